@@ -1,0 +1,46 @@
+//! # planner-core
+//!
+//! A `#![no_std]`, allocation-free implementation of Kim & Kumar's MPC-based approach to
+//! provable system-wide safety of autonomous ground traffic (IEEE TAC 59(12), 2014).
+//! Equation numbers in the docs are the paper's; the choices where the paper is silent
+//! follow the project's SPEC.
+//!
+//! This release covers the single-lane part (paper Sec. III, SPEC §1–4):
+//! - [`params`]: Table I parameters, validated;
+//! - [`safety`]: dMB, tL, dh, dS, the speed bounds (3)(4), tH (5)(6), V^k_t (7), the
+//!   invariant of Lemma 3 and the max-braking sequence of Lemma 2;
+//! - [`mpc`]: problem (10) as data with a configurable quadratic cost;
+//! - [`solver`]: our interior-point solver with O(N) pentadiagonal Newton systems;
+//! - [`planner`]: the planner step: obstacle (2)/(22), solve, verify, certified fallback.
+//!
+//! Memory is bounded by the const-generic horizon `N`; no function panics on any input
+//! (clippy denies `unwrap`, `expect`, `panic!` and indexing that can panic), and every
+//! loop has a fixed bound. Precision is a type parameter: `f32` for the Cortex-M4F FPU,
+//! `f64` on hosts; the numerical margins of each are constants of [`Real`].
+#![no_std]
+#![deny(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing,
+    clippy::unreachable,
+    clippy::todo,
+    clippy::unimplemented
+)]
+
+pub mod banded;
+pub mod mpc;
+pub mod params;
+pub mod planner;
+pub mod real;
+pub mod safety;
+pub mod solver;
+
+pub use mpc::{ConstraintKind, CostWeights, ProblemError, SingleLaneProblem, Violation};
+pub use params::{Params, ParamsError, ParamsSpec};
+pub use planner::{
+    Command, ConfigError, FallbackReason, InputError, Observation, Planner, StepStatus, Vehicle,
+};
+pub use real::Real;
+pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};

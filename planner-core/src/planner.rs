@@ -1,0 +1,340 @@
+//! The single-lane planner step (Sec. III, Theorem 1): obstacle position x̄ (2)/(22),
+//! problem (10), solve, verify against the exact constraints, else the certified
+//! max-braking fallback of Lemma 2.
+//!
+//! Data flows one way: [`Observation`] (what the vehicle knows) → [`Planner::step`] →
+//! [`Command`] (what to apply, and why).
+
+use crate::mpc::{ConstraintKind, CostWeights, ProblemError, SingleLaneProblem, Violation};
+use crate::params::Params;
+use crate::real::Real;
+use crate::safety;
+use crate::solver::{IpmSolver, MpcSolver, SolveError};
+
+/// Another vehicle in the ego's lane, as the ego knows it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Vehicle<F> {
+    /// Centre position x(c) along the lane (m).
+    pub x: F,
+    /// Length L(c) (m).
+    pub length: F,
+}
+
+/// What the ego knows at time t.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation<'a, F> {
+    /// x_t: ego centre position (m).
+    pub x: F,
+    /// v_{t−h}: the speed applied over the last period (m/s).
+    pub v_prev: F,
+    /// Vehicles in the lane (any order; those not ahead are ignored, as in (2)).
+    pub vehicles: &'a [Vehicle<F>],
+    /// Road end or stop line x_R (22), if any (m).
+    pub stop_line: Option<F>,
+    /// Target position x^f for the cost (m); ignored when its weight is 0.
+    pub target_x: F,
+    /// Reference speed v_ref for the cost (m/s).
+    pub v_ref: F,
+}
+
+/// Why the certified fallback was applied.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FallbackReason<F> {
+    /// The invariant x_t < x̄ − dS(v_{t−h}) (with margin) did not hold: (10) may be
+    /// infeasible, so the planner brakes as hard as it can.
+    InvariantViolated,
+    /// The solver stopped without a solution.
+    Solver(SolveError),
+    /// The solver's plan failed verification against the exact constraints.
+    Verification(Violation<F>),
+}
+
+/// What the planner did this step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StepStatus<F> {
+    /// The optimal plan was verified and its first input applied.
+    Solved {
+        /// Solver iterations.
+        iterations: u32,
+    },
+    /// The certified max-braking fallback (Lemma 2) was applied.
+    Fallback(FallbackReason<F>),
+}
+
+/// The command to apply over [t, t+h).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command<F> {
+    /// v_t (m/s).
+    pub v: F,
+    /// How it was obtained.
+    pub status: StepStatus<F>,
+    /// The gap x̄_t − x_t the planner used (m), before the margin.
+    pub gap: F,
+}
+
+/// Bad input: nothing was planned and the planner's state is unchanged. The caller should
+/// apply [`safety::max_braking_command`] for the step (the safe action whatever happened).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputError {
+    /// A position, speed, length or target is NaN or infinite.
+    NotFinite,
+    /// v_{t−h} is negative or above vmax.
+    SpeedOutOfRange,
+    /// A vehicle length is not positive.
+    BadLength,
+}
+
+/// Invalid planner configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConfigError {
+    /// See [`ProblemError::InvalidWeights`].
+    InvalidWeights,
+}
+
+/// The position x̄_t of the nearest obstacle ahead, extent-adjusted (SPEC §1):
+/// min over vehicles c with x(c) > x_t of x(c) − (L(c) + L)/2 − d0, eq. (2), and the stop
+/// line x_R − L/2 − d0, eq. (22). `None` when there is neither.
+pub fn obstacle_position<F: Real>(
+    p: &Params<F>,
+    x: F,
+    vehicles: &[Vehicle<F>],
+    stop_line: Option<F>,
+) -> Option<F> {
+    let half = F::HALF;
+    let mut best: Option<F> = stop_line.map(|xr| xr - half * p.length() - p.d0());
+    for c in vehicles.iter().filter(|c| c.x > x) {
+        let xb = c.x - half * (c.length + p.length()) - p.d0();
+        best = Some(match best {
+            Some(b) => b.min(xb),
+            None => xb,
+        });
+    }
+    best
+}
+
+/// A gap so large that no safety constraint of an N-step horizon can be active: the
+/// farthest the ego can travel in N steps plus dS(vmax), plus 1 m.
+pub fn free_road_gap<F: Real>(p: &Params<F>, n: usize) -> F {
+    F::from_usize(n) * p.h() * p.v_max() + safety::d_s(p, p.v_max()) + F::ONE
+}
+
+/// Slack allowed on the linear constraints (speed, acceleration) after the plan has been
+/// clamped into them exactly: the rounding of one subtraction of speeds ≤ vmax.
+pub fn speed_slack<F: Real>(p: &Params<F>) -> F {
+    F::from_f64(8.0) * F::EPSILON * (p.v_max() + F::ONE)
+}
+
+/// One vehicle's single-lane MPC planner with horizon `N`, solver `S`.
+#[derive(Debug, Clone)]
+pub struct Planner<F, const N: usize, S = IpmSolver<F, N>> {
+    params: Params<F>,
+    weights: CostWeights<F>,
+    solver: S,
+    plan: [F; N],
+    have_plan: bool,
+}
+
+impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
+    /// A planner using our interior-point solver with default settings.
+    pub fn new(params: Params<F>, weights: CostWeights<F>) -> Result<Self, ConfigError> {
+        Self::with_solver(params, weights, IpmSolver::default())
+    }
+}
+
+impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
+    /// A planner using `solver`.
+    pub fn with_solver(
+        params: Params<F>,
+        weights: CostWeights<F>,
+        solver: S,
+    ) -> Result<Self, ConfigError> {
+        let w = [
+            weights.target_position,
+            weights.reference_speed,
+            weights.smoothness,
+        ];
+        if w.iter().any(|x| !x.is_finite() || *x < F::ZERO)
+            || !(weights.reference_speed > F::ZERO || weights.smoothness > F::ZERO)
+        {
+            return Err(ConfigError::InvalidWeights);
+        }
+        Ok(Self {
+            params,
+            weights,
+            solver,
+            plan: [F::ZERO; N],
+            have_plan: false,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params<F> {
+        &self.params
+    }
+
+    /// The plan of the last step (v_t .. v_{t+(N−1)h}), if any.
+    pub fn plan(&self) -> Option<&[F; N]> {
+        self.have_plan.then_some(&self.plan)
+    }
+
+    /// Forgets the previous plan (next step starts cold).
+    pub fn reset(&mut self) {
+        self.have_plan = false;
+    }
+
+    fn check_input(&self, obs: &Observation<'_, F>) -> Result<(), InputError> {
+        let scalars = [obs.x, obs.v_prev, obs.target_x, obs.v_ref];
+        if !scalars.iter().all(|x| x.is_finite())
+            || obs.stop_line.is_some_and(|x| !x.is_finite())
+            || obs
+                .vehicles
+                .iter()
+                .any(|c| !(c.x.is_finite() && c.length.is_finite()))
+        {
+            return Err(InputError::NotFinite);
+        }
+        if obs.vehicles.iter().any(|c| !(c.length > F::ZERO)) {
+            return Err(InputError::BadLength);
+        }
+        if !(obs.v_prev >= F::ZERO && obs.v_prev <= self.params.v_max()) {
+            return Err(InputError::SpeedOutOfRange);
+        }
+        Ok(())
+    }
+
+    /// One planning step at time t.
+    pub fn step(&mut self, obs: &Observation<'_, F>) -> Result<Command<F>, InputError> {
+        self.check_input(obs)?;
+        let p = self.params;
+        let free = free_road_gap(&p, N);
+        let gap = obstacle_position(&p, obs.x, obs.vehicles, obs.stop_line)
+            .map_or(free, |xb| (xb - obs.x).min(free));
+        let problem = SingleLaneProblem::<F, N>::new(
+            &p,
+            obs.v_prev,
+            gap,
+            F::SAFETY_MARGIN_M,
+            self.weights,
+            obs.target_x - obs.x,
+            obs.v_ref,
+        );
+        let problem = match problem {
+            Ok(pr) => pr,
+            // Inputs and weights were checked above, so only the invariant can fail here.
+            Err(ProblemError::InvariantViolated)
+            | Err(ProblemError::NotFinite)
+            | Err(ProblemError::SpeedOutOfRange)
+            | Err(ProblemError::InvalidWeights) => {
+                return Ok(self.fallback(obs.v_prev, gap, FallbackReason::InvariantViolated))
+            }
+        };
+        let warm = self.have_plan.then(|| shifted(&self.plan));
+        let solution = match self.solver.solve(&problem, warm.as_ref()) {
+            Ok(s) => s,
+            Err(e) => return Ok(self.fallback(obs.v_prev, gap, FallbackReason::Solver(e))),
+        };
+        match verify(&p, &problem, solution.v) {
+            Ok(plan) => {
+                self.plan = plan;
+                self.have_plan = true;
+                Ok(Command {
+                    v: plan.first().copied().unwrap_or(F::ZERO),
+                    status: StepStatus::Solved {
+                        iterations: solution.iterations,
+                    },
+                    gap,
+                })
+            }
+            Err(v) => Ok(self.fallback(obs.v_prev, gap, FallbackReason::Verification(v))),
+        }
+    }
+
+    fn fallback(&mut self, v_prev: F, gap: F, why: FallbackReason<F>) -> Command<F> {
+        self.plan = safety::max_braking(&self.params, v_prev);
+        self.have_plan = true;
+        Command {
+            v: safety::max_braking_command(&self.params, v_prev),
+            status: StepStatus::Fallback(why),
+            gap,
+        }
+    }
+}
+
+/// The previous plan shifted one step (the last speed repeated): the warm start.
+fn shifted<F: Real, const N: usize>(plan: &[F; N]) -> [F; N] {
+    let mut out = *plan;
+    out.rotate_left(1.min(N));
+    if let (Some(last), Some(prev)) = (N.checked_sub(1), N.checked_sub(2)) {
+        let v = out.get(prev).copied().unwrap_or(F::ZERO);
+        if let Some(slot) = out.get_mut(last) {
+            *slot = v;
+        }
+    }
+    out
+}
+
+/// Verifies a plan against the exact constraints of (10).
+///
+/// The linear constraints (V^k_t and acceleration) are first enforced exactly by clamping
+/// each v_k, in order, into [max(lo_k, v_{k−1} + amin h), min(hi_k, v_{k−1} + amax h)];
+/// the solver's output violates them by at most its tolerance, so the clamp moves v_k by
+/// that much. Then every constraint is checked: linear ones within [`speed_slack`],
+/// safety within [`Real::VERIFY_SLACK_M`] of the margin-tightened gap, so the exact
+/// (untightened) safety constraint holds with `SAFETY_MARGIN_M − VERIFY_SLACK_M` to spare.
+pub fn verify<F: Real, const N: usize>(
+    p: &Params<F>,
+    problem: &SingleLaneProblem<F, N>,
+    mut v: [F; N],
+) -> Result<[F; N], Violation<F>> {
+    let mut prev = problem.v_prev;
+    for (k, ((vk, &lo), &hi)) in v
+        .iter_mut()
+        .zip(problem.lo.iter())
+        .zip(problem.hi_exact.iter())
+        .enumerate()
+    {
+        let lower = lo.max(prev + problem.dv_min);
+        let upper = hi.min(prev + problem.dv_max);
+        if !(lower <= upper) || !vk.is_finite() {
+            return Err(Violation {
+                amount: lower - upper,
+                kind: ConstraintKind::SpeedUpper,
+                step: k,
+            });
+        }
+        *vk = vk.max(lower).min(upper);
+        prev = *vk;
+    }
+    let worst = worst_relative(p, problem, &v);
+    match worst {
+        Some(violation) => Err(violation),
+        None => Ok(v),
+    }
+}
+
+/// The first constraint of the exact (10) exceeded beyond its slack, if any.
+fn worst_relative<F: Real, const N: usize>(
+    p: &Params<F>,
+    problem: &SingleLaneProblem<F, N>,
+    v: &[F; N],
+) -> Option<Violation<F>> {
+    let lin = speed_slack(p);
+    let mut found = None;
+    let exact = SingleLaneProblem {
+        hi: problem.hi_exact,
+        ..problem.clone()
+    };
+    exact.for_each_constraint(v, |amount, kind, step| {
+        let slack = match kind {
+            ConstraintKind::Safety => F::VERIFY_SLACK_M,
+            _ => lin,
+        };
+        // `!(a <= b)` also catches NaN.
+        if !(amount <= slack) {
+            found = Some(Violation { amount, kind, step });
+            return false;
+        }
+        true
+    });
+    found
+}

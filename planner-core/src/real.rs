@@ -1,0 +1,163 @@
+//! Floating-point abstraction: the planner runs in `f32` on the Cortex-M4F FPU and in
+//! `f64` on hosts; every numerical tolerance is a named constant of this trait, per precision.
+
+use core::fmt::Debug;
+use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
+
+/// A floating-point scalar the planner can compute with (`f32` or `f64`).
+///
+/// The constants are the *numerical margins* that keep the safety checks sound in the
+/// chosen precision; each says why it has its value.
+pub trait Real:
+    Copy
+    + Default
+    + Debug
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+    + 'static
+{
+    /// 0.
+    const ZERO: Self;
+    /// 1.
+    const ONE: Self;
+    /// 2.
+    const TWO: Self;
+    /// 1/2.
+    const HALF: Self;
+    /// Machine epsilon of the type.
+    const EPSILON: Self;
+    /// Distance (m) by which the planner tightens the safety constraint x_{k+1} + dS(v_k) ≤ x̄.
+    ///
+    /// Why: the plan is computed and verified in this precision relative to the gap
+    /// x̄ − x_t (≤ a few km); the rounding of the handful of operations in x_{k+1} + dS(v_k)
+    /// is below 10 ulp of the gap. f32: 10 × 2⁻¹² m at 4 km ≈ 0.01 m, so 2 cm leaves
+    /// head-room; f64: 1 µm is ~10⁹ ulp, far above any rounding.
+    const SAFETY_MARGIN_M: Self;
+    /// Slack (m) the verifier allows on the tightened safety constraint; strictly smaller
+    /// than [`Real::SAFETY_MARGIN_M`], so a verified plan satisfies the exact constraint
+    /// with at least `SAFETY_MARGIN_M − VERIFY_SLACK_M` to spare.
+    const VERIFY_SLACK_M: Self;
+    /// Relative stopping tolerance of the interior-point solver (primal residual,
+    /// dual residual and duality gap); near √ε for f32, 1e-10 for f64.
+    const SOLVER_TOL: Self;
+    /// Relative dual-residual tolerance of the solver. Looser than [`Real::SOLVER_TOL`]
+    /// because once λ/s passes ~1e13 the Newton systems are so ill-conditioned that steps
+    /// stop reducing the dual residual (it floors between 1e-9 and 1e-7 in f64, 1e-2 in
+    /// f32) while J has long converged. The objective accuracy this buys is measured, not
+    /// assumed: the Clarabel cross-check asserts ≤ 1e-6 relative (f64).
+    const SOLVER_DUAL_TOL: Self;
+    /// Converts from `f64` (rounding to nearest).
+    fn from_f64(x: f64) -> Self;
+    /// Converts from a small count (horizon index).
+    fn from_usize(n: usize) -> Self;
+    /// Converts to `f64` (exact).
+    fn to_f64(self) -> f64;
+    /// Square root (NaN for negative input).
+    fn sqrt(self) -> Self;
+    /// `true` unless NaN or ±∞.
+    fn is_finite(self) -> bool;
+
+    /// Absolute value.
+    #[inline]
+    fn abs(self) -> Self {
+        if self < Self::ZERO {
+            -self
+        } else {
+            self
+        }
+    }
+    /// The smaller of two values (the other if one is NaN).
+    #[inline]
+    fn min(self, o: Self) -> Self {
+        if o < self {
+            o
+        } else {
+            self
+        }
+    }
+    /// The larger of two values (the other if one is NaN).
+    #[inline]
+    fn max(self, o: Self) -> Self {
+        if o > self {
+            o
+        } else {
+            self
+        }
+    }
+    /// `self²`.
+    #[inline]
+    fn sq(self) -> Self {
+        self * self
+    }
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const TWO: Self = 2.0;
+    const HALF: Self = 0.5;
+    const EPSILON: Self = f32::EPSILON;
+    const SAFETY_MARGIN_M: Self = 0.02;
+    const VERIFY_SLACK_M: Self = 0.005;
+    const SOLVER_TOL: Self = 2e-4;
+    const SOLVER_DUAL_TOL: Self = 2e-2;
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+    #[inline]
+    fn from_usize(n: usize) -> Self {
+        n as f32
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    #[inline]
+    fn sqrt(self) -> Self {
+        libm::sqrtf(self)
+    }
+    #[inline]
+    fn is_finite(self) -> bool {
+        f32::is_finite(self)
+    }
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const TWO: Self = 2.0;
+    const HALF: Self = 0.5;
+    const EPSILON: Self = f64::EPSILON;
+    const SAFETY_MARGIN_M: Self = 1e-6;
+    const VERIFY_SLACK_M: Self = 1e-9;
+    const SOLVER_TOL: Self = 1e-10;
+    const SOLVER_DUAL_TOL: Self = 1e-6;
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+    #[inline]
+    fn from_usize(n: usize) -> Self {
+        n as f64
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn sqrt(self) -> Self {
+        libm::sqrt(self)
+    }
+    #[inline]
+    fn is_finite(self) -> bool {
+        f64::is_finite(self)
+    }
+}

@@ -1,0 +1,210 @@
+//! The paper's safety quantities (Sec. III, SPEC §3): braking distances, the speed bounds
+//! (3)(4), the shortest stopping time tH (5)(6), the speed region V^k_t (7), dS (8)(9),
+//! the operational invariant of Lemma 3 and the certified max-braking sequence of Lemma 2.
+//!
+//! All functions are pure and total: a precondition that does not hold gives `None`,
+//! never a panic.
+
+use crate::params::Params;
+use crate::real::Real;
+
+/// dMB(v) = v² / (2|amin|): minimum braking distance from speed `v`.
+#[inline]
+pub fn d_mb<F: Real>(p: &Params<F>, v: F) -> F {
+    v * v / (F::TWO * p.brake())
+}
+
+/// tL(v) = v / |amin|: minimum stopping time from speed `v`.
+#[inline]
+pub fn t_l<F: Real>(p: &Params<F>, v: F) -> F {
+    v / p.brake()
+}
+
+/// dh(v) = v h + |amin| h² / 2, eq. (9): the distance covered in one sampling period at
+/// speed `v`, plus the braking distance lost by reacting one period late.
+#[inline]
+pub fn d_h<F: Real>(p: &Params<F>, v: F) -> F {
+    let h = p.h();
+    v * h + F::HALF * p.brake() * h * h
+}
+
+/// dS(v) = dMB(v) + dh(v), eq. (8). Equals dMB(v + |amin| h) (tested).
+#[inline]
+pub fn d_s<F: Real>(p: &Params<F>, v: F) -> F {
+    d_mb(p, v) + d_h(p, v)
+}
+
+/// The per-step speed bounds of eqs. (3)(4) for the current step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedBounds<F> {
+    /// v̲_t = max{0, v_{t−h} + amin h}, eq. (3).
+    pub lower: F,
+    /// v̄_t = min{vmax, v_{t−h} + amax h, sqrt(2|amin| (x̄_t − x_t))}, eq. (4).
+    pub upper: F,
+}
+
+/// Eqs. (3)(4). `gap` = x̄_t − x_t (m); a negative gap counts as 0 (then v̄ = 0).
+pub fn speed_bounds<F: Real>(p: &Params<F>, v_prev: F, gap: F) -> SpeedBounds<F> {
+    let h = p.h();
+    let lower = (v_prev + p.a_min() * h).max(F::ZERO);
+    let stop_limited = (F::TWO * p.brake() * gap.max(F::ZERO)).sqrt();
+    let upper = p.v_max().min(v_prev + p.a_max() * h).min(stop_limited);
+    SpeedBounds { lower, upper }
+}
+
+/// tH(v), eqs. (5)(6) in closed form: the shortest time to cover `gap` starting at speed
+/// `v` and be stopped at its end, accelerating at amax (capped at vmax), then braking at
+/// amin. `None` if the gap is shorter than dMB(v) (the profile does not exist) or the
+/// inputs are outside their domain (v < 0 or v > vmax).
+pub fn t_h<F: Real>(p: &Params<F>, v: F, gap: F) -> Option<F> {
+    if !(v >= F::ZERO && v <= p.v_max() && gap >= d_mb(p, v)) {
+        return None;
+    }
+    let a = p.a_max();
+    let b = p.brake();
+    let vm = p.v_max();
+    // Peak speed where the accelerating and braking branches meet.
+    let vp = ((gap + v * v / (F::TWO * a)) / (F::HALF / a + F::HALF / b)).sqrt();
+    if vp <= vm {
+        Some((vp - v) / a + vp / b)
+    } else {
+        let cruise = (gap - (vm * vm - v * v) / (F::TWO * a) - vm * vm / (F::TWO * b)) / vm;
+        Some((vm - v) / a + cruise.max(F::ZERO) + vm / b)
+    }
+}
+
+/// The upper boundary of the polygon V_t (Fig. 3) at time `tau` after t: the profile (5)
+/// from v̄_t, i.e. max{0, min{v̄ + amax τ, vmax, |amin| (tH(v̄) − τ)}}.
+#[inline]
+pub fn upper_profile<F: Real>(p: &Params<F>, v_bar: F, t_h_bar: F, tau: F) -> F {
+    (v_bar + p.a_max() * tau)
+        .min(p.v_max())
+        .min(p.brake() * (t_h_bar - tau))
+        .max(F::ZERO)
+}
+
+/// The interval V^k_t of eq. (7) for every k in 0..N: `lo[k] ≤ v_k ≤ hi[k]`.
+///
+/// `gap` = x̄_t − x_t. Lower line: max(0, v̲_t + amin kh); upper: [`upper_profile`].
+/// `None` when tH(v̄_t) does not exist (non-finite or negative inputs).
+pub fn speed_region<F: Real, const N: usize>(
+    p: &Params<F>,
+    v_prev: F,
+    gap: F,
+) -> Option<([F; N], [F; N])> {
+    let bounds = speed_bounds(p, v_prev, gap);
+    // v̄ ≤ sqrt(2 b gap) makes gap ≥ dMB(v̄), so tH exists whenever the inputs are sane.
+    let th = t_h(p, bounds.upper.max(F::ZERO), gap.max(F::ZERO))?;
+    let mut lo = [F::ZERO; N];
+    let mut hi = [F::ZERO; N];
+    let h = p.h();
+    for (k, (l, u)) in lo.iter_mut().zip(hi.iter_mut()).enumerate() {
+        let tau = F::from_usize(k) * h;
+        *l = (bounds.lower + p.a_min() * tau).max(F::ZERO);
+        *u = upper_profile(p, bounds.upper, th, tau);
+    }
+    Some((lo, hi))
+}
+
+/// The operational form of the safety relation c_i S_t c_j (Lemma 3):
+/// x_t(c_i) < x̄ − dS(v_{t−h}(c_i)), written with the gap x̄ − x_t. Strict, as in the paper.
+#[inline]
+pub fn invariant_holds<F: Real>(p: &Params<F>, v_prev: F, gap: F) -> bool {
+    d_s(p, v_prev) < gap
+}
+
+/// The certified fallback of Lemma 2: v_{t+kh} = max(0, v_{t−h} + amin (k+1) h).
+/// While the invariant holds it satisfies every constraint of (10) and reaches 0.
+pub fn max_braking<F: Real, const N: usize>(p: &Params<F>, v_prev: F) -> [F; N] {
+    let mut out = [F::ZERO; N];
+    let step = p.a_min() * p.h();
+    let mut v = v_prev;
+    for o in out.iter_mut() {
+        v = (v + step).max(F::ZERO);
+        *o = v;
+    }
+    out
+}
+
+/// The first input of [`max_braking`]: the command to apply when nothing else is certified.
+#[inline]
+pub fn max_braking_command<F: Real>(p: &Params<F>, v_prev: F) -> F {
+    (v_prev + p.a_min() * p.h()).max(F::ZERO)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p() -> Params<f64> {
+        Params::table_i()
+    }
+
+    #[test]
+    fn hand_computed_values() {
+        let p = p();
+        // dMB(15) = 225 / 15.8
+        assert!((d_mb(&p, 15.0) - 14.240_506_329_113_924).abs() < 1e-12);
+        assert!((t_l(&p, 15.0) - 1.898_734_177_215_19).abs() < 1e-12);
+        // dh(15) = 0.15 + 7.9 * 1e-4 / 2
+        assert!((d_h(&p, 15.0) - 0.150_395).abs() < 1e-12);
+        assert!((d_s(&p, 15.0) - (14.240_506_329_113_924 + 0.150_395)).abs() < 1e-12);
+        // dS(0) = amin h² / 2
+        assert!((d_s(&p, 0.0) - 0.000_395).abs() < 1e-15);
+    }
+
+    #[test]
+    fn speed_bounds_hand_computed() {
+        let p = p();
+        let b = speed_bounds(&p, 10.0, 1000.0);
+        assert!((b.lower - 9.921).abs() < 1e-12);
+        assert!((b.upper - 10.038).abs() < 1e-12);
+        // Near an obstacle: sqrt(2 * 7.9 * 2) = 5.621...
+        let b = speed_bounds(&p, 10.0, 2.0);
+        assert!((b.upper - (31.6f64).sqrt()).abs() < 1e-12);
+        // At vmax the cap binds.
+        let b = speed_bounds(&p, 27.8, 1000.0);
+        assert!((b.upper - 27.8).abs() < 1e-12);
+    }
+
+    #[test]
+    fn t_h_hand_computed() {
+        let p = p();
+        // From rest over 100 m without reaching vmax:
+        // vp = sqrt(100 / (1/7.6 + 1/15.8)) = 22.6604..., tH = vp/3.8 + vp/7.9.
+        let vp = (100.0f64 / (1.0 / 7.6 + 1.0 / 15.8)).sqrt();
+        let expect = vp / 3.8 + vp / 7.9;
+        assert!((t_h(&p, 0.0, 100.0).unwrap() - expect).abs() < 1e-12);
+        // From vmax over 1000 m: cruise.
+        let vm = 27.8f64;
+        let expect = (1000.0 - vm * vm / 15.8) / vm + vm / 7.9;
+        assert!((t_h(&p, vm, 1000.0).unwrap() - expect).abs() < 1e-12);
+        // Exactly the braking distance: tH = tL.
+        let t = t_h(&p, 15.0, d_mb(&p, 15.0)).unwrap();
+        assert!((t - t_l(&p, 15.0)).abs() < 1e-9);
+        // Too short: no profile.
+        assert_eq!(t_h(&p, 15.0, 1.0), None);
+        assert_eq!(t_h(&p, f64::NAN, 1.0), None);
+    }
+
+    #[test]
+    fn speed_region_contains_max_braking() {
+        let p = p();
+        let (lo, hi) = speed_region::<f64, 50>(&p, 20.0, 200.0).unwrap();
+        let mb = max_braking::<f64, 50>(&p, 20.0);
+        for k in 0..50 {
+            assert!(lo[k] <= mb[k] + 1e-12 && mb[k] <= hi[k]);
+        }
+        assert!((lo[0] - 19.921).abs() < 1e-12);
+        assert!((hi[0] - 20.038).abs() < 1e-12);
+    }
+
+    #[test]
+    fn max_braking_reaches_zero() {
+        let p = p();
+        let mb = max_braking::<f64, 300>(&p, 20.0);
+        assert_eq!(mb[299], 0.0);
+        assert!((mb[0] - 19.921).abs() < 1e-12);
+        assert_eq!(max_braking_command(&p, 0.05), 0.0);
+    }
+}
