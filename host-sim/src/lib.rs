@@ -5,5 +5,8 @@
 //! implemented yet.)
 #![deny(missing_docs)]
 
+pub mod bench;
 pub mod instances;
+pub mod monitor;
+pub mod platoon;
 pub mod reference;

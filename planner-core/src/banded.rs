@@ -17,6 +17,8 @@ pub struct Penta<F, const N: usize> {
     pub e1: [F; N],
     /// Second sub-diagonal, M[j][j−2].
     pub e2: [F; N],
+    /// After [`Penta::factor`]: 1 / D[j] (multiplying is far cheaper than dividing).
+    pub dinv: [F; N],
 }
 
 impl<F: Real, const N: usize> Default for Penta<F, N> {
@@ -25,6 +27,7 @@ impl<F: Real, const N: usize> Default for Penta<F, N> {
             d: [F::ZERO; N],
             e1: [F::ZERO; N],
             e2: [F::ZERO; N],
+            dinv: [F::ZERO; N],
         }
     }
 }
@@ -85,14 +88,14 @@ impl<F: Real, const N: usize> Penta<F, N> {
         for j in 0..N {
             let (mut l1, mut l2) = (F::ZERO, F::ZERO);
             if j >= 2 {
-                l2 = get(&self.e2, j) / get(&self.d, j - 2);
+                l2 = get(&self.e2, j) * get(&self.dinv, j - 2);
             }
             if j >= 1 {
                 let mut m = get(&self.e1, j);
                 if j >= 2 {
                     m -= l2 * get(&self.d, j - 2) * get(&self.e1, j - 1);
                 }
-                l1 = m / get(&self.d, j - 1);
+                l1 = m * get(&self.dinv, j - 1);
             }
             let mut dj = get(&self.d, j);
             if j >= 1 {
@@ -110,6 +113,7 @@ impl<F: Real, const N: usize> Penta<F, N> {
                 return Err(NotPositiveDefinite);
             }
             set(&mut self.d, j, dj);
+            set(&mut self.dinv, j, F::ONE / dj);
             set(&mut self.e1, j, l1);
             set(&mut self.e2, j, l2);
         }
@@ -128,8 +132,8 @@ impl<F: Real, const N: usize> Penta<F, N> {
             }
             set(b, j, x);
         }
-        for (bj, dj) in b.iter_mut().zip(self.d.iter()) {
-            *bj = *bj / *dj;
+        for (bj, dj) in b.iter_mut().zip(self.dinv.iter()) {
+            *bj *= *dj;
         }
         for j in (0..N).rev() {
             let x = get(b, j)

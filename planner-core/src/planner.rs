@@ -43,6 +43,10 @@ pub enum FallbackReason<F> {
     /// The invariant x_t < x̄ − dS(v_{t−h}) (with margin) did not hold: (10) may be
     /// infeasible, so the planner brakes as hard as it can.
     InvariantViolated,
+    /// The invariant holds with less than [`MIN_ROOM_M`] to spare: (10) has (almost) no
+    /// interior and max braking is the forced answer, e.g. standing behind a stopped
+    /// vehicle. Not a failure.
+    NoRoom,
     /// The solver stopped without a solution.
     Solver(SolveError),
     /// The solver's plan failed verification against the exact constraints.
@@ -117,6 +121,12 @@ pub fn obstacle_position<F: Real>(
 pub fn free_road_gap<F: Real>(p: &Params<F>, n: usize) -> F {
     F::from_usize(n) * p.h() * p.v_max() + safety::d_s(p, p.v_max()) + F::ONE
 }
+
+/// Room (m) below which the planner does not call the solver: when
+/// x̄ − x_t − margin − dS(v_{t−h}) < 1 mm the feasible set of (10) is a sliver around the
+/// max-braking sequence (a single point when stopped behind a stopped vehicle), which
+/// interior-point methods cannot centre in; max braking is then applied as the answer.
+pub const MIN_ROOM_M: f64 = 1e-3;
 
 /// Slack allowed on the linear constraints (speed, acceleration) after the plan has been
 /// clamped into them exactly: the rounding of one subtraction of speeds ≤ vmax.
@@ -228,6 +238,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
                 return Ok(self.fallback(obs.v_prev, gap, FallbackReason::InvariantViolated))
             }
         };
+        if problem.gap - safety::d_s(&p, obs.v_prev) < F::from_f64(MIN_ROOM_M) {
+            return Ok(self.fallback(obs.v_prev, gap, FallbackReason::NoRoom));
+        }
         let warm = self.have_plan.then(|| shifted(&self.plan));
         let solution = match self.solver.solve(&problem, warm.as_ref()) {
             Ok(s) => s,

@@ -23,26 +23,11 @@ use crate::banded::{get, Penta};
 use crate::mpc::SingleLaneProblem;
 use crate::real::Real;
 
-/// `a[f][k]`, or 0 out of range.
-#[inline(always)]
-fn get2<F: Real, const N: usize>(a: &[[F; N]; FAMILIES], f: usize, k: usize) -> F {
-    a.get(f).and_then(|r| r.get(k)).copied().unwrap_or(F::ZERO)
-}
+/// Default [`Settings::warm_barrier`].
+pub const WARM_BARRIER: f64 = 1e-3;
 
-#[inline(always)]
-fn set2<F: Real, const N: usize>(a: &mut [[F; N]; FAMILIES], f: usize, k: usize, x: F) {
-    if let Some(slot) = a.get_mut(f).and_then(|r| r.get_mut(k)) {
-        *slot = x;
-    }
-}
-
-/// Number of constraint families (upper and lower speed, accel, decel, safety).
+/// Number of constraint families: v_k ≤ hi_k, v_k ≥ lo_k, accel, decel, safety.
 const FAMILIES: usize = 5;
-const UPPER: usize = 0;
-const LOWER: usize = 1;
-const ACCEL: usize = 2;
-const DECEL: usize = 3;
-const SAFETY: usize = 4;
 
 /// Solver settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,8 +48,12 @@ pub struct Settings<F> {
     /// (see [`Penta::factor`]).
     pub pivot_floor: F,
     /// Iterative-refinement passes per Newton solve, against the unregularised matrix
-    /// (they undo the regularisation's perturbation; each costs O(N)).
+    /// (they undo the regularisation's perturbation; each costs O(N)). f32 needs one to
+    /// stay within ~1e-3 of the optimum; in f64 it does not change the answer measurably.
     pub refinement_steps: u32,
+    /// Barrier level at which a warm start begins: slacks are floored at this value and
+    /// duals at its square over the slack (a cold start uses 1).
+    pub warm_barrier: F,
 }
 
 impl<F: Real> Default for Settings<F> {
@@ -76,7 +65,12 @@ impl<F: Real> Default for Settings<F> {
             step_fraction: F::from_f64(0.99),
             regularization: F::EPSILON * F::from_f64(1e3),
             pivot_floor: F::EPSILON * F::from_f64(16.0),
-            refinement_steps: 2,
+            refinement_steps: if F::EPSILON > F::from_f64(1e-10) {
+                1
+            } else {
+                0
+            },
+            warm_barrier: F::from_f64(WARM_BARRIER),
         }
     }
 }
@@ -114,7 +108,7 @@ pub struct Solution<F, const N: usize> {
 pub struct IterationInfo<F> {
     /// Iteration number.
     pub iteration: u32,
-    /// J at the iterate.
+    /// J at the iterate (0 until the residuals are small: it is computed only then).
     pub objective: F,
     /// Largest primal residual |g + s|.
     pub primal_residual: F,
@@ -137,30 +131,67 @@ pub trait MpcSolver<F: Real, const N: usize> {
     ) -> Result<Solution<F, N>, SolveError>;
 }
 
+/// Slacks, duals and work vectors of one constraint family (one entry per step k).
+#[derive(Debug, Clone)]
+struct Family<F, const N: usize> {
+    /// Constraint values g (≤ 0 when satisfied).
+    g: [F; N],
+    /// Slacks s > 0 with g + s = 0 at convergence.
+    s: [F; N],
+    /// 1/s, refreshed once per iteration (divisions dominate otherwise).
+    inv_s: [F; N],
+    /// Duals λ > 0.
+    lam: [F; N],
+    /// Complementarity right-hand side of the current Newton system.
+    rc: [F; N],
+    /// Newton directions of s and λ.
+    ds: [F; N],
+    dl: [F; N],
+}
+
+impl<F: Real, const N: usize> Family<F, N> {
+    fn new() -> Self {
+        let z = [F::ZERO; N];
+        Self {
+            g: z,
+            s: z,
+            inv_s: z,
+            lam: z,
+            rc: z,
+            ds: z,
+            dl: z,
+        }
+    }
+}
+
 /// Our interior-point solver, with all working storage inline (no allocation):
-/// about (12 + 5·6) N scalars.
+/// about 45 N scalars.
+///
+/// The five constraint families share three gradient stencils in z:
+/// D1_k = e_k − e_{k−1} (v_k; upper bound +, lower bound −), D2_k = e_k − 2e_{k−1} + e_{k−2}
+/// (Δv_k; accel +, decel −) and S_k = c0_k e_k + c1_k e_{k−1} (safety, c depends on v_k).
+/// So the Newton matrix, Jᵀλ and the right-hand sides are assembled in single fused
+/// passes from three per-step weights, with no scattered updates.
 #[derive(Debug, Clone)]
 pub struct IpmSolver<F, const N: usize> {
     settings: Settings<F>,
     /// The primal iterate, kept in speeds: prefix sums z reach N·vmax and would cost
     /// log2(N) bits of every speed in f32. Only Newton directions live in z-coordinates.
     v: [F; N],
+    fam: [Family<F, N>; FAMILIES],
+    /// Safety stencil coefficients at k and k−1.
+    c0: [F; N],
+    c1: [F; N],
+    /// Work vectors.
     dz: [F; N],
     rhs: [F; N],
-    r_d: [F; N],
-    q: [F; N],
-    p: Penta<F, N>,
+    rd: [F; N],
+    w1: [F; N],
+    w2: [F; N],
+    w3: [F; N],
     kkt: Penta<F, N>,
-    /// The Newton matrix before factorisation, for iterative refinement.
+    /// The Newton matrix before regularisation, for iterative refinement.
     kkt_raw: Penta<F, N>,
-    g: [[F; N]; FAMILIES],
-    s: [[F; N]; FAMILIES],
-    lam: [[F; N]; FAMILIES],
-    ds: [[F; N]; FAMILIES],
-    dl: [[F; N]; FAMILIES],
-    rc: [[F; N]; FAMILIES],
-    /// Safety-constraint gradient coefficients (at k and k−1), which depend on v_k.
-    sgrad: [[F; 2]; N],
     /// Duals of the last successful solve are available for a warm start.
     have_duals: bool,
 }
@@ -171,28 +202,46 @@ impl<F: Real, const N: usize> Default for IpmSolver<F, N> {
     }
 }
 
+/// Which stencil a family uses and with which sign.
+#[derive(Clone, Copy)]
+enum Proj {
+    D1(bool),
+    D2(bool),
+    S,
+}
+
+const PROJ: [Proj; FAMILIES] = [
+    Proj::D1(true),
+    Proj::D1(false),
+    Proj::D2(true),
+    Proj::D2(false),
+    Proj::S,
+];
+
 impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// A solver with the given settings.
     pub fn new(settings: Settings<F>) -> Self {
-        let zn = [F::ZERO; N];
-        let zf = [[F::ZERO; N]; FAMILIES];
+        let z = [F::ZERO; N];
         Self {
             settings,
-            v: zn,
-            dz: zn,
-            rhs: zn,
-            r_d: zn,
-            q: zn,
-            p: Penta::default(),
+            v: z,
+            fam: [
+                Family::new(),
+                Family::new(),
+                Family::new(),
+                Family::new(),
+                Family::new(),
+            ],
+            c0: z,
+            c1: z,
+            dz: z,
+            rhs: z,
+            rd: z,
+            w1: z,
+            w2: z,
+            w3: z,
             kkt: Penta::default(),
             kkt_raw: Penta::default(),
-            g: zf,
-            s: zf,
-            lam: zf,
-            ds: zf,
-            dl: zf,
-            rc: zf,
-            sgrad: [[F::ZERO; 2]; N],
             have_duals: false,
         }
     }
@@ -202,99 +251,65 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         &self.settings
     }
 
-    /// Gradient stencil of constraint (family `f`, step k): coefficients at z_k, z_{k−1},
-    /// z_{k−2}.
-    #[inline(always)]
-    fn stencil(&self, f: usize, k: usize) -> [F; 3] {
-        let one = F::ONE;
-        let two = F::TWO;
-        match f {
-            UPPER => [one, -one, F::ZERO],
-            LOWER => [-one, one, F::ZERO],
-            ACCEL => [one, -two, one],
-            DECEL => [-one, two, -one],
-            _ => {
-                let [a, b] = self.sgrad.get(k).copied().unwrap_or([F::ZERO; 2]);
-                [a, b, F::ZERO]
-            }
-        }
-    }
-
-    /// cᵀ x for stencil c at step k.
-    #[inline(always)]
-    fn dot(c: [F; 3], x: &[F; N], k: usize) -> F {
-        let [c0, c1, c2] = c;
-        let mut acc = c0 * get(x, k);
-        if let Some(i) = k.checked_sub(1) {
-            acc += c1 * get(x, i);
-        }
-        if let Some(i) = k.checked_sub(2) {
-            acc += c2 * get(x, i);
-        }
-        acc
-    }
-
-    /// x += a c at step k.
-    #[inline(always)]
-    fn scatter(c: [F; 3], a: F, x: &mut [F; N], k: usize) {
-        let [c0, c1, c2] = c;
-        if let Some(slot) = x.get_mut(k) {
-            *slot += a * c0;
-        }
-        if let Some(slot) = k.checked_sub(1).and_then(|i| x.get_mut(i)) {
-            *slot += a * c1;
-        }
-        if let Some(slot) = k.checked_sub(2).and_then(|i| x.get_mut(i)) {
-            *slot += a * c2;
-        }
-    }
-
-    /// The Hessian P of J in z (J = ½ zᵀ P z + qᵀ z + const); q is kept for tests of the
-    /// gradient, which the iteration computes from the speeds instead.
-    fn build_cost(&mut self, pr: &SingleLaneProblem<F, N>) {
-        let w = pr.weights;
-        let two = F::TWO;
-        self.p.clear();
-        self.q = [F::ZERO; N];
-        // w_x (X − h z_{N−1})²
-        if let Some(last) = N.checked_sub(1) {
-            let c = [pr.h, F::ZERO, F::ZERO];
-            self.p.add_stencil(last, c, two * w.target_position);
-            Self::scatter(c, -two * w.target_position * pr.target, &mut self.q, last);
-        }
-        for k in 0..N {
-            // w_v (v_k − v_ref)²
-            let c = [F::ONE, -F::ONE, F::ZERO];
-            self.p.add_stencil(k, c, two * w.reference_speed);
-            Self::scatter(c, -two * w.reference_speed * pr.v_ref, &mut self.q, k);
-            // w_Δ (v_k − v_{k−1})²; for k = 0 the target is v_{t−h}.
-            let c = [F::ONE, -two, F::ONE];
-            self.p.add_stencil(k, c, two * w.smoothness);
-            if k == 0 {
-                Self::scatter(c, -two * w.smoothness * pr.v_prev, &mut self.q, k);
-            }
-        }
-    }
-
-    /// Evaluates every constraint g at the iterate, and the safety gradients.
+    /// Evaluates every constraint g at the iterate, and the safety stencil.
     fn evaluate(&mut self, pr: &SingleLaneProblem<F, N>) {
-        let mut zk = F::ZERO;
-        let mut v_prev = pr.v_prev;
+        let [up, lo, ac, de, sa] = &mut self.fam;
         let inv_b = F::ONE / pr.brake;
+        let mut z = F::ZERO;
+        let mut v_prev = pr.v_prev;
         for k in 0..N {
             let vk = get(&self.v, k);
-            zk += vk;
+            z += vk;
             let dv = vk - v_prev;
-            set2(&mut self.g, UPPER, k, vk - get(&pr.hi, k));
-            set2(&mut self.g, LOWER, k, get(&pr.lo, k) - vk);
-            set2(&mut self.g, ACCEL, k, dv - pr.dv_max);
-            set2(&mut self.g, DECEL, k, pr.dv_min - dv);
-            set2(&mut self.g, SAFETY, k, pr.safety_value(pr.h * zk, vk));
+            put(&mut up.g, k, vk - get(&pr.hi, k));
+            put(&mut lo.g, k, get(&pr.lo, k) - vk);
+            put(&mut ac.g, k, dv - pr.dv_max);
+            put(&mut de.g, k, pr.dv_min - dv);
+            put(&mut sa.g, k, pr.safety_value(pr.h * z, vk));
             let slope = pr.h + vk * inv_b;
-            if let Some(sg) = self.sgrad.get_mut(k) {
-                *sg = [pr.h + slope, -slope];
-            }
+            put(&mut self.c0, k, pr.h + slope);
+            put(&mut self.c1, k, -slope);
             v_prev = vk;
+        }
+    }
+
+    /// out = Σ_k (a1_k D1_k + a2_k D2_k + a3_k S_k), in one pass.
+    fn jt(&self, a1: &[F; N], a2: &[F; N], a3: &[F; N], out: &mut [F; N]) {
+        let two = F::TWO;
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = get(a1, j) - get(a1, j + 1) + get(a2, j) - two * get(a2, j + 1)
+                + get(a2, j + 2)
+                + get(&self.c0, j) * get(a3, j)
+                + get(&self.c1, j + 1) * get(a3, j + 1);
+        }
+    }
+
+    /// K = Σ_k (w1_k D1 D1ᵀ + w2_k D2 D2ᵀ + w3_k S Sᵀ) + diag_last e_{N−1}e_{N−1}ᵀ, fused.
+    fn assemble(&mut self, diag_last: F) {
+        let two = F::TWO;
+        let four = F::from_f64(4.0);
+        let (w1, w2, w3, c0, c1) = (&self.w1, &self.w2, &self.w3, &self.c0, &self.c1);
+        let k = &mut self.kkt_raw;
+        for j in 0..N {
+            let (c0j, c1j, c1n) = (get(c0, j), get(c1, j), get(c1, j + 1));
+            let d = get(w1, j)
+                + get(w1, j + 1)
+                + get(w2, j)
+                + four * get(w2, j + 1)
+                + get(w2, j + 2)
+                + get(w3, j) * c0j * c0j
+                + get(w3, j + 1) * c1n * c1n;
+            put(&mut k.d, j, d);
+            let e1 = if j >= 1 {
+                -get(w1, j) - two * get(w2, j) - two * get(w2, j + 1) + get(w3, j) * c0j * c1j
+            } else {
+                F::ZERO
+            };
+            put(&mut k.e1, j, e1);
+            put(&mut k.e2, j, if j >= 2 { get(w2, j) } else { F::ZERO });
+        }
+        if let Some(last) = k.d.last_mut() {
+            *last += diag_last;
         }
     }
 
@@ -302,51 +317,53 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// ∂J/∂z_k = ∂J/∂v_k − ∂J/∂v_{k+1}, plus the target term on z_{N−1}.
     fn cost_gradient(&self, pr: &SingleLaneProblem<F, N>, out: &mut [F; N]) {
         let w = pr.weights;
-        let two = F::TWO;
-        let dv = |k: usize| -> F {
-            let vk = get(&self.v, k);
-            let before = if k == 0 {
-                pr.v_prev
-            } else {
-                get(&self.v, k - 1)
-            };
-            vk - before
-        };
+        let two_v = F::TWO * w.reference_speed;
+        let two_s = F::TWO * w.smoothness;
+        // ∂J/∂v_k (without the target term, equal for every k), into `out`.
+        let mut prev = pr.v_prev;
         let mut pos = F::ZERO;
-        for (k, o) in out.iter_mut().enumerate() {
+        for k in 0..N {
             let vk = get(&self.v, k);
+            let dv_next = if k + 1 < N {
+                get(&self.v, k + 1) - vk
+            } else {
+                F::ZERO
+            };
+            put(
+                out,
+                k,
+                two_v * (vk - pr.v_ref) + two_s * (vk - prev - dv_next),
+            );
             pos += vk * pr.h;
-            let mut gv = two * w.reference_speed * (vk - pr.v_ref) + two * w.smoothness * dv(k);
-            let mut gnext = F::ZERO;
-            if k + 1 < N {
-                gv -= two * w.smoothness * dv(k + 1);
-                let vn = get(&self.v, k + 1);
-                gnext = two * w.reference_speed * (vn - pr.v_ref) + two * w.smoothness * dv(k + 1);
-                if k + 2 < N {
-                    gnext -= two * w.smoothness * dv(k + 2);
-                }
-            }
-            *o = gv - gnext;
+            prev = vk;
+        }
+        for k in 0..N {
+            let g = get(out, k) - get(out, k + 1);
+            put(out, k, g);
         }
         if let Some(last) = out.last_mut() {
-            *last -= two * w.target_position * pr.h * (pr.target - pos);
+            *last -= F::TWO * w.target_position * pr.h * (pr.target - pos);
         }
     }
 
     /// rhs = −r_d + Σ ∇g_i (rc_i − λ_i r_p,i) / s_i, with r_p = g + s.
     fn build_rhs(&mut self) {
-        for (r, d) in self.rhs.iter_mut().zip(self.r_d.iter()) {
-            *r = -*d;
+        let mut a1 = [F::ZERO; N];
+        let mut a2 = [F::ZERO; N];
+        let mut a3 = [F::ZERO; N];
+        let [up, lo, ac, de, sa] = &self.fam;
+        let t = |f: &Family<F, N>, k: usize| -> F {
+            (get(&f.rc, k) - get(&f.lam, k) * (get(&f.g, k) + get(&f.s, k))) * get(&f.inv_s, k)
+        };
+        for k in 0..N {
+            put(&mut a1, k, t(up, k) - t(lo, k));
+            put(&mut a2, k, t(ac, k) - t(de, k));
+            put(&mut a3, k, t(sa, k));
         }
-        for f in 0..FAMILIES {
-            for k in 0..N {
-                let s = get2(&self.s, f, k);
-                let l = get2(&self.lam, f, k);
-                let rp = get2(&self.g, f, k) + s;
-                let a = (get2(&self.rc, f, k) - l * rp) / s;
-                let c = self.stencil(f, k);
-                Self::scatter(c, a, &mut self.rhs, k);
-            }
+        let mut out = [F::ZERO; N];
+        self.jt(&a1, &a2, &a3, &mut out);
+        for ((r, o), d) in self.rhs.iter_mut().zip(out.iter()).zip(self.rd.iter()) {
+            *r = *o - *d;
         }
     }
 
@@ -370,22 +387,45 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// After solving for dz: ds = −r_p − ∇gᵀ dz, dλ = (−rc − λ ds) / s; returns the
     /// largest step in (0, 1] keeping s + α ds ≥ 0 and λ + α dλ ≥ 0.
     fn recover_and_step_length(&mut self) -> F {
+        let mut d1 = [F::ZERO; N];
+        let mut d2 = [F::ZERO; N];
+        let mut sd = [F::ZERO; N];
+        let (mut dz_prev, mut dv_prev) = (F::ZERO, F::ZERO);
+        for k in 0..N {
+            let dz = get(&self.dz, k);
+            let dv = dz - dz_prev;
+            put(&mut d1, k, dv);
+            put(&mut d2, k, dv - dv_prev);
+            put(
+                &mut sd,
+                k,
+                get(&self.c0, k) * dz + get(&self.c1, k) * dz_prev,
+            );
+            dz_prev = dz;
+            dv_prev = dv;
+        }
         let mut alpha = F::ONE;
-        for f in 0..FAMILIES {
-            for k in 0..N {
-                let c = self.stencil(f, k);
-                let s = get2(&self.s, f, k);
-                let l = get2(&self.lam, f, k);
-                let rp = get2(&self.g, f, k) + s;
-                let ds = -rp - Self::dot(c, &self.dz, k);
-                let dl = (-get2(&self.rc, f, k) - l * ds) / s;
-                set2(&mut self.ds, f, k, ds);
-                set2(&mut self.dl, f, k, dl);
-                if ds < F::ZERO {
-                    alpha = alpha.min(-s / ds);
+        for (f, proj) in self.fam.iter_mut().zip(PROJ.iter()) {
+            let (dir, sign) = match *proj {
+                Proj::D1(pos) => (&d1, pos),
+                Proj::D2(pos) => (&d2, pos),
+                Proj::S => (&sd, true),
+            };
+            let it =
+                f.ds.iter_mut()
+                    .zip(f.dl.iter_mut())
+                    .zip(f.g.iter().zip(f.s.iter().zip(f.inv_s.iter())))
+                    .zip(f.lam.iter().zip(f.rc.iter()))
+                    .zip(dir.iter());
+            for ((((ds, dl), (&g, (&s, &is))), (&l, &rc)), &dd) in it {
+                let proj_dz = if sign { dd } else { -dd };
+                *ds = -(g + s) - proj_dz;
+                *dl = (-rc - l * *ds) * is;
+                if *ds < F::ZERO {
+                    alpha = alpha.min(-s / *ds);
                 }
-                if dl < F::ZERO {
-                    alpha = alpha.min(-l / dl);
+                if *dl < F::ZERO {
+                    alpha = alpha.min(-l / *dl);
                 }
             }
         }
@@ -394,11 +434,11 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
 
     fn initialize(&mut self, pr: &SingleLaneProblem<F, N>, warm: Option<&[F; N]>) -> bool {
         let warm_ok = match warm {
-            Some(w) => {
+            Some(w) if w.iter().all(|x| x.is_finite()) => {
                 self.v = *w;
-                w.iter().all(|x| x.is_finite())
+                true
             }
-            None => false,
+            _ => false,
         };
         if !warm_ok {
             // Cold: hold the current speed as far as V^k_t allows.
@@ -410,19 +450,26 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         let use_duals = warm_ok && self.have_duals;
         // Starting centrality: a warm start sits close to the central path, so it starts
         // with a small barrier; a cold start with a unit one.
-        let floor = if warm_ok { F::from_f64(1e-2) } else { F::ONE };
-        for f in 0..FAMILIES {
-            for k in 0..N {
-                let s = (-get2(&self.g, f, k)).max(floor);
-                set2(&mut self.s, f, k, s);
-                let l = if use_duals {
-                    // Previous duals, shifted one step (the last one repeated).
-                    let prev = get2(&self.lam, f, (k + 1).min(N.saturating_sub(1)));
-                    prev.max(floor * floor / s)
+        let floor = if warm_ok {
+            self.settings.warm_barrier
+        } else {
+            F::ONE
+        };
+        for f in self.fam.iter_mut() {
+            // Previous duals, shifted one step (the last one repeated).
+            let shifted: [F; N] =
+                core::array::from_fn(|k| get(&f.lam, (k + 1).min(N.saturating_sub(1))));
+            for ((s, l), (&g, &lp)) in
+                f.s.iter_mut()
+                    .zip(f.lam.iter_mut())
+                    .zip(f.g.iter().zip(shifted.iter()))
+            {
+                *s = (-g).max(floor);
+                *l = if use_duals {
+                    lp.max(floor * floor / *s)
                 } else {
                     floor / s.max(F::ONE)
                 };
-                set2(&mut self.lam, f, k, l);
             }
         }
         warm_ok
@@ -448,50 +495,62 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         trace: &mut dyn FnMut(IterationInfo<F>),
     ) -> Result<Solution<F, N>, SolveError> {
         let st = self.settings;
-        self.build_cost(pr);
+        let two = F::TWO;
         self.initialize(pr, warm_start);
         self.have_duals = false;
         let m = F::from_usize(FAMILIES * N);
         // Rounding floor of the primal residual: a few ulp of the largest quantity.
         let floor_p = F::from_f64(16.0) * F::EPSILON * (pr.gap.abs() + F::from_f64(100.0));
         let tol_p = st.tol + floor_p;
+        let w = pr.weights;
+        let inv_b = F::ONE / pr.brake;
         for it in 0..st.max_iter {
             self.evaluate(pr);
             // Dual residual r_d = ∇J + Σ λ ∇g, measured against its largest single term:
             // on degenerate vertices (speed cap and acceleration limit active together)
             // the duals are not unique and grow in opposite directions, so the round-off
             // of Σ λ ∇g is ε·max|λ_i ∇g_i| even where the sum is small.
-            let mut rd = [F::ZERO; N];
-            self.cost_gradient(pr, &mut rd);
-            let mut scale = F::ONE;
-            for r in rd.iter() {
-                scale = scale.max(r.abs());
+            let mut grad = [F::ZERO; N];
+            self.cost_gradient(pr, &mut grad);
+            let mut scale = grad.iter().fold(F::ONE, |a, &x| a.max(x.abs()));
+            let [up, lo, ac, de, sa] = &self.fam;
+            let a1: [F; N] = core::array::from_fn(|k| get(&up.lam, k) - get(&lo.lam, k));
+            let a2: [F; N] = core::array::from_fn(|k| get(&ac.lam, k) - get(&de.lam, k));
+            for k in 0..N {
+                let c = get(&self.c0, k).abs().max(get(&self.c1, k).abs());
+                scale = scale
+                    .max(get(&up.lam, k))
+                    .max(get(&lo.lam, k))
+                    .max(two * get(&ac.lam, k))
+                    .max(two * get(&de.lam, k))
+                    .max(get(&sa.lam, k) * c);
             }
             let mut jl = [F::ZERO; N];
+            self.jt(&a1, &a2, &sa.lam, &mut jl);
+            for ((r, g), j) in self.rd.iter_mut().zip(grad.iter()).zip(jl.iter()) {
+                *r = *g + *j;
+            }
             let mut max_rp = F::ZERO;
             let mut gap_sum = F::ZERO;
-            for f in 0..FAMILIES {
-                for k in 0..N {
-                    let l = get2(&self.lam, f, k);
-                    let s = get2(&self.s, f, k);
-                    let c = self.stencil(f, k);
-                    let [c0, c1, c2] = c;
-                    scale = scale.max(l.abs() * c0.abs().max(c1.abs()).max(c2.abs()));
-                    Self::scatter(c, l, &mut jl, k);
-                    max_rp = max_rp.max((get2(&self.g, f, k) + s).abs());
+            for f in self.fam.iter() {
+                for ((&g, &s), &l) in f.g.iter().zip(f.s.iter()).zip(f.lam.iter()) {
+                    max_rp = max_rp.max((g + s).abs());
                     gap_sum += s * l;
                 }
             }
-            for (r, j) in rd.iter_mut().zip(jl.iter()) {
-                *r += *j;
-            }
-            self.r_d = rd;
-            let max_rd = rd.iter().fold(F::ZERO, |a, &x| a.max(x.abs()));
-            let v = self.v;
-            let obj = pr.objective(&v);
-            if !(obj.is_finite() && gap_sum.is_finite() && max_rd.is_finite()) {
+            let max_rd = self.rd.iter().fold(F::ZERO, |a, &x| a.max(x.abs()));
+            if !(gap_sum.is_finite() && max_rd.is_finite() && max_rp.is_finite()) {
                 return Err(SolveError::NonFinite);
             }
+            let v = self.v;
+            // J is needed only for the gap test (and the trace): skip it while the
+            // residuals are still large.
+            let feasible_enough = max_rp <= tol_p && max_rd <= st.tol_dual * scale;
+            let obj = if feasible_enough {
+                pr.objective(&v)
+            } else {
+                F::ZERO
+            };
             let mut info = IterationInfo {
                 iteration: it,
                 objective: obj,
@@ -500,10 +559,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 mu: gap_sum / m,
                 step: F::ZERO,
             };
-            if max_rp <= tol_p
-                && max_rd <= st.tol_dual * scale
-                && gap_sum <= st.tol * (F::ONE + obj.abs())
-            {
+            if feasible_enough && gap_sum <= st.tol * (F::ONE + obj.abs()) {
                 trace(info);
                 self.have_duals = true;
                 return Ok(Solution {
@@ -514,21 +570,35 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             }
             let mu = gap_sum / m;
 
-            // Newton matrix: P + Σ λ ∇²g + Σ (λ/s) ∇g ∇gᵀ + δ I.
-            self.kkt_raw.clone_from(&self.p);
-            let inv_b = F::ONE / pr.brake;
-            for f in 0..FAMILIES {
-                for k in 0..N {
-                    let w = get2(&self.lam, f, k) / get2(&self.s, f, k);
-                    let c = self.stencil(f, k);
-                    self.kkt_raw.add_stencil(k, c, w);
+            // Newton matrix: ∇²J + Σ λ ∇²g + Σ (λ/s) ∇g ∇gᵀ (+ δ I when factorised).
+            for f in self.fam.iter_mut() {
+                for (is, &s) in f.inv_s.iter_mut().zip(f.s.iter()) {
+                    *is = F::ONE / s;
                 }
             }
-            for k in 0..N {
-                let l = get2(&self.lam, SAFETY, k);
-                self.kkt_raw
-                    .add_stencil(k, [F::ONE, -F::ONE, F::ZERO], l * inv_b);
+            {
+                let [up, lo, ac, de, sa] = &self.fam;
+                for k in 0..N {
+                    let ls = get(&sa.lam, k);
+                    put(
+                        &mut self.w1,
+                        k,
+                        two * w.reference_speed
+                            + get(&up.lam, k) * get(&up.inv_s, k)
+                            + get(&lo.lam, k) * get(&lo.inv_s, k)
+                            + ls * inv_b,
+                    );
+                    put(
+                        &mut self.w2,
+                        k,
+                        two * w.smoothness
+                            + get(&ac.lam, k) * get(&ac.inv_s, k)
+                            + get(&de.lam, k) * get(&de.inv_s, k),
+                    );
+                    put(&mut self.w3, k, ls * get(&sa.inv_s, k));
+                }
             }
+            self.assemble(two * w.target_position * pr.h * pr.h);
             self.kkt.clone_from(&self.kkt_raw);
             for d in self.kkt.d.iter_mut() {
                 *d += st.regularization;
@@ -538,25 +608,23 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             }
 
             // Predictor (affine scaling): rc = s∘λ.
-            for f in 0..FAMILIES {
-                for k in 0..N {
-                    set2(
-                        &mut self.rc,
-                        f,
-                        k,
-                        get2(&self.s, f, k) * get2(&self.lam, f, k),
-                    );
+            for f in self.fam.iter_mut() {
+                for ((rc, &s), &l) in f.rc.iter_mut().zip(f.s.iter()).zip(f.lam.iter()) {
+                    *rc = s * l;
                 }
             }
             self.build_rhs();
             self.newton_solve(st.refinement_steps);
             let alpha_aff = self.recover_and_step_length();
             let mut mu_aff = F::ZERO;
-            for f in 0..FAMILIES {
-                for k in 0..N {
-                    let s = get2(&self.s, f, k) + alpha_aff * get2(&self.ds, f, k);
-                    let l = get2(&self.lam, f, k) + alpha_aff * get2(&self.dl, f, k);
-                    mu_aff += s * l;
+            for f in self.fam.iter() {
+                for (((&s, &l), &ds), &dl) in
+                    f.s.iter()
+                        .zip(f.lam.iter())
+                        .zip(f.ds.iter())
+                        .zip(f.dl.iter())
+                {
+                    mu_aff += (s + alpha_aff * ds) * (l + alpha_aff * dl);
                 }
             }
             mu_aff = mu_aff / m;
@@ -564,12 +632,15 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             let sigma = ratio * ratio * ratio;
 
             // Corrector: rc = s∘λ + Δs_aff∘Δλ_aff − σμ.
-            for f in 0..FAMILIES {
-                for k in 0..N {
-                    let rc = get2(&self.s, f, k) * get2(&self.lam, f, k)
-                        + get2(&self.ds, f, k) * get2(&self.dl, f, k)
-                        - sigma * mu;
-                    set2(&mut self.rc, f, k, rc);
+            for f in self.fam.iter_mut() {
+                for ((((rc, &s), &l), &ds), &dl) in
+                    f.rc.iter_mut()
+                        .zip(f.s.iter())
+                        .zip(f.lam.iter())
+                        .zip(f.ds.iter())
+                        .zip(f.dl.iter())
+                {
+                    *rc = s * l + ds * dl - sigma * mu;
                 }
             }
             self.build_rhs();
@@ -587,17 +658,27 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 *v += alpha * (dz - dz_prev);
                 dz_prev = dz;
             }
-            for f in 0..FAMILIES {
-                for k in 0..N {
-                    let s = get2(&self.s, f, k) + alpha * get2(&self.ds, f, k);
-                    let l = get2(&self.lam, f, k) + alpha * get2(&self.dl, f, k);
-                    set2(&mut self.s, f, k, s);
-                    set2(&mut self.lam, f, k, l);
+            for f in self.fam.iter_mut() {
+                for (((s, l), &ds), &dl) in
+                    f.s.iter_mut()
+                        .zip(f.lam.iter_mut())
+                        .zip(f.ds.iter())
+                        .zip(f.dl.iter())
+                {
+                    *s += alpha * ds;
+                    *l += alpha * dl;
                 }
             }
         }
         Err(SolveError::IterationLimit {
             iterations: st.max_iter,
         })
+    }
+}
+
+#[inline(always)]
+fn put<F: Real>(a: &mut [F], i: usize, x: F) {
+    if let Some(slot) = a.get_mut(i) {
+        *slot = x;
     }
 }

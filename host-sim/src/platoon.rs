@@ -1,0 +1,343 @@
+//! Single-lane platoons (Theorem 1): a leader driving an adversarial admissible profile,
+//! followers each running their own planner-core instance, an independent monitor.
+
+use crate::monitor::{Findings, Limits, Truth};
+use planner_core::planner::Vehicle;
+use planner_core::{CostWeights, FallbackReason, Observation, Params, Planner, Real, StepStatus};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+/// How the platoon's leader drives: any profile within [0, vmax] and [amin, amax].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LeaderProfile {
+    /// A new random acceleration in [amin, amax] every 0.2–2 s.
+    Random,
+    /// Cruise, then full braking to a stop, wait, full acceleration, and again.
+    EmergencyStops,
+    /// Alternating full acceleration and full braking phases of 1–4 s.
+    StopAndGo,
+}
+
+/// One platoon experiment.
+#[derive(Debug, Clone, Copy)]
+pub struct PlatoonSpec {
+    /// Number of vehicles, leader included (≥ 2).
+    pub vehicles: usize,
+    /// Simulated time (s).
+    pub duration_s: f64,
+    /// Leader behaviour.
+    pub profile: LeaderProfile,
+    /// Seed of the initial state and the leader's profile.
+    pub seed: u64,
+    /// Followers plan in f32 (as on the Cortex-M4F) instead of f64.
+    pub f32_planners: bool,
+}
+
+/// Result of a platoon run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlatoonOutcome {
+    /// Monitor findings.
+    pub findings: Findings,
+    /// Planner steps taken.
+    pub planner_steps: u64,
+    /// Steps on which a planner applied the certified fallback.
+    pub fallback_steps: u64,
+    /// Of those: the invariant (with margin) did not hold.
+    pub fallback_invariant: u64,
+    /// Of those: no room to move (e.g. stopped behind a stopped vehicle): forced braking.
+    pub fallback_no_room: u64,
+    /// Of those: the solver stopped without a solution.
+    pub fallback_solver: u64,
+    /// Of those: the plan failed verification.
+    pub fallback_verification: u64,
+}
+
+/// Horizon of the followers' planners.
+pub const HORIZON: usize = 20;
+
+struct Leader {
+    profile: LeaderProfile,
+    accel: f64,
+    until: f64,
+    phase: u8,
+}
+
+impl Leader {
+    fn accel(&mut self, t: f64, v: f64, lim: &Limits, rng: &mut ChaCha8Rng) -> f64 {
+        if t >= self.until {
+            match self.profile {
+                LeaderProfile::Random => {
+                    self.accel = rng.random_range(-lim.brake..lim.a_max);
+                    self.until = t + rng.random_range(0.2..2.0);
+                }
+                LeaderProfile::EmergencyStops => {
+                    self.phase = (self.phase + 1) % 3;
+                    let (a, d) = match self.phase {
+                        0 => (
+                            rng.random_range(-0.5..lim.a_max),
+                            rng.random_range(1.0..6.0),
+                        ),
+                        1 => (-lim.brake, rng.random_range(2.0..5.0)),
+                        _ => (0.0, rng.random_range(0.0..3.0)),
+                    };
+                    self.accel = a;
+                    self.until = t + d;
+                    if self.phase == 2 {
+                        // After a standstill, leave at full acceleration.
+                        self.accel = lim.a_max;
+                    }
+                }
+                LeaderProfile::StopAndGo => {
+                    self.phase ^= 1;
+                    self.accel = if self.phase == 0 {
+                        lim.a_max
+                    } else {
+                        -lim.brake
+                    };
+                    self.until = t + rng.random_range(1.0..4.0);
+                }
+            }
+        }
+        let _ = v;
+        self.accel
+    }
+}
+
+/// A random platoon spec for case `i` of a Theorem 1 sweep.
+pub fn random_spec(i: u64, seed: u64) -> PlatoonSpec {
+    let mut rng = crate::instances::rng(seed.wrapping_mul(1_000_003).wrapping_add(i));
+    let profile = match rng.random_range(0..3) {
+        0 => LeaderProfile::Random,
+        1 => LeaderProfile::EmergencyStops,
+        _ => LeaderProfile::StopAndGo,
+    };
+    PlatoonSpec {
+        vehicles: rng.random_range(2..=20),
+        duration_s: rng.random_range(20.0..30.0),
+        profile,
+        seed: rng.random(),
+        f32_planners: i % 4 == 3,
+    }
+}
+
+/// Runs a platoon (dispatching on the planners' precision).
+pub fn run(spec: &PlatoonSpec) -> PlatoonOutcome {
+    if spec.f32_planners {
+        run_in::<f32>(spec)
+    } else {
+        run_in::<f64>(spec)
+    }
+}
+
+fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
+    let lim = Limits::table_i();
+    let params = Params::<F>::table_i();
+    let pf64 = Params::<f64>::table_i();
+    let mut rng = crate::instances::rng(spec.seed);
+    let n = spec.vehicles.max(2);
+    let length = pf64.length();
+    // Initial state: leader at the front; each follower behind its predecessor by the
+    // extent, d0, dS(v) and the f32 safety margin, plus a random extra: the invariant
+    // holds, with the planners' margins, at t = 0.
+    let margin = f64::from(f32::SAFETY_MARGIN_M) + 0.01;
+    let mut cars: Vec<Truth> = Vec::with_capacity(n);
+    let mut x = 0.0;
+    for i in 0..n {
+        let v = rng.random_range(0.0..lim.v_max);
+        if i > 0 {
+            x -= length + lim.d0 + lim.safe_distance(v) + margin + rng.random_range(0.0..20.0);
+        }
+        cars.push(Truth {
+            x,
+            length,
+            v,
+            v_before: v,
+        });
+    }
+    let mut planners: Vec<Planner<F, HORIZON>> = (1..n)
+        .map(|_| Planner::new(params, CostWeights::default()).expect("default weights are valid"))
+        .collect();
+    let mut leader = Leader {
+        profile: spec.profile,
+        accel: 0.0,
+        until: 0.0,
+        phase: 0,
+    };
+    let mut findings = Findings::new();
+    let mut out = PlatoonOutcome {
+        findings,
+        planner_steps: 0,
+        fallback_steps: 0,
+        fallback_invariant: 0,
+        fallback_no_room: 0,
+        fallback_solver: 0,
+        fallback_verification: 0,
+    };
+    let steps = (spec.duration_s / lim.h).round() as u64;
+    let mut commands = vec![0.0f64; n];
+    let mut seen: Vec<Vehicle<F>> = Vec::with_capacity(n);
+    for step in 0..steps {
+        let t = step as f64 * lim.h;
+        findings.check_lane(&lim, &cars);
+        // Every vehicle decides on the state at t, then all move.
+        seen.clear();
+        seen.extend(cars.iter().map(|c| Vehicle {
+            x: F::from_f64(c.x),
+            length: F::from_f64(c.length),
+        }));
+        let a = leader.accel(t, cars[0].v, &lim, &mut rng);
+        let v0 = cars[0].v;
+        commands[0] = (v0 + a * lim.h).clamp(
+            (v0 - lim.brake * lim.h).max(0.0),
+            (v0 + lim.a_max * lim.h).min(lim.v_max),
+        );
+        for (i, planner) in planners.iter_mut().enumerate() {
+            let me = &cars[i + 1];
+            let obs = Observation {
+                x: F::from_f64(me.x),
+                v_prev: F::from_f64(me.v),
+                vehicles: &seen,
+                stop_line: None,
+                target_x: F::ZERO,
+                v_ref: params.v_max(),
+            };
+            let cmd = match planner.step(&obs) {
+                Ok(c) => {
+                    if let StepStatus::Fallback(why) = c.status {
+                        out.fallback_steps += 1;
+                        match why {
+                            FallbackReason::InvariantViolated => out.fallback_invariant += 1,
+                            FallbackReason::NoRoom => out.fallback_no_room += 1,
+                            FallbackReason::Solver(e) => {
+                                out.fallback_solver += 1;
+                                if std::env::var_os("PLATOON_DEBUG").is_some() {
+                                    eprintln!("solver {e:?} at v={:?} gap={:?}", me.v, c.gap);
+                                }
+                            }
+                            FallbackReason::Verification(_) => out.fallback_verification += 1,
+                        }
+                    }
+                    c.v.to_f64()
+                }
+                // Bad input cannot happen here; brake if it ever does.
+                Err(_) => {
+                    out.fallback_steps += 1;
+                    (me.v - lim.brake * lim.h).max(0.0)
+                }
+            };
+            out.planner_steps += 1;
+            commands[i + 1] = cmd;
+        }
+        for (c, &v) in cars.iter_mut().zip(commands.iter()) {
+            c.v_before = c.v;
+            c.v = v;
+            c.x += v * lim.h;
+        }
+    }
+    findings.check_lane(&lim, &cars);
+    out.findings = findings;
+    out
+}
+
+/// Summary of a Theorem 1 sweep.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct SweepSummary {
+    /// Platoons run.
+    pub cases: u64,
+    /// Vehicles in all platoons.
+    pub vehicles: u64,
+    /// Planner steps.
+    pub planner_steps: u64,
+    /// Fallback steps.
+    pub fallback_steps: u64,
+    /// Of those, forced standstills (no room).
+    pub fallback_no_room: u64,
+    /// Of those, solver failures or failed verifications.
+    pub fallback_solver_or_verification: u64,
+    /// Collisions seen by the monitor.
+    pub collisions: u64,
+    /// Invariant violations seen by the monitor.
+    pub invariant_violations: u64,
+    /// Speed/acceleration limit violations.
+    pub limit_violations: u64,
+    /// Smallest bumper gap (m).
+    pub min_gap_m: f64,
+    /// Wall time (s).
+    pub wall_seconds: f64,
+}
+
+/// Runs `cases` random platoons on all cores.
+pub fn sweep(cases: u64, seed: u64) -> SweepSummary {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    let t0 = std::time::Instant::now();
+    let next = AtomicU64::new(0);
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let parts: Vec<SweepSummary> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut acc = SweepSummary {
+                        min_gap_m: f64::INFINITY,
+                        ..Default::default()
+                    };
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if i >= cases {
+                            break acc;
+                        }
+                        let spec = random_spec(i, seed);
+                        let out = run(&spec);
+                        acc.cases += 1;
+                        acc.vehicles += spec.vehicles as u64;
+                        acc.planner_steps += out.planner_steps;
+                        acc.fallback_steps += out.fallback_steps;
+                        acc.fallback_no_room += out.fallback_no_room;
+                        acc.fallback_solver_or_verification +=
+                            out.fallback_solver + out.fallback_verification;
+                        acc.collisions += out.findings.collisions;
+                        acc.invariant_violations += out.findings.invariant_violations;
+                        acc.limit_violations += out.findings.limit_violations;
+                        acc.min_gap_m = acc.min_gap_m.min(out.findings.min_gap_m);
+                    }
+                })
+            })
+            .collect();
+        handles.into_iter().filter_map(|h| h.join().ok()).collect()
+    });
+    let mut total = SweepSummary {
+        min_gap_m: f64::INFINITY,
+        ..Default::default()
+    };
+    for p in parts {
+        total.cases += p.cases;
+        total.vehicles += p.vehicles;
+        total.planner_steps += p.planner_steps;
+        total.fallback_steps += p.fallback_steps;
+        total.fallback_no_room += p.fallback_no_room;
+        total.fallback_solver_or_verification += p.fallback_solver_or_verification;
+        total.collisions += p.collisions;
+        total.invariant_violations += p.invariant_violations;
+        total.limit_violations += p.limit_violations;
+        total.min_gap_m = total.min_gap_m.min(p.min_gap_m);
+    }
+    total.wall_seconds = t0.elapsed().as_secs_f64();
+    total
+}
+
+/// `host-sim platoons`: prints the sweep summary; exit code 1 on any violation.
+pub fn sweep_cli(cases: u64, seed: u64, json: bool) -> std::process::ExitCode {
+    let s = sweep(cases, seed);
+    if json {
+        match serde_json::to_string(&s) {
+            Ok(j) => println!("{j}"),
+            Err(e) => eprintln!("error: {e}"),
+        }
+    } else {
+        println!("{s:#?}");
+    }
+    if s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == cases {
+        std::process::ExitCode::SUCCESS
+    } else {
+        std::process::ExitCode::FAILURE
+    }
+}
