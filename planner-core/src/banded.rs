@@ -197,11 +197,15 @@ mod tests {
 
     #[test]
     fn rejects_indefinite() {
-        let mut m = Penta::<f64, 3>::default();
-        m.d = [1.0, -1.0, 1.0];
+        let mut m = Penta::<f64, 3> {
+            d: [1.0, -1.0, 1.0],
+            ..Default::default()
+        };
         assert_eq!(m.factor(0.0), Err(NotPositiveDefinite));
-        let mut m = Penta::<f64, 3>::default();
-        m.d = [1.0, f64::NAN, 1.0];
+        let mut m = Penta::<f64, 3> {
+            d: [1.0, f64::NAN, 1.0],
+            ..Default::default()
+        };
         assert_eq!(m.factor(1e-14), Err(NotPositiveDefinite));
     }
 }

@@ -43,9 +43,9 @@ pub enum FallbackReason<F> {
     /// The invariant x_t < x̄ − dS(v_{t−h}) (with margin) did not hold: (10) may be
     /// infeasible, so the planner brakes as hard as it can.
     InvariantViolated,
-    /// The invariant holds with less than [`MIN_ROOM_M`] to spare: (10) has (almost) no
-    /// interior and max braking is the forced answer, e.g. standing behind a stopped
-    /// vehicle. Not a failure.
+    /// Max braking satisfies (10) with less than [`MIN_ROOM_M`] to spare: (10) has
+    /// (almost) no interior and max braking is the forced answer, e.g. standing behind a
+    /// stopped vehicle. Not a failure.
     NoRoom,
     /// The solver stopped without a solution.
     Solver(SolveError),
@@ -122,11 +122,13 @@ pub fn free_road_gap<F: Real>(p: &Params<F>, n: usize) -> F {
     F::from_usize(n) * p.h() * p.v_max() + safety::d_s(p, p.v_max()) + F::ONE
 }
 
-/// Room (m) below which the planner does not call the solver: when
-/// x̄ − x_t − margin − dS(v_{t−h}) < 1 mm the feasible set of (10) is a sliver around the
-/// max-braking sequence (a single point when stopped behind a stopped vehicle), which
-/// interior-point methods cannot centre in; max braking is then applied as the answer.
-pub const MIN_ROOM_M: f64 = 1e-3;
+/// Slack (m) below which the planner does not call the solver: when the first step of the
+/// max-braking plan satisfies the safety constraint of (10) with less than 0.5 mm to
+/// spare, the feasible set is a sliver around that plan (a single point when standing
+/// behind a stopped vehicle), which interior-point methods cannot centre in; max braking
+/// is then applied as the answer. A moving vehicle on the invariant's boundary still has
+/// 1.5 |amin| h² ≈ 1.2 mm here, so this only triggers at (near) standstill.
+pub const MIN_ROOM_M: f64 = 5e-4;
 
 /// Slack allowed on the linear constraints (speed, acceleration) after the plan has been
 /// clamped into them exactly: the rounding of one subtraction of speeds ≤ vmax.
@@ -238,7 +240,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
                 return Ok(self.fallback(obs.v_prev, gap, FallbackReason::InvariantViolated))
             }
         };
-        if problem.gap - safety::d_s(&p, obs.v_prev) < F::from_f64(MIN_ROOM_M) {
+        let v_brake = safety::max_braking_command(&p, obs.v_prev);
+        let room = -problem.safety_value(p.h() * v_brake, v_brake);
+        if room < F::from_f64(MIN_ROOM_M) {
             return Ok(self.fallback(obs.v_prev, gap, FallbackReason::NoRoom));
         }
         let warm = self.have_plan.then(|| shifted(&self.plan));
@@ -291,7 +295,8 @@ fn shifted<F: Real, const N: usize>(plan: &[F; N]) -> [F; N] {
 /// The linear constraints (V^k_t and acceleration) are first enforced exactly by clamping
 /// each v_k, in order, into [max(lo_k, v_{k−1} + amin h), min(hi_k, v_{k−1} + amax h)];
 /// the solver's output violates them by at most its tolerance, so the clamp moves v_k by
-/// that much. Then every constraint is checked: linear ones within [`speed_slack`],
+/// that much (where rounding leaves the interval empty by less than [`speed_slack`], its
+/// lower end is taken). Then every constraint is checked: linear ones within [`speed_slack`],
 /// safety within [`Real::VERIFY_SLACK_M`] of the margin-tightened gap, so the exact
 /// (untightened) safety constraint holds with `SAFETY_MARGIN_M − VERIFY_SLACK_M` to spare.
 pub fn verify<F: Real, const N: usize>(
@@ -299,6 +304,7 @@ pub fn verify<F: Real, const N: usize>(
     problem: &SingleLaneProblem<F, N>,
     mut v: [F; N],
 ) -> Result<[F; N], Violation<F>> {
+    let slack = speed_slack(p);
     let mut prev = problem.v_prev;
     for (k, ((vk, &lo), &hi)) in v
         .iter_mut()
@@ -308,14 +314,20 @@ pub fn verify<F: Real, const N: usize>(
     {
         let lower = lo.max(prev + problem.dv_min);
         let upper = hi.min(prev + problem.dv_max);
-        if !(lower <= upper) || !vk.is_finite() {
+        // The interval can be empty by rounding where V^k_t's upper edge falls at exactly
+        // the braking rate; within the slack, take its lower (slower, safer) end.
+        if !(lower <= upper + slack) || !vk.is_finite() {
             return Err(Violation {
                 amount: lower - upper,
                 kind: ConstraintKind::SpeedUpper,
                 step: k,
             });
         }
-        *vk = vk.max(lower).min(upper);
+        *vk = if lower > upper {
+            lower
+        } else {
+            vk.max(lower).min(upper)
+        };
         prev = *vk;
     }
     let worst = worst_relative(p, problem, &v);
