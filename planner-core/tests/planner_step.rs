@@ -75,7 +75,12 @@ fn closes_on_stopped_leader_keeping_the_invariant() {
     let (mut x, mut v) = (0.0, 20.0);
     for _ in 0..600 {
         let c = pl.step(&obs(x, v, &cars)).expect("valid input");
-        assert!(matches!(c.status, StepStatus::Solved { .. }), "{c:?}");
+        // Solved all the way; max braking is forced only once (nearly) stopped.
+        match c.status {
+            StepStatus::Solved { .. } => {}
+            StepStatus::Fallback(FallbackReason::NoRoom) => assert!(v < 0.1, "{c:?} at v={v}"),
+            other => panic!("{other:?} at x = {x}, v = {v}"),
+        }
         assert!(c.v >= v - 0.079 - 1e-12 && c.v <= v + 0.038 + 1e-12);
         v = c.v;
         x += v * 0.01;
