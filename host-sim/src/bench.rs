@@ -90,6 +90,7 @@ fn compare<const N: usize>(
     let reference = ClarabelSolver {
         tol_gap: 1e-8,
         tol_feas: 1e-8,
+        accept_almost_solved: false,
     };
     let (clarabel_us, r) = time_us(reps, || {}, || reference.solve_conic(pr, &data));
     let r = r.ok()?;

@@ -1,21 +1,84 @@
 //! `host-sim`: command-line front end.
+//!
+//! Exit codes: 0 success; 1 a collision or a safety/limit violation was seen; 2 bad
+//! input (arguments, scenario file, output file); 3 a liveness goal was missed.
 
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
+use host_sim::plot::PlotData;
+use host_sim::scenario::Scenario;
+use host_sim::sim::{run_scenario, SolverChoice};
+use host_sim::trace::TraceWriter;
+use std::io::{BufWriter, IsTerminal};
+use std::path::PathBuf;
 use std::process::ExitCode;
+
+const EXIT_UNSAFE: u8 = 1;
+const EXIT_BAD_INPUT: u8 = 2;
+const EXIT_NOT_LIVE: u8 = 3;
 
 #[derive(Parser)]
 #[command(
     name = "host-sim",
     version,
-    about = "Runs planner-core on the host: benchmarks and simulations"
+    about = "Runs planner-core instances on the host: simulations over a bus, benchmarks",
+    after_help = "Exit codes: 0 ok, 1 collision or violation, 2 bad input, 3 liveness goal missed."
 )]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum SolverArg {
+    /// planner-core's interior-point solver.
+    Ours,
+    /// Clarabel, the reference solver.
+    Clarabel,
+}
+
 #[derive(Subcommand)]
 enum Command {
+    /// Runs a scenario file: every vehicle its own planner, talking only over the bus.
+    Run {
+        /// Scenario file (TOML).
+        file: PathBuf,
+        /// Overrides the scenario's seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Print one JSON summary object.
+        #[arg(long)]
+        json: bool,
+        /// Write a CSV trace (t,id,x,y,theta,v,omega,lane,target_lane,mode).
+        #[arg(long, value_name = "out.csv")]
+        trace: Option<PathBuf>,
+        /// Draw trajectories and speeds to a .png or .svg file.
+        #[arg(long, value_name = "out.png|out.svg")]
+        plot: Option<PathBuf>,
+        /// The planners' solver.
+        #[arg(long, value_enum, default_value = "ours")]
+        solver: SolverArg,
+    },
+    /// Many vehicles (parallel single-lane platoons) at h = 0.01 on all cores.
+    Scale {
+        /// Number of vehicles.
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+        vehicles: u64,
+        /// Simulated seconds.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Vehicles per road (platoon).
+        #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..=128))]
+        platoon: u64,
+        /// Worker threads (0 = all cores).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Our solver and Clarabel on identical instances of (10), N = 20 and 50, cold and warm.
     BenchPlanner {
         /// Print one JSON object instead of a table.
@@ -45,9 +108,182 @@ enum Command {
     },
 }
 
+fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
+    match serde_json::to_string(value) {
+        Ok(s) => {
+            println!("{s}");
+            Ok(())
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            Err(ExitCode::from(EXIT_BAD_INPUT))
+        }
+    }
+}
+
+fn bad_input(msg: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {msg}");
+    ExitCode::from(EXIT_BAD_INPUT)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run(
+    file: PathBuf,
+    seed: Option<u64>,
+    json: bool,
+    trace: Option<PathBuf>,
+    plot: Option<PathBuf>,
+    solver: SolverArg,
+) -> ExitCode {
+    // Every input is checked before anything runs.
+    if let Some(p) = &plot {
+        if !matches!(p.extension().and_then(|e| e.to_str()), Some("png" | "svg")) {
+            return bad_input(format!("--plot {}: must end in .png or .svg", p.display()));
+        }
+    }
+    let scenario = match Scenario::load(&file) {
+        Ok(s) => s,
+        Err(e) => return bad_input(e),
+    };
+    let mut writer = match &trace {
+        Some(p) => match std::fs::File::create(p).and_then(|f| TraceWriter::new(BufWriter::new(f)))
+        {
+            Ok(w) => Some(w),
+            Err(e) => return bad_input(format!("--trace {}: {e}", p.display())),
+        },
+        None => None,
+    };
+    let mut plot_data = PlotData {
+        lanes: scenario.road.lanes,
+        end_x: scenario.road.end_x,
+        ..PlotData::default()
+    };
+    let want_plot = plot.is_some();
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let b = indicatif::ProgressBar::new(1000);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40} {percent:>3}% {elapsed} / ~{eta} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    });
+    let name = scenario.name.clone();
+    let solver = match solver {
+        SolverArg::Ours => SolverChoice::Ours,
+        SolverArg::Clarabel => SolverChoice::Clarabel,
+    };
+    let result = run_scenario(
+        scenario,
+        solver,
+        seed,
+        &mut |row| {
+            if let Some(w) = writer.as_mut() {
+                w.row(row);
+            }
+            if want_plot {
+                plot_data.add(row);
+            }
+        },
+        &mut |done, total| {
+            if let Some(b) = &bar {
+                b.set_position(done * 1000 / total.max(1));
+            }
+        },
+    );
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let summary = match result {
+        Ok(s) => s,
+        Err(e) => return bad_input(format!("bus: {e}")),
+    };
+    if let Some(w) = writer {
+        if let Err(e) = w.finish() {
+            return bad_input(format!("--trace: {e}"));
+        }
+    }
+    if let Some(p) = &plot {
+        if let Err(e) = host_sim::plot::write(&plot_data, &name, p) {
+            return bad_input(e);
+        }
+    }
+    if json {
+        if let Err(code) = print_json(&summary) {
+            return code;
+        }
+    } else {
+        println!(
+            "{}: {} vehicles, {:.2} s simulated in {:.2} s; collisions {}, invariant violations {}, \
+             limit violations {}, road-end overruns {}, min gap {:.3} m, fallback steps {}, waiting steps {}, goals {}/{}{}",
+            summary.scenario,
+            summary.vehicles,
+            summary.sim_seconds,
+            summary.wall_seconds,
+            summary.collisions,
+            summary.invariant_violations,
+            summary.limit_violations,
+            summary.road_end_overruns,
+            summary.min_gap_m,
+            summary.fallback_steps,
+            summary.waiting_steps,
+            summary.goals_reached,
+            summary.goals,
+            if summary.completed { " (completed)" } else { " (NOT completed)" }
+        );
+    }
+    if summary.collisions
+        + summary.invariant_violations
+        + summary.limit_violations
+        + summary.road_end_overruns
+        > 0
+    {
+        ExitCode::from(EXIT_UNSAFE)
+    } else if !summary.completed {
+        ExitCode::from(EXIT_NOT_LIVE)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Run {
+            file,
+            seed,
+            json,
+            trace,
+            plot,
+            solver,
+        } => run(file, seed, json, trace, plot, solver),
+        Command::Scale {
+            vehicles,
+            duration,
+            platoon,
+            threads,
+            seed,
+            json,
+        } => {
+            if !(duration > 0.0 && duration <= 86_400.0) {
+                return bad_input(format!("--duration must be in (0, 86400], got {duration}"));
+            }
+            let r =
+                host_sim::scale::run(vehicles as usize, duration, platoon as usize, threads, seed);
+            if json {
+                if let Err(code) = print_json(&r) {
+                    return code;
+                }
+            } else {
+                println!("{r:#?}");
+            }
+            if r.collisions + r.invariant_violations + r.limit_violations > 0 {
+                ExitCode::from(EXIT_UNSAFE)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
         Command::BenchPlanner {
             json,
             problems,
@@ -56,12 +292,8 @@ fn main() -> ExitCode {
         } => {
             let report = host_sim::bench::run(problems as usize, seed, reps as usize);
             if json {
-                match serde_json::to_string(&report) {
-                    Ok(s) => println!("{s}"),
-                    Err(e) => {
-                        eprintln!("error: {e}");
-                        return ExitCode::FAILURE;
-                    }
+                if let Err(code) = print_json(&report) {
+                    return code;
                 }
             } else {
                 println!(
@@ -80,9 +312,16 @@ fn main() -> ExitCode {
                 for r in &report.results {
                     println!(
                         "{:>3} {:>5} {:>8} {:>12.2} {:>10.2} {:>14.1} {:>8.1} {:>10.1e} {:>10.1e} {:>6}",
-                        r.horizon, r.mode, r.problems, r.planner_median_us, r.planner_p99_us,
-                        r.clarabel_median_us, r.speedup, r.max_rel_objective_gap,
-                        r.max_constraint_violation, r.planner_median_iterations
+                        r.horizon,
+                        r.mode,
+                        r.problems,
+                        r.planner_median_us,
+                        r.planner_p99_us,
+                        r.clarabel_median_us,
+                        r.speedup,
+                        r.max_rel_objective_gap,
+                        r.max_constraint_violation,
+                        r.planner_median_iterations
                     );
                 }
             }

@@ -1,4 +1,4 @@
-//! Independent safety monitor for single-lane traffic.
+//! Independent safety monitor.
 //!
 //! Written from the paper's definitions with its own formulas (it does not call
 //! planner-core's safety functions), so that a bug there cannot hide itself here:
@@ -17,6 +17,8 @@ pub struct Limits {
     pub h: f64,
     /// d0 (m).
     pub d0: f64,
+    /// Heading bound |θ| ≤ θmax relative to the road (rad).
+    pub theta_max: f64,
 }
 
 impl Limits {
@@ -28,6 +30,7 @@ impl Limits {
             brake: 7.9,
             h: 0.01,
             d0: 0.5,
+            theta_max: std::f64::consts::FRAC_PI_6,
         }
     }
 
@@ -41,10 +44,21 @@ impl Limits {
 /// One vehicle as the simulator knows it (ground truth).
 #[derive(Debug, Clone, Copy)]
 pub struct Truth {
-    /// Centre position (m).
+    /// Centre position along the road (m).
     pub x: f64,
+    /// Lateral centre position (m).
+    pub y: f64,
+    /// Heading relative to the road (rad).
+    pub theta: f64,
     /// Length (m).
     pub length: f64,
+    /// Width (m).
+    pub width: f64,
+    /// Lane.
+    pub lane: u8,
+    /// Whether this vehicle is responsible for the invariant toward its leader (planner
+    /// driven); scripted drivers lead their lanes and are not.
+    pub keeps_invariant: bool,
     /// Speed applied over the last period, v_{t−h} (m/s).
     pub v: f64,
     /// Speed applied over the period before, v_{t−2h} (m/s).
@@ -60,6 +74,8 @@ pub struct Findings {
     pub invariant_violations: u64,
     /// Steps × vehicles with speed outside [0, vmax] or acceleration outside its limits.
     pub limit_violations: u64,
+    /// Steps × vehicles whose front bumper was past the road end x_R.
+    pub road_end_overruns: u64,
     /// Smallest bumper-to-bumper gap seen (m).
     pub min_gap_m: f64,
 }
@@ -77,23 +93,48 @@ impl Findings {
         }
     }
 
-    /// Checks one lane at one instant. `lane` may be in any order.
-    pub fn check_lane(&mut self, lim: &Limits, lane: &[Truth]) {
-        let mut order: Vec<&Truth> = lane.iter().collect();
-        order.sort_by(|a, b| a.x.total_cmp(&b.x));
+    /// Checks every vehicle at one instant (any order): collisions between every pair
+    /// (oriented rectangles), the invariant between consecutive vehicles of each lane
+    /// and, for each lane's front vehicle, toward the road end `end_x` (22), and each
+    /// vehicle's limits.
+    pub fn check(&mut self, lim: &Limits, all: &[Truth], end_x: Option<f64>) {
+        for (i, a) in all.iter().enumerate() {
+            for b in all.iter().skip(i + 1) {
+                if rectangles_overlap(a, b) {
+                    self.collisions += 1;
+                }
+            }
+        }
+        let mut order: Vec<&Truth> = all.iter().collect();
+        order.sort_by(|a, b| a.lane.cmp(&b.lane).then(a.x.total_cmp(&b.x)));
         for pair in order.windows(2) {
             let (f, l) = (pair[0], pair[1]);
+            if f.lane != l.lane {
+                continue;
+            }
             let gap = l.x - f.x - 0.5 * (l.length + f.length);
             self.min_gap_m = self.min_gap_m.min(gap);
-            if gap <= 0.0 {
-                self.collisions += 1;
-            }
             // Lemma 3's invariant, extent-adjusted (SPEC §1): x_f < x̄ − dS(v_{t−h}(f)).
-            if gap - lim.d0 <= lim.safe_distance(f.v) {
+            if f.keeps_invariant && gap - lim.d0 <= lim.safe_distance(f.v) {
                 self.invariant_violations += 1;
             }
         }
-        for c in lane {
+        if let Some(end) = end_x {
+            for (i, c) in order.iter().enumerate() {
+                let front_of_lane = order.get(i + 1).is_none_or(|n| n.lane != c.lane);
+                let room = end - c.x - 0.5 * c.length;
+                if room < 0.0 {
+                    self.road_end_overruns += 1;
+                }
+                if front_of_lane && c.keeps_invariant && room - lim.d0 <= lim.safe_distance(c.v) {
+                    self.invariant_violations += 1;
+                }
+            }
+        }
+        for c in all {
+            if c.theta.abs() > lim.theta_max + 1e-12 {
+                self.limit_violations += 1;
+            }
             let dv = c.v - c.v_before;
             if c.v < -LIMIT_TOL
                 || c.v > lim.v_max + LIMIT_TOL
@@ -103,5 +144,83 @@ impl Findings {
                 self.limit_violations += 1;
             }
         }
+    }
+}
+
+/// Separating-axis test for two oriented L × W rectangles (touching counts as overlap).
+pub fn rectangles_overlap(a: &Truth, b: &Truth) -> bool {
+    let reach = 0.5 * (a.length.hypot(a.width) + b.length.hypot(b.width));
+    if (a.x - b.x).abs() > reach || (a.y - b.y).abs() > reach {
+        return false;
+    }
+    let corners = |t: &Truth| {
+        let (s, c) = t.theta.sin_cos();
+        let (hl, hw) = (0.5 * t.length, 0.5 * t.width);
+        [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw)]
+            .map(|(u, w)| (t.x + u * c - w * s, t.y + u * s + w * c))
+    };
+    let (ca, cb) = (corners(a), corners(b));
+    let axes = |t: &Truth| {
+        let (s, c) = t.theta.sin_cos();
+        [(c, s), (-s, c)]
+    };
+    for (ax, ay) in axes(a).into_iter().chain(axes(b)) {
+        let project = |cs: &[(f64, f64); 4]| {
+            cs.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &(x, y)| {
+                    let p = x * ax + y * ay;
+                    (lo.min(p), hi.max(p))
+                })
+        };
+        let (a0, a1) = project(&ca);
+        let (b0, b1) = project(&cb);
+        if a1 < b0 || b1 < a0 {
+            return false;
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn car(x: f64, y: f64, theta: f64) -> Truth {
+        Truth {
+            x,
+            y,
+            theta,
+            length: 4.5,
+            width: 1.7,
+            lane: 0,
+            keeps_invariant: true,
+            v: 0.0,
+            v_before: 0.0,
+        }
+    }
+
+    #[test]
+    fn rectangle_overlap_cases() {
+        assert!(rectangles_overlap(&car(0.0, 0.0, 0.0), &car(4.4, 0.0, 0.0)));
+        assert!(!rectangles_overlap(
+            &car(0.0, 0.0, 0.0),
+            &car(4.6, 0.0, 0.0)
+        ));
+        assert!(!rectangles_overlap(
+            &car(0.0, 0.0, 0.0),
+            &car(0.0, 1.8, 0.0)
+        ));
+        assert!(rectangles_overlap(&car(0.0, 0.0, 0.0), &car(0.0, 1.6, 0.0)));
+        // Rotated 90°: B spans 1.7 m in x, so they touch while |dx| ≤ 2.25 + 0.85 = 3.1.
+        let r = car(3.0, 0.0, std::f64::consts::FRAC_PI_2);
+        assert!(rectangles_overlap(&car(0.0, 0.0, 0.0), &r));
+        let r = car(3.2, 0.0, std::f64::consts::FRAC_PI_2);
+        assert!(!rectangles_overlap(&car(0.0, 0.0, 0.0), &r));
+        // 45°: at (3.6, 2.2) B's edge crosses A near (2.25, 0.37); at (4.0, 2.6) it misses
+        // A although the bounding boxes still overlap, so only B's own axes separate them.
+        let d = car(3.6, 2.2, std::f64::consts::FRAC_PI_4);
+        assert!(rectangles_overlap(&car(0.0, 0.0, 0.0), &d));
+        let d = car(4.0, 2.6, std::f64::consts::FRAC_PI_4);
+        assert!(!rectangles_overlap(&car(0.0, 0.0, 0.0), &d));
     }
 }

@@ -149,7 +149,12 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
         }
         cars.push(Truth {
             x,
+            y: 0.0,
+            theta: 0.0,
             length,
+            width: pf64.width(),
+            lane: 0,
+            keeps_invariant: i > 0,
             v,
             v_before: v,
         });
@@ -178,7 +183,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     let mut seen: Vec<Vehicle<F>> = Vec::with_capacity(n);
     for step in 0..steps {
         let t = step as f64 * lim.h;
-        findings.check_lane(&lim, &cars);
+        findings.check(&lim, &cars, None);
         // Every vehicle decides on the state at t, then all move.
         seen.clear();
         seen.extend(cars.iter().map(|c| Vehicle {
@@ -234,7 +239,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
             c.x += v * lim.h;
         }
     }
-    findings.check_lane(&lim, &cars);
+    findings.check(&lim, &cars, None);
     out.findings = findings;
     out
 }

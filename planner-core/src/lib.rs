@@ -11,7 +11,8 @@
 //!   invariant of Lemma 3 and the max-braking sequence of Lemma 2;
 //! - [`mpc`]: problem (10) as data with a configurable quadratic cost;
 //! - [`solver`]: our interior-point solver with O(N) pentadiagonal Newton systems;
-//! - [`planner`]: the planner step: obstacle (2)/(22), solve, verify, certified fallback.
+//! - [`planner`]: the planner step: obstacle (2)/(22), solve, verify, certified fallback;
+//! - [`world`]: V2V vehicle-state messages and the bounded world view built from them.
 //!
 //! Memory is bounded by the const-generic horizon `N`; no function panics on any input
 //! (clippy denies `unwrap`, `expect`, `panic!` and indexing that can panic), and every
@@ -42,6 +43,7 @@ pub mod planner;
 pub mod real;
 pub mod safety;
 pub mod solver;
+pub mod world;
 
 pub use mpc::{ConstraintKind, CostWeights, ProblemError, SingleLaneProblem, Violation};
 pub use params::{Params, ParamsError, ParamsSpec};
@@ -50,3 +52,4 @@ pub use planner::{
 };
 pub use real::Real;
 pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};
+pub use world::{VehicleState, WorldError, WorldView};

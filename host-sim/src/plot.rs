@@ -1,0 +1,205 @@
+//! `--plot out.png|out.svg`: x–y trajectories with the vehicles' L × W rectangles at
+//! snapshots (in the style of the paper's Fig. 7/8), and speed over time.
+
+use crate::sim::{TraceRow, LANE_WIDTH_M, LENGTH_M, WIDTH_M};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One sample of a vehicle: (t, x, y, theta, v).
+pub type Sample = (f64, f64, f64, f64, f64);
+
+/// What the plot needs, sampled from the trace.
+#[derive(Debug, Default)]
+pub struct PlotData {
+    /// Per vehicle: (t, x, y, theta, v), sampled every `every_s`.
+    pub series: BTreeMap<u16, Vec<Sample>>,
+    /// Lanes on the road.
+    pub lanes: u8,
+    /// Road end, if any.
+    pub end_x: Option<f64>,
+}
+
+impl PlotData {
+    /// Samples a trace row (keeps one row every 0.1 s).
+    pub fn add(&mut self, r: &TraceRow) {
+        // Rows come every h = 0.01 s; t is a multiple of h.
+        if ((r.t * 100.0).round() as i64) % 10 == 0 {
+            self.series
+                .entry(r.id)
+                .or_default()
+                .push((r.t, r.x, r.y, r.theta, r.v));
+        }
+    }
+}
+
+/// Plot errors.
+#[derive(Debug)]
+pub struct PlotError(pub String);
+
+impl std::fmt::Display for PlotError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "plot: {}", self.0)
+    }
+}
+
+impl std::error::Error for PlotError {}
+
+fn e<E: std::fmt::Display>(x: E) -> PlotError {
+    PlotError(x.to_string())
+}
+
+/// Registers the embedded DejaVu Sans font (so plots need no system fonts).
+fn register_font() -> Result<(), PlotError> {
+    plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+        .map_err(|_| PlotError("embedded font rejected".into()))
+}
+
+/// Writes the figure to `path` (PNG or SVG by extension).
+pub fn write(data: &PlotData, title: &str, path: &Path) -> Result<(), PlotError> {
+    let size = (1400, 900);
+    // Both backends lay text out with the registered font.
+    register_font()?;
+    match path.extension().and_then(|s| s.to_str()) {
+        Some("png") => {
+            let root = BitMapBackend::new(path, size).into_drawing_area();
+            draw(data, title, &root)?;
+            root.present().map_err(e)
+        }
+        Some("svg") => {
+            let root = SVGBackend::new(path, size).into_drawing_area();
+            draw(data, title, &root)?;
+            root.present().map_err(e)
+        }
+        _ => Err(PlotError(format!(
+            "{}: the plot file must end in .png or .svg",
+            path.display()
+        ))),
+    }
+}
+
+fn palette(i: usize) -> RGBColor {
+    const C: [RGBColor; 10] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(127, 127, 127),
+        RGBColor(188, 189, 34),
+        RGBColor(23, 190, 207),
+    ];
+    C[i % C.len()]
+}
+
+fn draw<DB: DrawingBackend>(
+    data: &PlotData,
+    title: &str,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(e)?;
+    let root = root.titled(title, ("sans-serif", 28)).map_err(e)?;
+    let (top, bottom) = root.split_vertically(480);
+    let all = data.series.values().flatten();
+    let (mut x0, mut x1, mut t1) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+    for &(t, x, _, _, _) in all {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        t1 = t1.max(t);
+    }
+    if !x0.is_finite() {
+        return Err(PlotError("nothing to plot".into()));
+    }
+    if let Some(end) = data.end_x {
+        x1 = x1.max(end + 5.0);
+    }
+    let road_w = f64::from(data.lanes.max(1)) * LANE_WIDTH_M;
+    let mut xy = ChartBuilder::on(&top)
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .caption(
+            "trajectories (rectangles: L × W at snapshots)",
+            ("sans-serif", 20),
+        )
+        .build_cartesian_2d((x0 - 10.0)..(x1 + 10.0), -0.5..(road_w + 0.5))
+        .map_err(e)?;
+    xy.configure_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .disable_mesh()
+        .draw()
+        .map_err(e)?;
+    // Lane markings and the road end.
+    for l in 0..=data.lanes {
+        let y = f64::from(l) * LANE_WIDTH_M;
+        xy.draw_series(LineSeries::new(
+            [(x0 - 10.0, y), (x1 + 10.0, y)],
+            BLACK.mix(0.4),
+        ))
+        .map_err(e)?;
+    }
+    if let Some(end) = data.end_x {
+        xy.draw_series(LineSeries::new(
+            [(end, 0.0), (end, road_w)],
+            RED.stroke_width(3),
+        ))
+        .map_err(e)?;
+    }
+    let snapshots = 6.0;
+    for (i, (id, s)) in data.series.iter().enumerate() {
+        let c = palette(i);
+        xy.draw_series(LineSeries::new(s.iter().map(|p| (p.1, p.2)), c.mix(0.6)))
+            .map_err(e)?
+            .label(format!("vehicle {id}"))
+            .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], c.filled()));
+        for k in 0..=(snapshots as usize) {
+            let t_snap = t1 * k as f64 / snapshots;
+            if let Some(p) = s
+                .iter()
+                .min_by(|a, b| (a.0 - t_snap).abs().total_cmp(&(b.0 - t_snap).abs()))
+            {
+                let (sn, cs) = p.3.sin_cos();
+                let (hl, hw) = (0.5 * LENGTH_M, 0.5 * WIDTH_M);
+                let pts: Vec<(f64, f64)> = [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw), (hl, hw)]
+                    .iter()
+                    .map(|&(u, w)| (p.1 + u * cs - w * sn, p.2 + u * sn + w * cs))
+                    .collect();
+                xy.draw_series(std::iter::once(Polygon::new(pts.clone(), c.mix(0.35))))
+                    .map_err(e)?;
+                xy.draw_series(std::iter::once(PathElement::new(pts, c.stroke_width(1))))
+                    .map_err(e)?;
+            }
+        }
+    }
+    if data.series.len() <= 12 {
+        xy.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
+    }
+    let mut sv = ChartBuilder::on(&bottom)
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .caption("speed", ("sans-serif", 20))
+        .build_cartesian_2d(0.0..t1.max(1e-3), 0.0..30.0)
+        .map_err(e)?;
+    sv.configure_mesh()
+        .x_desc("t (s)")
+        .y_desc("v (m/s)")
+        .draw()
+        .map_err(e)?;
+    for (i, s) in data.series.values().enumerate() {
+        sv.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.4)), palette(i)))
+            .map_err(e)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,143 @@
+//! `host-sim scale`: many vehicles at h = 0.01 on all cores, as parallel single-lane
+//! roads, each a platoon behind a randomly driven leader on its own in-process bus (V2V
+//! range is local: vehicles on different roads do not hear each other).
+
+use crate::monitor::Limits;
+use crate::scenario::{DriverKind, Road, Scenario, VehicleSpec};
+use crate::sim::{Simulation, SolverChoice, LENGTH_M, START_MARGIN_M};
+use rand::Rng;
+use serde::Serialize;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+/// The `scale` summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScaleReport {
+    /// Vehicles simulated.
+    pub vehicles: usize,
+    /// Roads (platoons) they were split into.
+    pub roads: usize,
+    /// Worker threads.
+    pub threads: usize,
+    /// Simulated time (s).
+    pub sim_seconds: f64,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+    /// sim_seconds / wall_seconds.
+    pub realtime_factor: f64,
+    /// Planner steps per wall-clock second.
+    pub planner_steps_per_second: f64,
+    /// Collisions seen by the monitors.
+    pub collisions: u64,
+    /// Invariant violations seen by the monitors.
+    pub invariant_violations: u64,
+    /// Limit violations seen by the monitors.
+    pub limit_violations: u64,
+    /// Planner fallback steps (excluding forced standstills).
+    pub fallback_steps: u64,
+}
+
+/// One road of the scale run: `n` vehicles, a random leader, planner followers.
+pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> Scenario {
+    let lim = Limits::table_i();
+    let mut rng = crate::instances::rng(seed ^ (index as u64).wrapping_mul(0x9E37_79B9));
+    let mut vehicles = Vec::with_capacity(n);
+    let mut x = 0.0;
+    for i in 0..n {
+        let v = rng.random_range(5.0..lim.v_max);
+        if i > 0 {
+            x -= LENGTH_M
+                + lim.d0
+                + lim.safe_distance(v)
+                + START_MARGIN_M
+                + rng.random_range(0.5..15.0);
+        }
+        vehicles.push(VehicleSpec {
+            id: i as u16 + 1,
+            x,
+            lane: 0,
+            v,
+            target_lane: None,
+            driver: if i == 0 {
+                DriverKind::Random
+            } else {
+                DriverKind::Planner
+            },
+            script: Vec::new(),
+            goal_x: None,
+            v_ref: None,
+        });
+    }
+    Scenario {
+        name: format!("scale-road-{index}"),
+        duration_s,
+        seed: seed.wrapping_add(index as u64),
+        horizon: 20,
+        deadline_s: duration_s,
+        road: Road {
+            lanes: 1,
+            end_x: None,
+        },
+        vehicles,
+    }
+}
+
+/// Runs `vehicles` vehicles for `duration_s` on `threads` threads (0 = all cores).
+pub fn run(
+    vehicles: usize,
+    duration_s: f64,
+    platoon: usize,
+    threads: usize,
+    seed: u64,
+) -> ScaleReport {
+    let platoon = platoon.clamp(2, crate::scenario::MAX_VEHICLES);
+    let roads: Vec<usize> = (0..vehicles.div_ceil(platoon))
+        .map(|r| platoon.min(vehicles - r * platoon))
+        .collect();
+    let threads = if threads == 0 {
+        std::thread::available_parallelism().map_or(2, |n| n.get())
+    } else {
+        threads
+    };
+    let next = AtomicUsize::new(0);
+    let totals = Mutex::new((0u64, 0u64, 0u64, 0u64, 0u64));
+    let t0 = std::time::Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let r = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&n) = roads.get(r) else { break };
+                let mut sim =
+                    Simulation::<20>::new(road(r, n, duration_s, seed), SolverChoice::Ours, None);
+                while !sim.finished() {
+                    if sim.step(&mut |_| {}).is_err() {
+                        break;
+                    }
+                }
+                let sum = sim.summary(0.0);
+                if let Ok(mut t) = totals.lock() {
+                    t.0 += sum.planner_steps;
+                    t.1 += sum.collisions;
+                    t.2 += sum.invariant_violations;
+                    t.3 += sum.limit_violations;
+                    t.4 += sum.fallback_steps;
+                }
+            });
+        }
+    });
+    let wall = t0.elapsed().as_secs_f64();
+    let (steps, col, inv, lim, fb) = totals.into_inner().unwrap_or_default();
+    ScaleReport {
+        vehicles,
+        roads: roads.len(),
+        threads,
+        sim_seconds: duration_s,
+        wall_seconds: wall,
+        realtime_factor: duration_s / wall,
+        planner_steps_per_second: steps as f64 / wall,
+        collisions: col,
+        invariant_violations: inv,
+        limit_violations: lim,
+        fallback_steps: fb,
+    }
+}

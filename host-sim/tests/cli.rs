@@ -1,0 +1,181 @@
+//! The `host-sim` binary: exit codes, JSON, traces, plots, argument checking.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+fn scenario(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios")
+        .join(name)
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("host-sim-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d.join(name)
+}
+
+#[test]
+fn run_writes_json_trace_and_plots() {
+    let trace = tmp("road-end.csv");
+    let png = tmp("road-end.png");
+    let out = bin()
+        .args(["run"])
+        .arg(scenario("road-end.toml"))
+        .args(["--json", "--trace"])
+        .arg(&trace)
+        .arg("--plot")
+        .arg(&png)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    for key in [
+        "scenario",
+        "vehicles",
+        "sim_seconds",
+        "collisions",
+        "invariant_violations",
+        "min_gap_m",
+        "fallback_steps",
+        "completed",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}: {v}");
+    }
+    assert_eq!(v["collisions"], 0);
+    assert_eq!(v["completed"], true);
+    let csv = std::fs::read_to_string(&trace).expect("trace written");
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("t,id,x,y,theta,v,omega,lane,target_lane,mode")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    // 10 vehicles × 6000 steps.
+    assert_eq!(rows.len(), 60_000);
+    for r in &rows {
+        assert_eq!(r.len(), 10);
+        assert!(r[..7].iter().all(|x| x.parse::<f64>().is_ok()), "{r:?}");
+        assert!(
+            [
+                "cruise",
+                "lane_change",
+                "yield",
+                "fallback",
+                "waiting",
+                "crossing",
+                "done"
+            ]
+            .contains(&r[9]),
+            "{r:?}"
+        );
+    }
+    let bytes = std::fs::read(&png).expect("png written");
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let svg = tmp("road-end.svg");
+    let out = bin()
+        .arg("run")
+        .arg(scenario("road-end.toml"))
+        .arg("--plot")
+        .arg(&svg)
+        .output()
+        .expect("runs");
+    assert!(out.status.success());
+    let text = std::fs::read_to_string(&svg).expect("svg written");
+    assert!(text.starts_with("<svg") && text.contains("road-end"));
+}
+
+#[test]
+fn bad_input_exits_2_and_runs_nothing() {
+    let trace = tmp("never.csv");
+    let _ = std::fs::remove_file(&trace);
+    // Bad plot extension: rejected before the run; no trace file appears.
+    let out = bin()
+        .arg("run")
+        .arg(scenario("road-end.toml"))
+        .arg("--trace")
+        .arg(&trace)
+        .args(["--plot", "out.jpg"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains(".png or .svg"));
+    assert!(!trace.exists());
+    // Bad scenario: file:line: problem on stderr.
+    let bad = tmp("bad.toml");
+    std::fs::write(&bad, "name = \"x\"\nduration_s = 5.0\nwhat = 1\n").expect("write");
+    let out = bin().arg("run").arg(&bad).output().expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.toml:3:"), "{err}");
+    // Unknown solver, unknown flag: clap's usage errors, exit 2.
+    let out = bin()
+        .arg("run")
+        .arg(scenario("road-end.toml"))
+        .args(["--solver", "cplex"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let out = bin()
+        .args(["scale", "--vehicles", "0"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let out = bin()
+        .args(["scale", "--duration", "-3"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn missed_liveness_goal_exits_3() {
+    let f = tmp("unreachable.toml");
+    std::fs::write(
+        &f,
+        "name = \"far\"\nduration_s = 2.0\n[road]\nlanes = 1\n[[vehicle]]\nid = 1\nx = 0.0\nlane = 0\nv = 10.0\ngoal_x = 1000.0\n",
+    )
+    .expect("write");
+    let out = bin()
+        .arg("run")
+        .arg(&f)
+        .arg("--json")
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(3));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(v["completed"], false);
+}
+
+#[test]
+fn scale_prints_its_figures() {
+    let out = bin()
+        .args(["scale", "--vehicles", "60", "--duration", "2", "--json"])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    for key in [
+        "vehicles",
+        "sim_seconds",
+        "wall_seconds",
+        "realtime_factor",
+        "planner_steps_per_second",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(v["vehicles"], 60);
+    assert_eq!(v["collisions"], 0);
+}
