@@ -128,7 +128,7 @@ where
             "trajectories (rectangles: L × W at snapshots)",
             ("sans-serif", 20),
         )
-        .build_cartesian_2d((x0 - 10.0)..(x1 + 10.0), -0.5..(road_w + 0.5))
+        .build_cartesian_2d((x0 - 10.0)..(x1 + 10.0), -0.5..(road_w * 1.7 + 2.0))
         .map_err(e)?;
     xy.configure_mesh()
         .x_desc("x (m)")
@@ -179,7 +179,9 @@ where
         }
     }
     if data.series.len() <= 12 {
+        // Headroom above the road (see the y range) keeps the legend off the vehicles.
         xy.configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()

@@ -23,6 +23,9 @@ use crate::banded::{get, Penta};
 use crate::mpc::SingleLaneProblem;
 use crate::real::Real;
 
+/// Largest fraction to the boundary τ the solver uses (see [`Settings::step_fraction`]).
+pub const TAU_MAX: f64 = 0.9999;
+
 /// Default [`Settings::warm_barrier`].
 pub const WARM_BARRIER: f64 = 1e-3;
 
@@ -39,7 +42,8 @@ pub struct Settings<F> {
     pub tol: F,
     /// Stopping tolerance of the dual residual, relative to its largest term.
     pub tol_dual: F,
-    /// Fraction of the step to the boundary of the positive orthant (keeps s, λ > 0).
+    /// Smallest fraction τ of the step to the boundary of the positive orthant (keeps
+    /// s, λ > 0); the solver uses min(max(τ, 1 − μ), [`TAU_MAX`]).
     pub step_fraction: F,
     /// Static regularisation added to the Newton matrix diagonal (guards factorisation
     /// against round-off when many constraints are active).
@@ -385,7 +389,8 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
     }
 
     /// After solving for dz: ds = −r_p − ∇gᵀ dz, dλ = (−rc − λ ds) / s; returns the
-    /// largest step in (0, 1] keeping s + α ds ≥ 0 and λ + α dλ ≥ 0.
+    /// largest step α > 0 keeping s + α ds ≥ 0 and λ + α dλ ≥ 0 (not capped at 1: the
+    /// caller takes min(1, τ α), so a full Newton step is taken whenever it is safe).
     fn recover_and_step_length(&mut self) -> F {
         let mut d1 = [F::ZERO; N];
         let mut d2 = [F::ZERO; N];
@@ -404,7 +409,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             dz_prev = dz;
             dv_prev = dv;
         }
-        let mut alpha = F::ONE;
+        let mut alpha = F::ONE / F::EPSILON;
         for (f, proj) in self.fam.iter_mut().zip(PROJ.iter()) {
             let (dir, sign) = match *proj {
                 Proj::D1(pos) => (&d1, pos),
@@ -615,7 +620,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             }
             self.build_rhs();
             self.newton_solve(st.refinement_steps);
-            let alpha_aff = self.recover_and_step_length();
+            let alpha_aff = self.recover_and_step_length().min(F::ONE);
             let mut mu_aff = F::ZERO;
             for f in self.fam.iter() {
                 for (((&s, &l), &ds), &dl) in
@@ -646,7 +651,12 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             self.build_rhs();
             self.newton_solve(st.refinement_steps);
             let alpha_max = self.recover_and_step_length();
-            let alpha = (st.step_fraction * alpha_max).min(F::ONE);
+            // Fraction to the boundary τ → 1 as μ → 0: near the optimum the blocking
+            // slacks are the active constraints', which the Newton step sends to ~0, so
+            // a fixed τ would cap every step at τ and converge only linearly.
+            // Capped below 1 so that no slack or dual is ever driven to exactly zero.
+            let tau = st.step_fraction.max(F::ONE - mu).min(F::from_f64(TAU_MAX));
+            let alpha = (tau * alpha_max).min(F::ONE);
             info.step = alpha;
             trace(info);
             if !(alpha > F::ZERO) {
