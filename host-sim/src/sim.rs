@@ -212,6 +212,8 @@ pub struct RunSummary {
     pub waiting_steps: u64,
     /// Planner steps.
     pub planner_steps: u64,
+    /// Mean interior-point iterations of the planner steps that solved.
+    pub solver_iterations_mean: f64,
     /// Every vehicle with a goal reached it by the deadline (true when none has a goal).
     pub completed: bool,
     /// Vehicles with a goal, and how many reached it by the deadline.
@@ -248,6 +250,8 @@ pub struct Simulation<const N: usize, B: Bus = InProcessBus> {
     fallback_steps: u64,
     waiting_steps: u64,
     planner_steps: u64,
+    solved_steps: u64,
+    solver_iterations: u64,
     rejected: u64,
     solver: SolverChoice,
     seed: u64,
@@ -332,6 +336,8 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             fallback_steps: 0,
             waiting_steps: 0,
             planner_steps: 0,
+            solved_steps: 0,
+            solver_iterations: 0,
             rejected: 0,
             solver,
             seed,
@@ -384,7 +390,11 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                     match planner.step(&obs) {
                         Ok(c) => {
                             a.mode = match c.status {
-                                StepStatus::Solved { .. } => Mode::Cruise,
+                                StepStatus::Solved { iterations } => {
+                                    self.solved_steps += 1;
+                                    self.solver_iterations += u64::from(iterations);
+                                    Mode::Cruise
+                                }
                                 StepStatus::Fallback(FallbackReason::NoRoom) => {
                                     self.waiting_steps += 1;
                                     Mode::Waiting
@@ -478,6 +488,7 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             fallback_steps: self.fallback_steps,
             waiting_steps: self.waiting_steps,
             planner_steps: self.planner_steps,
+            solver_iterations_mean: self.solver_iterations as f64 / self.solved_steps.max(1) as f64,
             completed: reached.len() == with_goal.len(),
             goals: with_goal.len(),
             goals_reached: reached.len(),

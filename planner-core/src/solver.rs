@@ -144,6 +144,8 @@ struct Family<F, const N: usize> {
     s: [F; N],
     /// 1/s, refreshed once per iteration (divisions dominate otherwise).
     inv_s: [F; N],
+    /// 1/λ, refreshed once per iteration, for the step-length ratio test.
+    inv_l: [F; N],
     /// Duals λ > 0.
     lam: [F; N],
     /// Complementarity right-hand side of the current Newton system.
@@ -160,6 +162,7 @@ impl<F: Real, const N: usize> Family<F, N> {
             g: z,
             s: z,
             inv_s: z,
+            inv_l: z,
             lam: z,
             rc: z,
             ds: z,
@@ -409,7 +412,9 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             dz_prev = dz;
             dv_prev = dv;
         }
-        let mut alpha = F::ONE / F::EPSILON;
+        // The ratio test as max(−ds/s, −dλ/λ) with the cached reciprocals: one division
+        // at the end instead of two per constraint.
+        let mut worst = F::EPSILON;
         for (f, proj) in self.fam.iter_mut().zip(PROJ.iter()) {
             let (dir, sign) = match *proj {
                 Proj::D1(pos) => (&d1, pos),
@@ -420,21 +425,16 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 f.ds.iter_mut()
                     .zip(f.dl.iter_mut())
                     .zip(f.g.iter().zip(f.s.iter().zip(f.inv_s.iter())))
-                    .zip(f.lam.iter().zip(f.rc.iter()))
+                    .zip(f.lam.iter().zip(f.rc.iter().zip(f.inv_l.iter())))
                     .zip(dir.iter());
-            for ((((ds, dl), (&g, (&s, &is))), (&l, &rc)), &dd) in it {
+            for ((((ds, dl), (&g, (&s, &is))), (&l, (&rc, &il))), &dd) in it {
                 let proj_dz = if sign { dd } else { -dd };
                 *ds = -(g + s) - proj_dz;
                 *dl = (-rc - l * *ds) * is;
-                if *ds < F::ZERO {
-                    alpha = alpha.min(-s / *ds);
-                }
-                if *dl < F::ZERO {
-                    alpha = alpha.min(-l / *dl);
-                }
+                worst = worst.max(-*ds * is).max(-*dl * il);
             }
         }
-        alpha
+        F::ONE / worst
     }
 
     fn initialize(&mut self, pr: &SingleLaneProblem<F, N>, warm: Option<&[F; N]>) -> bool {
@@ -579,6 +579,9 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             for f in self.fam.iter_mut() {
                 for (is, &s) in f.inv_s.iter_mut().zip(f.s.iter()) {
                     *is = F::ONE / s;
+                }
+                for (il, &l) in f.inv_l.iter_mut().zip(f.lam.iter()) {
+                    *il = F::ONE / l;
                 }
             }
             {
