@@ -271,59 +271,34 @@ pub struct SweepSummary {
     pub wall_seconds: f64,
 }
 
-/// Runs `cases` random platoons on all cores.
+/// Runs `cases` random platoons of a sweep on all cores: (spec, outcome) per case, in
+/// case order.
+pub fn run_cases(cases: u64, seed: u64) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
+    crate::par::map_indexed(cases as usize, 0, |i| {
+        let spec = random_spec(i as u64, seed);
+        let out = run(&spec);
+        (spec, out)
+    })
+}
+
+/// Runs `cases` random platoons on all cores and sums up what the monitor saw.
 pub fn sweep(cases: u64, seed: u64) -> SweepSummary {
-    use std::sync::atomic::{AtomicU64, Ordering};
     let t0 = std::time::Instant::now();
-    let next = AtomicU64::new(0);
-    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let parts: Vec<SweepSummary> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut acc = SweepSummary {
-                        min_gap_m: f64::INFINITY,
-                        ..Default::default()
-                    };
-                    loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= cases {
-                            break acc;
-                        }
-                        let spec = random_spec(i, seed);
-                        let out = run(&spec);
-                        acc.cases += 1;
-                        acc.vehicles += spec.vehicles as u64;
-                        acc.planner_steps += out.planner_steps;
-                        acc.fallback_steps += out.fallback_steps;
-                        acc.fallback_no_room += out.fallback_no_room;
-                        acc.fallback_solver_or_verification +=
-                            out.fallback_solver + out.fallback_verification;
-                        acc.collisions += out.findings.collisions;
-                        acc.invariant_violations += out.findings.invariant_violations;
-                        acc.limit_violations += out.findings.limit_violations;
-                        acc.min_gap_m = acc.min_gap_m.min(out.findings.min_gap_m);
-                    }
-                })
-            })
-            .collect();
-        handles.into_iter().filter_map(|h| h.join().ok()).collect()
-    });
     let mut total = SweepSummary {
         min_gap_m: f64::INFINITY,
         ..Default::default()
     };
-    for p in parts {
-        total.cases += p.cases;
-        total.vehicles += p.vehicles;
-        total.planner_steps += p.planner_steps;
-        total.fallback_steps += p.fallback_steps;
-        total.fallback_no_room += p.fallback_no_room;
-        total.fallback_solver_or_verification += p.fallback_solver_or_verification;
-        total.collisions += p.collisions;
-        total.invariant_violations += p.invariant_violations;
-        total.limit_violations += p.limit_violations;
-        total.min_gap_m = total.min_gap_m.min(p.min_gap_m);
+    for (spec, out) in run_cases(cases, seed) {
+        total.cases += 1;
+        total.vehicles += spec.vehicles as u64;
+        total.planner_steps += out.planner_steps;
+        total.fallback_steps += out.fallback_steps;
+        total.fallback_no_room += out.fallback_no_room;
+        total.fallback_solver_or_verification += out.fallback_solver + out.fallback_verification;
+        total.collisions += out.findings.collisions;
+        total.invariant_violations += out.findings.invariant_violations;
+        total.limit_violations += out.findings.limit_violations;
+        total.min_gap_m = total.min_gap_m.min(out.findings.min_gap_m);
     }
     total.wall_seconds = t0.elapsed().as_secs_f64();
     total

@@ -7,8 +7,6 @@ use crate::scenario::{DriverKind, Road, Scenario, VehicleSpec};
 use crate::sim::{Simulation, SolverChoice, LENGTH_M, START_MARGIN_M};
 use rand::Rng;
 use serde::Serialize;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 /// The `scale` summary.
 #[derive(Debug, Clone, Serialize)]
@@ -94,39 +92,27 @@ pub fn run(
     let roads: Vec<usize> = (0..vehicles.div_ceil(platoon))
         .map(|r| platoon.min(vehicles - r * platoon))
         .collect();
-    let threads = if threads == 0 {
-        std::thread::available_parallelism().map_or(2, |n| n.get())
-    } else {
-        threads
-    };
-    let next = AtomicUsize::new(0);
-    let totals = Mutex::new((0u64, 0u64, 0u64, 0u64, 0u64));
+    let threads = crate::par::threads(threads);
     let t0 = std::time::Instant::now();
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| loop {
-                let r = next.fetch_add(1, Ordering::Relaxed);
-                let Some(&n) = roads.get(r) else { break };
-                let mut sim =
-                    Simulation::<20>::new(road(r, n, duration_s, seed), SolverChoice::Ours, None);
-                while !sim.finished() {
-                    if sim.step(&mut |_| {}).is_err() {
-                        break;
-                    }
-                }
-                let sum = sim.summary(0.0);
-                if let Ok(mut t) = totals.lock() {
-                    t.0 += sum.planner_steps;
-                    t.1 += sum.collisions;
-                    t.2 += sum.invariant_violations;
-                    t.3 += sum.limit_violations;
-                    t.4 += sum.fallback_steps;
-                }
-            });
+    let sums = crate::par::map_indexed(roads.len(), threads, |r| {
+        let n = roads.get(r).copied().unwrap_or(0);
+        let mut sim = Simulation::<20>::new(road(r, n, duration_s, seed), SolverChoice::Ours, None);
+        while !sim.finished() {
+            if sim.step(&mut |_| {}).is_err() {
+                break;
+            }
         }
+        sim.summary(0.0)
     });
     let wall = t0.elapsed().as_secs_f64();
-    let (steps, col, inv, lim, fb) = totals.into_inner().unwrap_or_default();
+    let sum = |f: fn(&crate::sim::RunSummary) -> u64| sums.iter().map(f).sum::<u64>();
+    let (steps, col, inv, lim, fb) = (
+        sum(|s| s.planner_steps),
+        sum(|s| s.collisions),
+        sum(|s| s.invariant_violations),
+        sum(|s| s.limit_violations),
+        sum(|s| s.fallback_steps),
+    );
     ScaleReport {
         vehicles,
         roads: roads.len(),

@@ -13,6 +13,15 @@ fn scenario(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// Parses stdout as one JSON object holding every key in `keys`.
+fn json_with(stdout: &[u8], keys: &[&str]) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_slice(stdout).expect("one JSON object");
+    for key in keys {
+        assert!(v.get(key).is_some(), "missing {key}: {v}");
+    }
+    v
+}
+
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("host-sim-cli-{}", std::process::id()));
     std::fs::create_dir_all(&d).expect("temp dir");
@@ -37,19 +46,19 @@ fn run_writes_json_trace_and_plots() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
-    for key in [
-        "scenario",
-        "vehicles",
-        "sim_seconds",
-        "collisions",
-        "invariant_violations",
-        "min_gap_m",
-        "fallback_steps",
-        "completed",
-    ] {
-        assert!(v.get(key).is_some(), "missing {key}: {v}");
-    }
+    let v = json_with(
+        &out.stdout,
+        &[
+            "scenario",
+            "vehicles",
+            "sim_seconds",
+            "collisions",
+            "invariant_violations",
+            "min_gap_m",
+            "fallback_steps",
+            "completed",
+        ],
+    );
     assert_eq!(v["collisions"], 0);
     assert_eq!(v["completed"], true);
     let csv = std::fs::read_to_string(&trace).expect("trace written");
@@ -151,7 +160,7 @@ fn missed_liveness_goal_exits_3() {
         .output()
         .expect("runs");
     assert_eq!(out.status.code(), Some(3));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let v = json_with(&out.stdout, &["completed"]);
     assert_eq!(v["completed"], false);
 }
 
@@ -166,16 +175,16 @@ fn scale_prints_its_figures() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
-    for key in [
-        "vehicles",
-        "sim_seconds",
-        "wall_seconds",
-        "realtime_factor",
-        "planner_steps_per_second",
-    ] {
-        assert!(v.get(key).is_some(), "missing {key}");
-    }
+    let v = json_with(
+        &out.stdout,
+        &[
+            "vehicles",
+            "sim_seconds",
+            "wall_seconds",
+            "realtime_factor",
+            "planner_steps_per_second",
+        ],
+    );
     assert_eq!(v["vehicles"], 60);
     assert_eq!(v["collisions"], 0);
 }

@@ -6,8 +6,7 @@
 //!
 //! `THEOREM1_CASES` sets the number of cases (default 200; README gives the 10,000 run).
 
-use host_sim::platoon::{random_spec, run};
-use std::sync::atomic::{AtomicU64, Ordering};
+use host_sim::platoon::run_cases;
 
 #[test]
 fn theorem_1_random_platoons() {
@@ -19,36 +18,14 @@ fn theorem_1_random_platoons() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(1);
-    let next = AtomicU64::new(0);
-    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let results: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut mine = Vec::new();
-                    loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= cases {
-                            break mine;
-                        }
-                        let spec = random_spec(i, seed);
-                        mine.push((i, spec, run(&spec)));
-                    }
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("worker panicked"))
-            .collect()
-    });
+    let results = run_cases(cases, seed);
     let mut steps = 0;
     let mut fallbacks = 0;
     let mut no_room = 0;
     let mut solver_or_verification = 0;
     let mut vehicles = 0;
     let mut min_gap = f64::INFINITY;
-    for (i, spec, out) in &results {
+    for (i, (spec, out)) in results.iter().enumerate() {
         let f = out.findings;
         assert_eq!(
             (f.collisions, f.invariant_violations, f.limit_violations),
