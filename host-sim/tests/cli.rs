@@ -188,3 +188,33 @@ fn scale_prints_its_figures() {
     assert_eq!(v["vehicles"], 60);
     assert_eq!(v["collisions"], 0);
 }
+
+#[test]
+fn clarabel_can_drive_the_planners() {
+    // A follower closing on a braking leader, planned by Clarabel: the verifier accepts
+    // its plans (no fallback) and the run is safe.
+    let f = tmp("clarabel.toml");
+    std::fs::write(
+        &f,
+        "name = \"cl\"\nduration_s = 3.0\n[road]\nlanes = 1\n\
+         [[vehicle]]\nid = 1\nx = 0.0\nlane = 0\nv = 15.0\ndriver = \"script\"\n\
+         script = [{ until_s = 1.0, accel = -7.9 }]\n\
+         [[vehicle]]\nid = 2\nx = -40.0\nlane = 0\nv = 15.0\n",
+    )
+    .expect("write");
+    let out = bin()
+        .arg("run")
+        .arg(&f)
+        .args(["--json", "--solver", "clarabel"])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(&out.stdout, &["solver", "fallback_steps", "collisions"]);
+    assert_eq!(v["solver"], "clarabel");
+    assert_eq!(v["fallback_steps"], 0, "{v}");
+    assert_eq!(v["collisions"], 0);
+}
