@@ -63,7 +63,7 @@ struct Leader {
 }
 
 impl Leader {
-    fn accel(&mut self, t: f64, v: f64, lim: &Limits, rng: &mut ChaCha8Rng) -> f64 {
+    fn accel(&mut self, t: f64, lim: &Limits, rng: &mut ChaCha8Rng) -> f64 {
         if t >= self.until {
             match self.profile {
                 LeaderProfile::Random => {
@@ -98,7 +98,6 @@ impl Leader {
                 }
             }
         }
-        let _ = v;
         self.accel
     }
 }
@@ -190,7 +189,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
             x: F::from_f64(c.x),
             length: F::from_f64(c.length),
         }));
-        let a = leader.accel(t, cars[0].v, &lim, &mut rng);
+        let a = leader.accel(t, &lim, &mut rng);
         let v0 = cars[0].v;
         commands[0] = (v0 + a * lim.h).clamp(
             (v0 - lim.brake * lim.h).max(0.0),
