@@ -176,12 +176,7 @@ pub fn warm<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchRes
             p.v_max(),
         );
         let Ok(pr) = pr else { break };
-        let warm_start = plan.map(|pl| {
-            let mut w = pl;
-            w.rotate_left(1);
-            w[N - 1] = w[N - 2];
-            w
-        });
+        let warm_start = plan.as_ref().map(planner_core::planner::shifted);
         let Some((sample, sol)) = compare(&pr, warm_start.as_ref(), &mut ours, reps) else {
             break;
         };

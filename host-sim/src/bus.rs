@@ -55,8 +55,6 @@ pub trait Bus {
 pub struct InProcessBus {
     nodes: Vec<u16>,
     queues: Vec<VecDeque<Received>>,
-    /// Messages sent (for statistics).
-    pub sent: u64,
 }
 
 impl InProcessBus {
@@ -65,7 +63,6 @@ impl InProcessBus {
         Self {
             nodes: nodes.to_vec(),
             queues: nodes.iter().map(|_| VecDeque::new()).collect(),
-            sent: 0,
         }
     }
 
@@ -85,7 +82,6 @@ impl Bus for InProcessBus {
                 q.push_back(Received { msg: *msg, at: now });
             }
         }
-        self.sent += 1;
         Ok(())
     }
 

@@ -327,6 +327,20 @@ fn main() -> ExitCode {
             }
             ExitCode::SUCCESS
         }
-        Command::Platoons { cases, seed, json } => host_sim::platoon::sweep_cli(cases, seed, json),
+        Command::Platoons { cases, seed, json } => {
+            let s = host_sim::platoon::sweep(cases, seed);
+            if json {
+                if let Err(code) = print_json(&s) {
+                    return code;
+                }
+            } else {
+                println!("{s:#?}");
+            }
+            if s.collisions + s.invariant_violations + s.limit_violations > 0 || s.cases != cases {
+                ExitCode::from(EXIT_UNSAFE)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
     }
 }

@@ -302,21 +302,3 @@ pub fn sweep(cases: u64, seed: u64) -> SweepSummary {
     total.wall_seconds = t0.elapsed().as_secs_f64();
     total
 }
-
-/// `host-sim platoons`: prints the sweep summary; exit code 1 on any violation.
-pub fn sweep_cli(cases: u64, seed: u64, json: bool) -> std::process::ExitCode {
-    let s = sweep(cases, seed);
-    if json {
-        match serde_json::to_string(&s) {
-            Ok(j) => println!("{j}"),
-            Err(e) => eprintln!("error: {e}"),
-        }
-    } else {
-        println!("{s:#?}");
-    }
-    if s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == cases {
-        std::process::ExitCode::SUCCESS
-    } else {
-        std::process::ExitCode::FAILURE
-    }
-}

@@ -278,7 +278,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
 }
 
 /// The previous plan shifted one step (the last speed repeated): the warm start.
-fn shifted<F: Real, const N: usize>(plan: &[F; N]) -> [F; N] {
+pub fn shifted<F: Real, const N: usize>(plan: &[F; N]) -> [F; N] {
     let mut out = *plan;
     out.rotate_left(1.min(N));
     if let (Some(last), Some(prev)) = (N.checked_sub(1), N.checked_sub(2)) {

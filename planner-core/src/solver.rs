@@ -197,7 +197,7 @@ pub struct IpmSolver<F, const N: usize> {
     w2: [F; N],
     w3: [F; N],
     kkt: Penta<F, N>,
-    /// The Newton matrix before regularisation, for iterative refinement.
+    /// The Newton matrix before regularisation, kept only for iterative refinement.
     kkt_raw: Penta<F, N>,
     /// Duals of the last successful solve are available for a warm start.
     have_duals: bool,
@@ -291,12 +291,13 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         }
     }
 
-    /// K = Σ_k (w1_k D1 D1ᵀ + w2_k D2 D2ᵀ + w3_k S Sᵀ) + diag_last e_{N−1}e_{N−1}ᵀ, fused.
+    /// K = Σ_k (w1_k D1 D1ᵀ + w2_k D2 D2ᵀ + w3_k S Sᵀ) + diag_last e_{N−1}e_{N−1}ᵀ, fused,
+    /// into `kkt` (unregularised).
     fn assemble(&mut self, diag_last: F) {
         let two = F::TWO;
         let four = F::from_f64(4.0);
         let (w1, w2, w3, c0, c1) = (&self.w1, &self.w2, &self.w3, &self.c0, &self.c1);
-        let k = &mut self.kkt_raw;
+        let k = &mut self.kkt;
         for j in 0..N {
             let (c0j, c1j, c1n) = (get(c0, j), get(c1, j), get(c1, j + 1));
             let d = get(w1, j)
@@ -607,7 +608,10 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 }
             }
             self.assemble(two * w.target_position * pr.h * pr.h);
-            self.kkt.clone_from(&self.kkt_raw);
+            // The unregularised matrix is only needed by iterative refinement.
+            if st.refinement_steps > 0 {
+                self.kkt_raw.clone_from(&self.kkt);
+            }
             for d in self.kkt.d.iter_mut() {
                 *d += st.regularization;
             }
