@@ -11,6 +11,7 @@ pub mod bench;
 pub mod bus;
 pub mod instances;
 pub mod monitor;
+pub mod multilane;
 pub mod par;
 pub mod platoon;
 pub mod plot;

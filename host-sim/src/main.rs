@@ -94,6 +94,25 @@ enum Command {
         #[arg(long, default_value_t = 7)]
         seed: u64,
     },
+    /// The paper's experiments.
+    #[command(subcommand)]
+    Experiment(Experiment),
+    /// Theorem 2 sweep: random multi-lane traffic (3–4 lanes, up to 30 vehicles, random
+    /// target lanes), every vehicle its own planner.
+    Traffic {
+        /// Number of random cases.
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+        cases: u64,
+        /// Seed of the first case.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Simulated seconds per case.
+        #[arg(long, default_value_t = 20.0)]
+        duration: f64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
     Platoons {
         /// Number of random platoons.
@@ -247,6 +266,28 @@ fn run(
     }
 }
 
+#[derive(Subcommand)]
+enum Experiment {
+    /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
+    Multilane {
+        /// Number of runs (seeds 1..=K, or from --seed).
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Draw the first run's trajectories (Fig. 7 style) to a .png or .svg file.
+        #[arg(long, value_name = "out.png|out.svg")]
+        plot: Option<PathBuf>,
+        /// The planners' solver.
+        #[arg(long, value_enum, default_value = "ours")]
+        solver: SolverArg,
+    },
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
@@ -326,6 +367,77 @@ fn main() -> ExitCode {
                 }
             }
             ExitCode::SUCCESS
+        }
+        Command::Experiment(Experiment::Multilane {
+            seeds,
+            seed,
+            json,
+            plot,
+            solver,
+        }) => {
+            let solver = match solver {
+                SolverArg::Ours => SolverChoice::Ours,
+                SolverArg::Clarabel => SolverChoice::Clarabel,
+            };
+            if let Some(p) = &plot {
+                if !matches!(p.extension().and_then(|e| e.to_str()), Some("png" | "svg")) {
+                    return bad_input(format!("--plot {}: must end in .png or .svg", p.display()));
+                }
+            }
+            let r = host_sim::multilane::experiment(seeds, seed, solver, 0);
+            if let Some(path) = plot {
+                let sc = host_sim::multilane::paper_scenario(seed);
+                let name = format!("{} (Fig. 7 style)", sc.name);
+                // The manoeuvres are over well within 12 s (Fig. 7 shows the same window).
+                let mut data = PlotData {
+                    lanes: sc.road.lanes,
+                    end_x: sc.road.end_x,
+                    until_s: Some(12.0),
+                    ..PlotData::default()
+                };
+                host_sim::multilane::run_one(sc, solver, &mut |r| data.add(r));
+                if let Err(e) = host_sim::plot::write(&data, &name, &path) {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(EXIT_UNSAFE);
+                }
+            }
+            if json {
+                if let Err(code) = print_json(&r) {
+                    return code;
+                }
+            } else {
+                println!("{r:#?}");
+            }
+            if r.collisions + r.invariant_violations + r.limit_violations > 0 {
+                ExitCode::from(EXIT_UNSAFE)
+            } else if r.completed != r.runs {
+                ExitCode::from(EXIT_NOT_LIVE)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Command::Traffic {
+            cases,
+            seed,
+            duration,
+            json,
+        } => {
+            if !(duration > 0.0 && duration <= 3600.0) {
+                return bad_input(format!("--duration must be in (0, 3600], got {duration}"));
+            }
+            let r = host_sim::multilane::traffic_sweep(cases, seed, duration, 0);
+            if json {
+                if let Err(code) = print_json(&r) {
+                    return code;
+                }
+            } else {
+                println!("{r:#?}");
+            }
+            if r.collisions + r.invariant_violations + r.limit_violations > 0 {
+                ExitCode::from(EXIT_UNSAFE)
+            } else {
+                ExitCode::SUCCESS
+            }
         }
         Command::Platoons { cases, seed, json } => {
             let s = host_sim::platoon::sweep(cases, seed);

@@ -19,6 +19,8 @@ pub struct Limits {
     pub d0: f64,
     /// Heading bound |θ| ≤ θmax relative to the road (rad).
     pub theta_max: f64,
+    /// Lane width Wl (m): lane j spans y ∈ [j Wl, (j+1) Wl].
+    pub lane_width: f64,
 }
 
 impl Limits {
@@ -31,6 +33,7 @@ impl Limits {
             h: 0.01,
             d0: 0.5,
             theta_max: std::f64::consts::FRAC_PI_6,
+            lane_width: 3.6,
         }
     }
 
@@ -54,7 +57,8 @@ pub struct Truth {
     pub length: f64,
     /// Width (m).
     pub width: f64,
-    /// Lane.
+    /// Lane the vehicle says it is in (informational: the monitor judges lanes by the
+    /// rectangle's own footprint).
     pub lane: u8,
     /// Whether this vehicle is responsible for the invariant toward its leader (planner
     /// driven); scripted drivers lead their lanes and are not.
@@ -78,6 +82,8 @@ pub struct Findings {
     pub road_end_overruns: u64,
     /// Smallest bumper-to-bumper gap seen (m).
     pub min_gap_m: f64,
+    /// Steps × vehicles whose rectangle left the road (y outside [0, lanes · Wl]).
+    pub off_road: u64,
 }
 
 /// Tolerance on speed and acceleration limits: rounding of one f32 speed (2⁻²⁴ × 28 m/s),
@@ -94,10 +100,11 @@ impl Findings {
     }
 
     /// Checks every vehicle at one instant (any order): collisions between every pair
-    /// (oriented rectangles), the invariant between consecutive vehicles of each lane
-    /// and, for each lane's front vehicle, toward the road end `end_x` (22), and each
-    /// vehicle's limits.
-    pub fn check(&mut self, lim: &Limits, all: &[Truth], end_x: Option<f64>) {
+    /// (oriented rectangles); the invariant between consecutive vehicles of each lane —
+    /// a vehicle is in every lane its rectangle overlaps, whatever it says — and, for
+    /// each lane's front vehicle, toward the road end `end_x` (22); road departures on
+    /// a road of `lanes` lanes; and each vehicle's limits.
+    pub fn check(&mut self, lim: &Limits, all: &[Truth], end_x: Option<f64>, lanes: u8) {
         for (i, a) in all.iter().enumerate() {
             for b in all.iter().skip(i + 1) {
                 if rectangles_overlap(a, b) {
@@ -105,33 +112,46 @@ impl Findings {
                 }
             }
         }
-        let mut order: Vec<&Truth> = all.iter().collect();
-        order.sort_by(|a, b| a.lane.cmp(&b.lane).then(a.x.total_cmp(&b.x)));
-        for pair in order.windows(2) {
-            let (f, l) = (pair[0], pair[1]);
-            if f.lane != l.lane {
-                continue;
-            }
-            let gap = l.x - f.x - 0.5 * (l.length + f.length);
-            self.min_gap_m = self.min_gap_m.min(gap);
-            // Lemma 3's invariant, extent-adjusted (SPEC §1): x_f < x̄ − dS(v_{t−h}(f)).
-            if f.keeps_invariant && gap - lim.d0 <= lim.safe_distance(f.v) {
-                self.invariant_violations += 1;
-            }
-        }
-        if let Some(end) = end_x {
-            for (i, c) in order.iter().enumerate() {
-                let front_of_lane = order.get(i + 1).is_none_or(|n| n.lane != c.lane);
-                let room = end - c.x - 0.5 * c.length;
-                if room < 0.0 {
-                    self.road_end_overruns += 1;
+        let road_top = f64::from(lanes) * lim.lane_width;
+        for lane in 0..lanes {
+            let (lo, hi) = (
+                f64::from(lane) * lim.lane_width,
+                f64::from(lane + 1) * lim.lane_width,
+            );
+            let mut order: Vec<&Truth> = all
+                .iter()
+                .filter(|c| {
+                    let (bottom, top) = lateral_span(c);
+                    top > lo && bottom < hi
+                })
+                .collect();
+            order.sort_by(|a, b| a.x.total_cmp(&b.x));
+            for pair in order.windows(2) {
+                let (f, l) = (pair[0], pair[1]);
+                let gap = l.x - f.x - 0.5 * (l.length + f.length);
+                self.min_gap_m = self.min_gap_m.min(gap);
+                // Lemma 3's invariant, extent-adjusted (SPEC §1): x_f < x̄ − dS(v_{t−h}(f)).
+                if f.keeps_invariant && gap - lim.d0 <= lim.safe_distance(f.v) {
+                    self.invariant_violations += 1;
                 }
-                if front_of_lane && c.keeps_invariant && room - lim.d0 <= lim.safe_distance(c.v) {
+            }
+            if let (Some(end), Some(c)) = (end_x, order.last()) {
+                let room = end - c.x - 0.5 * c.length;
+                if c.keeps_invariant && room - lim.d0 <= lim.safe_distance(c.v) {
                     self.invariant_violations += 1;
                 }
             }
         }
         for c in all {
+            if let Some(end) = end_x {
+                if end - c.x - 0.5 * c.length < 0.0 {
+                    self.road_end_overruns += 1;
+                }
+            }
+            let (bottom, top) = lateral_span(c);
+            if bottom < 0.0 || top > road_top {
+                self.off_road += 1;
+            }
             if c.theta.abs() > lim.theta_max + 1e-12 {
                 self.limit_violations += 1;
             }
@@ -145,6 +165,12 @@ impl Findings {
             }
         }
     }
+}
+
+/// The y-range [bottom, top] the rectangle covers.
+pub fn lateral_span(c: &Truth) -> (f64, f64) {
+    let ext = 0.5 * (c.length * c.theta.sin().abs() + c.width * c.theta.cos().abs());
+    (c.y - ext, c.y + ext)
 }
 
 /// Separating-axis test for two oriented L × W rectangles (touching counts as overlap).

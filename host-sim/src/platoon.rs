@@ -148,7 +148,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
         }
         cars.push(Truth {
             x,
-            y: 0.0,
+            y: 0.5 * crate::sim::LANE_WIDTH_M,
             theta: 0.0,
             length,
             width: pf64.width(),
@@ -182,7 +182,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     let mut seen: Vec<Vehicle<F>> = Vec::with_capacity(n);
     for step in 0..steps {
         let t = step as f64 * lim.h;
-        findings.check(&lim, &cars, None);
+        findings.check(&lim, &cars, None, 1);
         // Every vehicle decides on the state at t, then all move.
         seen.clear();
         seen.extend(cars.iter().map(|c| Vehicle {
@@ -218,7 +218,10 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
                                     eprintln!("solver {e:?} at v={:?} gap={:?}", me.v, c.gap);
                                 }
                             }
-                            FallbackReason::Verification(_) => out.fallback_verification += 1,
+                            // A single-lane planner has neither the lane sets nor steering.
+                            FallbackReason::Verification(_)
+                            | FallbackReason::Yield
+                            | FallbackReason::Lateral => out.fallback_verification += 1,
                         }
                     }
                     c.v.to_f64()
@@ -238,7 +241,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
             c.x += v * lim.h;
         }
     }
-    findings.check(&lim, &cars, None);
+    findings.check(&lim, &cars, None, 1);
     out.findings = findings;
     out
 }

@@ -19,13 +19,15 @@ pub struct PlotData {
     pub lanes: u8,
     /// Road end, if any.
     pub end_x: Option<f64>,
+    /// Only rows with t ≤ this are kept (all if `None`).
+    pub until_s: Option<f64>,
 }
 
 impl PlotData {
     /// Samples a trace row (keeps one row every 0.1 s).
     pub fn add(&mut self, r: &TraceRow) {
         // Rows come every h = 0.01 s; t is a multiple of h.
-        if ((r.t * 100.0).round() as i64) % 10 == 0 {
+        if ((r.t * 100.0).round() as i64) % 10 == 0 && self.until_s.is_none_or(|u| r.t <= u) {
             self.series
                 .entry(r.id)
                 .or_default()

@@ -262,10 +262,11 @@ impl Scenario {
                 if t >= road.lanes {
                     return Err(bad(format!("target_lane {t} does not exist")));
                 }
-                if t != v.lane {
-                    return Err(bad(
-                        "lane changes are not supported yet: target_lane must equal lane".into(),
-                    ));
+                if t != v.lane && v.driver != DriverKind::Planner {
+                    return Err(bad(format!(
+                        "only planner-driven vehicles change lanes (driver is {:?})",
+                        v.driver
+                    )));
                 }
             }
             if v.goal_x.is_some_and(|g| !g.is_finite()) {
@@ -314,6 +315,28 @@ impl Scenario {
                 }
             }
             vehicles.push((v, span));
+        }
+        // Theorem 3 / (23): on a dead-end road a vehicle needing M lane changes must have
+        // M (dS(vmax) + dC(vmax)) of road left, or its changes are not guaranteed.
+        if let Some(end) = road.end_x {
+            let specs: Vec<VehicleSpec> = vehicles.iter().map(|(v, _)| v.clone()).collect();
+            for (i, (v, span)) in vehicles.iter().enumerate() {
+                let bound = crate::multilane::commitment_bound(&specs, &road, i, lim.v_max);
+                if let Some(b) = bound {
+                    let room = end - v.x;
+                    if !(room >= b) {
+                        return Err(err(
+                            Some(span.clone()),
+                            format!(
+                                "vehicle {}: needs {} lane change(s) but starts {room:.1} m \
+                                 before the road end; the commitment distance (23) is {b:.1} m",
+                                v.id,
+                                v.lane.abs_diff(v.target_lane.unwrap_or(v.lane))
+                            ),
+                        ));
+                    }
+                }
+            }
         }
         // Per lane, front to back: no overlap, the invariant for every planner-driven
         // follower, and scripted/random drivers only at the front of their lane (they do

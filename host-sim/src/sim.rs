@@ -10,10 +10,10 @@ use crate::bus::{Bus, InProcessBus, Message, Received};
 use crate::monitor::{Findings, Limits, Truth};
 use crate::reference::ClarabelSolver;
 use crate::scenario::{DriverKind, Phase, Scenario, MAX_VEHICLES};
-use planner_core::planner::Vehicle;
+use planner_core::lane_change::LaneEvent;
 use planner_core::{
-    CostWeights, FallbackReason, IpmSolver, MpcSolver, Observation, Params, Planner,
-    SingleLaneProblem, Solution, SolveError, StepStatus, VehicleState, WorldView,
+    CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, MpcSolver, Other, Params,
+    Pose, Road, SingleLaneProblem, Solution, SolveError, StepStatus, VehicleState, WorldView,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -126,9 +126,9 @@ pub struct TraceRow {
 
 enum Driver<const N: usize> {
     Planner {
-        planner: Box<Planner<f64, N, AnySolver<N>>>,
+        planner: Box<LanePlanner<f64, N, AnySolver<N>>>,
         world: Box<WorldView<f64, WORLD_CAP>>,
-        lane_buf: Box<heapless::Vec<Vehicle<f64>, WORLD_CAP>>,
+        others: Box<heapless::Vec<Other<f64>, WORLD_CAP>>,
     },
     Script(Vec<Phase>),
     Random {
@@ -147,12 +147,20 @@ struct Agent<const N: usize> {
     v_before: f64,
     omega: f64,
     lane: u8,
+    alpha: Option<u8>,
+    beta: Option<u8>,
     target_lane: u8,
     goal_x: Option<f64>,
     reached_at: Option<f64>,
     v_ref: f64,
     driver: Driver<N>,
     mode: Mode,
+    /// x where the current intention was declared.
+    declared_x: Option<f64>,
+    /// Lane changes completed: (x driven from declaration to completion, time completed).
+    changes: Vec<(f64, f64)>,
+    /// When the vehicle was last seen in its target lane with no change pending.
+    in_target_at: Option<f64>,
 }
 
 impl<const N: usize> Agent<N> {
@@ -165,8 +173,8 @@ impl<const N: usize> Agent<N> {
             v: self.v,
             omega: self.omega,
             lane: self.lane,
-            alpha: None,
-            beta: None,
+            alpha: self.alpha,
+            beta: self.beta,
             stamp: t,
         }
     }
@@ -186,6 +194,21 @@ impl<const N: usize> Agent<N> {
     }
 }
 
+/// Lane changes of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LaneChangeStats {
+    /// Planner-driven vehicles.
+    pub vehicles: usize,
+    /// How many are in their target lane with no change pending.
+    pub in_target_lane: usize,
+    /// Lane changes completed.
+    pub changes: usize,
+    /// When the last vehicle reached its target lane (s), if all did.
+    pub all_done_at_s: Option<f64>,
+    /// Longest x-distance driven from declaring an intention to completing the change (m).
+    pub max_distance_m: f64,
+}
+
 /// What a run produced (the `--json` summary).
 #[derive(Debug, Clone, Serialize)]
 pub struct RunSummary {
@@ -203,6 +226,8 @@ pub struct RunSummary {
     pub limit_violations: u64,
     /// Steps × vehicles past the road end.
     pub road_end_overruns: u64,
+    /// Steps × vehicles with their rectangle off the road.
+    pub off_road: u64,
     /// Smallest bumper-to-bumper gap between consecutive vehicles of a lane (m).
     pub min_gap_m: f64,
     /// Planner steps that applied the certified fallback (solver, verification or
@@ -210,11 +235,18 @@ pub struct RunSummary {
     pub fallback_steps: u64,
     /// Planner steps standing still with no room (forced, not a failure).
     pub waiting_steps: u64,
+    /// Planner steps braking under the Yield Protocol (not a failure).
+    pub yield_steps: u64,
+    /// Lane changes.
+    pub lane_changes: LaneChangeStats,
+    /// Lateral-QP iterations over the run.
+    pub lateral_iterations_total: u64,
     /// Planner steps.
     pub planner_steps: u64,
     /// Mean interior-point iterations of the planner steps that solved.
     pub solver_iterations_mean: f64,
-    /// Every vehicle with a goal reached it by the deadline (true when none has a goal).
+    /// Every vehicle with a goal reached it by the deadline (true when none has a goal),
+    /// and every planner-driven vehicle is in its target lane.
     pub completed: bool,
     /// Vehicles with a goal, and how many reached it by the deadline.
     pub goals: usize,
@@ -240,7 +272,6 @@ pub struct Simulation<const N: usize, B: Bus = InProcessBus> {
     agents: Vec<Agent<N>>,
     bus: B,
     lim: Limits,
-    params: Params<f64>,
     findings: Findings,
     t: f64,
     steps_done: u64,
@@ -249,6 +280,8 @@ pub struct Simulation<const N: usize, B: Bus = InProcessBus> {
     truths: Vec<Truth>,
     fallback_steps: u64,
     waiting_steps: u64,
+    yield_steps: u64,
+    lateral_iterations: u64,
     planner_steps: u64,
     solved_steps: u64,
     solver_iterations: u64,
@@ -285,12 +318,13 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                             }),
                         };
                         // Default weights are valid by construction.
-                        let planner = Planner::with_solver(params, CostWeights::default(), s)
-                            .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
+                        let planner =
+                            LanePlanner::with_solver(params, CostWeights::default(), s, spec.lane)
+                                .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
                         Driver::Planner {
                             planner: Box::new(planner),
                             world: Box::new(WorldView::new(spec.id)),
-                            lane_buf: Box::new(heapless::Vec::new()),
+                            others: Box::new(heapless::Vec::new()),
                         }
                     }
                     DriverKind::Script => Driver::Script(spec.script.clone()),
@@ -311,12 +345,18 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                     v_before: spec.v,
                     omega: 0.0,
                     lane: spec.lane,
+                    alpha: None,
+                    beta: None,
                     target_lane: spec.target_lane.unwrap_or(spec.lane),
                     goal_x: spec.goal_x,
                     reached_at: spec.goal_x.filter(|g| spec.x >= *g).map(|_| 0.0),
                     v_ref: spec.v_ref.unwrap_or(lim.v_max),
                     driver,
                     mode: Mode::Cruise,
+                    declared_x: None,
+                    changes: Vec::new(),
+                    in_target_at: (spec.target_lane.unwrap_or(spec.lane) == spec.lane)
+                        .then_some(0.0),
                 }
             })
             .collect();
@@ -326,7 +366,6 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             agents,
             bus,
             lim,
-            params,
             findings: Findings::new(),
             t: 0.0,
             steps_done: 0,
@@ -335,6 +374,8 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             truths: Vec::new(),
             fallback_steps: 0,
             waiting_steps: 0,
+            yield_steps: 0,
+            lateral_iterations: 0,
             planner_steps: 0,
             solved_steps: 0,
             solver_iterations: 0,
@@ -361,15 +402,20 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
         for a in &self.agents {
             self.bus.send(a.id, &Message::State(a.state(t)), t)?;
         }
+        let road = Road {
+            lanes: self.scenario.road.lanes,
+            lane_width: LANE_WIDTH_M,
+            end_x: self.scenario.road.end_x,
+        };
         let mut commands = Vec::with_capacity(self.agents.len());
         for a in self.agents.iter_mut() {
             self.inbox.clear();
             self.bus.receive(a.id, t, &mut self.inbox)?;
-            let v_cmd = match &mut a.driver {
+            let (v_cmd, w_cmd) = match &mut a.driver {
                 Driver::Planner {
                     planner,
                     world,
-                    lane_buf,
+                    others,
                 } => {
                     for r in &self.inbox {
                         let Message::State(s) = r.msg;
@@ -377,39 +423,73 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                             self.rejected += 1;
                         }
                     }
-                    world.lane_vehicles(a.lane, LENGTH_M, lane_buf);
-                    let obs = Observation {
-                        x: a.x,
+                    world.others(t, LENGTH_M, others);
+                    let obs = LaneObservation {
+                        pose: Pose {
+                            x: a.x,
+                            y: a.y,
+                            theta: a.theta,
+                        },
                         v_prev: a.v,
-                        vehicles: lane_buf,
-                        stop_line: self.scenario.road.end_x,
-                        target_x: a.goal_x.unwrap_or(0.0),
+                        omega_prev: a.omega,
+                        others,
+                        road,
+                        target_lane: a.target_lane,
+                        target: a.goal_x.map_or(0.0, |g| g - a.x),
                         v_ref: a.v_ref,
                     };
                     self.planner_steps += 1;
                     match planner.step(&obs) {
                         Ok(c) => {
+                            a.lane = c.lane;
+                            a.alpha = c.alpha;
+                            a.beta = c.beta;
+                            match c.event {
+                                Some(LaneEvent::Declared(_)) => {
+                                    a.declared_x.get_or_insert(a.x);
+                                }
+                                Some(LaneEvent::Completed(_)) => {
+                                    let from = a.declared_x.take().unwrap_or(a.x);
+                                    a.changes.push((a.x - from, t));
+                                }
+                                Some(LaneEvent::Started(_)) | None => {}
+                            }
+                            if c.lane == a.target_lane && c.alpha.is_none() {
+                                a.in_target_at.get_or_insert(t);
+                            }
+                            self.lateral_iterations += u64::from(c.lateral_iterations);
                             a.mode = match c.status {
                                 StepStatus::Solved { iterations } => {
                                     self.solved_steps += 1;
                                     self.solver_iterations += u64::from(iterations);
-                                    Mode::Cruise
+                                    if c.alpha.is_some() {
+                                        Mode::LaneChange
+                                    } else {
+                                        Mode::Cruise
+                                    }
                                 }
                                 StepStatus::Fallback(FallbackReason::NoRoom) => {
                                     self.waiting_steps += 1;
                                     Mode::Waiting
                                 }
-                                StepStatus::Fallback(_) => {
+                                StepStatus::Fallback(FallbackReason::Yield) => {
+                                    self.yield_steps += 1;
+                                    Mode::Yield
+                                }
+                                StepStatus::Fallback(why) => {
+                                    if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                                        eprintln!("t={t:.2} id={} fallback {why:?}", a.id);
+                                    }
                                     self.fallback_steps += 1;
                                     Mode::Fallback
                                 }
                             };
-                            c.v
+                            (c.v, c.omega)
                         }
                         Err(_) => {
                             self.fallback_steps += 1;
                             a.mode = Mode::Fallback;
-                            planner_core::safety::max_braking_command(&self.params, a.v)
+                            planner.braking_command(a.theta, a.v)
                         }
                     }
                 }
@@ -419,7 +499,7 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                         .find(|p| t < p.until_s)
                         .map_or(0.0, |p| p.accel);
                     a.mode = Mode::Cruise;
-                    admissible(&self.lim, a.v, accel)
+                    (admissible(&self.lim, a.v, accel), 0.0)
                 }
                 Driver::Random { rng, accel, until } => {
                     if t >= *until {
@@ -427,13 +507,13 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                         *until = t + rng.random_range(0.2..2.0);
                     }
                     a.mode = Mode::Cruise;
-                    admissible(&self.lim, a.v, *accel)
+                    (admissible(&self.lim, a.v, *accel), 0.0)
                 }
             };
             if a.reached_at.is_some() && a.mode == Mode::Cruise {
                 a.mode = Mode::Done;
             }
-            commands.push(v_cmd);
+            commands.push((v_cmd, w_cmd));
             trace(&TraceRow {
                 t,
                 id: a.id,
@@ -441,17 +521,26 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                 y: a.y,
                 theta: a.theta,
                 v: v_cmd,
-                omega: 0.0,
+                omega: w_cmd,
                 lane: a.lane,
                 target_lane: a.target_lane,
                 mode: a.mode,
             });
         }
-        // Exact single-lane model (SPEC §2): x⁺ = x + v h.
-        for (a, v) in self.agents.iter_mut().zip(commands) {
+        // The exact unicycle (1), integrated here independently of planner-core.
+        for (a, (v, w)) in self.agents.iter_mut().zip(commands) {
             a.v_before = a.v;
             a.v = v;
-            a.x += v * h;
+            a.omega = w;
+            if w.abs() > 1e-12 {
+                let th1 = a.theta + w * h;
+                a.x += v / w * (th1.sin() - a.theta.sin());
+                a.y -= v / w * (th1.cos() - a.theta.cos());
+                a.theta = th1;
+            } else {
+                a.x += v * h * a.theta.cos();
+                a.y += v * h * a.theta.sin();
+            }
         }
         self.steps_done += 1;
         self.t = self.steps_done as f64 * h;
@@ -462,9 +551,34 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
         }
         self.truths.clear();
         self.truths.extend(self.agents.iter().map(Agent::truth));
-        self.findings
-            .check(&self.lim, &self.truths, self.scenario.road.end_x);
+        self.findings.check(
+            &self.lim,
+            &self.truths,
+            self.scenario.road.end_x,
+            self.scenario.road.lanes,
+        );
         Ok(())
+    }
+
+    /// Lane-change statistics so far.
+    pub fn lane_changes(&self) -> LaneChangeStats {
+        let wanted: Vec<&Agent<N>> = self
+            .agents
+            .iter()
+            .filter(|a| matches!(a.driver, Driver::Planner { .. }))
+            .collect();
+        let done: Vec<f64> = wanted.iter().filter_map(|a| a.in_target_at).collect();
+        LaneChangeStats {
+            vehicles: wanted.len(),
+            in_target_lane: done.len(),
+            changes: wanted.iter().map(|a| a.changes.len()).sum(),
+            all_done_at_s: (done.len() == wanted.len())
+                .then(|| done.iter().copied().fold(0.0, f64::max)),
+            max_distance_m: wanted
+                .iter()
+                .flat_map(|a| a.changes.iter().map(|c| c.0))
+                .fold(0.0, f64::max),
+        }
     }
 
     /// The summary so far.
@@ -476,6 +590,7 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             .filter_map(|a| a.reached_at)
             .filter(|&t| t <= deadline + 1e-9)
             .collect();
+        let lane_changes = self.lane_changes();
         RunSummary {
             scenario: self.scenario.name.clone(),
             vehicles: self.agents.len(),
@@ -484,12 +599,17 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             invariant_violations: self.findings.invariant_violations,
             limit_violations: self.findings.limit_violations,
             road_end_overruns: self.findings.road_end_overruns,
+            off_road: self.findings.off_road,
             min_gap_m: self.findings.min_gap_m,
             fallback_steps: self.fallback_steps,
             waiting_steps: self.waiting_steps,
+            yield_steps: self.yield_steps,
+            lane_changes,
+            lateral_iterations_total: self.lateral_iterations,
             planner_steps: self.planner_steps,
             solver_iterations_mean: self.solver_iterations as f64 / self.solved_steps.max(1) as f64,
-            completed: reached.len() == with_goal.len(),
+            completed: reached.len() == with_goal.len()
+                && lane_changes.in_target_lane == lane_changes.vehicles,
             goals: with_goal.len(),
             goals_reached: reached.len(),
             last_goal_time_s: reached.iter().copied().reduce(f64::max),

@@ -218,3 +218,73 @@ fn clarabel_can_drive_the_planners() {
     assert_eq!(v["fallback_steps"], 0, "{v}");
     assert_eq!(v["collisions"], 0);
 }
+
+#[test]
+fn experiment_multilane_prints_the_issue_json_and_a_plot() {
+    let png = tmp("fig7.png");
+    let out = bin()
+        .args([
+            "experiment",
+            "multilane",
+            "--seeds",
+            "3",
+            "--json",
+            "--plot",
+        ])
+        .arg(&png)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(
+        &out.stdout,
+        &[
+            "runs",
+            "collisions",
+            "invariant_violations",
+            "completed",
+            "max_completion_time_s",
+            "mean_completion_time_s",
+            "max_lane_change_distance_m",
+            "bound_m",
+        ],
+    );
+    assert_eq!(v["runs"], 3);
+    assert_eq!(v["completed"], 3);
+    assert_eq!(v["collisions"], 0);
+    let bytes = std::fs::read(&png).expect("plot written");
+    assert!(bytes.starts_with(b"\x89PNG"), "a PNG");
+    // Bad arguments: exit 2, nothing run.
+    for args in [
+        vec!["experiment", "multilane", "--seeds", "0"],
+        vec!["experiment", "multilane", "--plot", "x.gif"],
+        vec!["experiment", "nowhere"],
+        vec!["traffic", "--duration", "0"],
+    ] {
+        let out = bin().args(&args).output().expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+    }
+}
+
+#[test]
+fn a_multilane_scenario_runs_with_clarabel_too() {
+    let out = bin()
+        .arg("run")
+        .arg(scenario("multilane.toml"))
+        .args(["--json", "--solver", "clarabel"])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(&out.stdout, &["solver", "collisions", "lane_changes"]);
+    assert_eq!(v["solver"], "clarabel");
+    assert_eq!(v["collisions"], 0);
+    assert_eq!(v["invariant_violations"], 0);
+    assert_eq!(v["completed"], true, "{v}");
+}

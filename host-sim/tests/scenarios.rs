@@ -197,6 +197,19 @@ fn bad_scenarios_are_rejected_with_file_line_and_problem() {
     let (line, p) = parse_err(t);
     assert_eq!(line, Some(6), "{p}");
     assert!(p.contains("road end"), "{p}");
+    // A dead end too close for two lane changes (commitment distance (23)).
+    let t = "name = \"t\"\nduration_s = 10.0\n[road]\nlanes = 3\nend_x = 150.0\n[[vehicle]]\nid = 1\nx = 0.0\nlane = 0\nv = 10.0\ntarget_lane = 2\n";
+    let (line, p) = parse_err(t);
+    assert_eq!(line, Some(6), "{p}");
+    assert!(p.contains("commitment distance (23)"), "{p}");
+    // A scripted driver cannot change lanes.
+    let t = "name = \"t\"\nduration_s = 10.0\n[road]\nlanes = 2\n[[vehicle]]\nid = 1\nx = 0.0\nlane = 0\nv = 10.0\ntarget_lane = 1\ndriver = \"random\"\n";
+    let (line, p) = parse_err(t);
+    assert_eq!(line, Some(5), "{p}");
+    assert!(
+        p.contains("only planner-driven vehicles change lanes"),
+        "{p}"
+    );
     // Bad horizon, bad duration, speed above vmax, scripted follower, duplicate id.
     let (line, _) = parse_err(&format!(
         "horizon = 30\n{HEAD}[[vehicle]]\nid = 1\nx = 0.0\nlane = 0\nv = 1.0\n"
@@ -224,4 +237,66 @@ fn bad_scenarios_are_rejected_with_file_line_and_problem() {
     // Missing file.
     let e = Scenario::load(Path::new("/nonexistent/x.toml")).expect_err("missing");
     assert!(e.to_string().contains("cannot read"), "{e}");
+}
+
+/// Theorem 3 (dead end): every vehicle needs one or two changes before x_R; all reach
+/// their target lanes and stop before the end, without a collision or violation.
+#[test]
+fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
+    let sc = Scenario::load(&builtin("dead-end.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let end = sc.road.end_x.expect("a dead end");
+    let needs: Vec<u8> = sc
+        .vehicles
+        .iter()
+        .map(|v| v.lane.abs_diff(v.target_lane.unwrap_or(v.lane)))
+        .collect();
+    assert!(needs.iter().all(|&m| m == 1 || m == 2) && needs.contains(&2));
+    let mut last = std::collections::BTreeMap::new();
+    let s = run_scenario(
+        sc,
+        SolverChoice::Ours,
+        None,
+        &mut |r| {
+            last.insert(r.id, *r);
+        },
+        &mut |_, _| {},
+    )
+    .expect("in-process bus cannot fail");
+    assert_eq!(
+        (
+            s.collisions,
+            s.invariant_violations,
+            s.limit_violations,
+            s.road_end_overruns,
+            s.off_road
+        ),
+        (0, 0, 0, 0, 0),
+        "{s:?}"
+    );
+    assert_eq!(s.lane_changes.in_target_lane, s.vehicles, "{s:?}");
+    assert!(s.completed);
+    for r in last.values() {
+        assert_eq!(r.lane, r.target_lane, "vehicle {}", r.id);
+        assert_eq!(r.v, 0.0, "vehicle {} stopped", r.id);
+        assert!(r.x + 2.25 < end, "vehicle {} before x_R", r.id);
+    }
+}
+
+/// The paper's multi-lane experiment (Fig. 6/7) on a few seeds, with both solvers: every
+/// lane change completes, nothing collides.
+#[test]
+fn multilane_experiment_completes_with_either_solver() {
+    let r = host_sim::multilane::experiment(8, 1, SolverChoice::Ours, 0);
+    assert_eq!(
+        (r.collisions, r.invariant_violations, r.limit_violations),
+        (0, 0, 0)
+    );
+    assert_eq!(r.completed, r.runs, "{r:?}");
+    assert!(r.max_lane_change_distance_m < r.bound_m, "{r:?}");
+    let c = host_sim::multilane::experiment(1, 1, SolverChoice::Clarabel, 0);
+    assert_eq!(
+        (c.collisions, c.invariant_violations, c.completed),
+        (0, 0, 1),
+        "{c:?}"
+    );
 }

@@ -37,14 +37,21 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod banded;
+pub mod free_space;
+pub mod lane_change;
+pub mod lanes;
+pub mod lateral;
 pub mod mpc;
 pub mod params;
 pub mod planner;
 pub mod real;
 pub mod safety;
 pub mod solver;
+pub mod unicycle;
 pub mod world;
 
+pub use lane_change::{LaneCommand, LaneEvent, LaneInputError, LaneObservation, LanePlanner};
+pub use lanes::{Other, Road};
 pub use mpc::{ConstraintKind, CostWeights, ProblemError, SingleLaneProblem, Violation};
 pub use params::{Params, ParamsError, ParamsSpec};
 pub use planner::{
@@ -52,4 +59,5 @@ pub use planner::{
 };
 pub use real::Real;
 pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};
+pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};

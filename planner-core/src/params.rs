@@ -222,6 +222,26 @@ impl<F: Real> Params<F> {
     pub fn d0(&self) -> F {
         self.spec.d0
     }
+    /// Lane width Wl.
+    #[inline]
+    pub fn lane_width(&self) -> F {
+        self.spec.lane_width
+    }
+    /// Minimum turning radius ρmin.
+    #[inline]
+    pub fn rho_min(&self) -> F {
+        self.spec.rho_min
+    }
+    /// θmin (< 0).
+    #[inline]
+    pub fn theta_min(&self) -> F {
+        self.spec.theta_min
+    }
+    /// θmax (> 0).
+    #[inline]
+    pub fn theta_max(&self) -> F {
+        self.spec.theta_max
+    }
 }
 
 #[cfg(test)]

@@ -51,6 +51,14 @@ pub enum FallbackReason<F> {
     Solver(SolveError),
     /// The solver's plan failed verification against the exact constraints.
     Verification(Violation<F>),
+    /// The Yield Protocol (20)(21): a vehicle ahead in ≺_t that is in, entering or
+    /// intending to enter one of the ego's lanes is within dS; the ego brakes until
+    /// (20) holds. Not a failure: the invariant toward the front set (15) still holds.
+    Yield,
+    /// The lane-change step (13) could not be verified on the exact unicycle model
+    /// (lateral plan out of the band, Ω or heading bounds): max braking with
+    /// straightening, certified one step earlier, is applied.
+    Lateral,
 }
 
 /// What the planner did this step.
@@ -221,49 +229,80 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         let free = free_road_gap(&p, N);
         let gap = obstacle_position(&p, obs.x, obs.vehicles, obs.stop_line)
             .map_or(free, |xb| (xb - obs.x).min(free));
+        Ok(self.plan_speed(obs.v_prev, gap, obs.target_x - obs.x, obs.v_ref))
+    }
+
+    /// One planning step given the gap x̄_t − x_t directly (for planners that build x̄
+    /// from their own vehicle sets, e.g. [`crate::lane_change`]). `target` = x^f − x_t.
+    pub fn step_gap(
+        &mut self,
+        v_prev: F,
+        gap: F,
+        target: F,
+        v_ref: F,
+    ) -> Result<Command<F>, InputError> {
+        if ![v_prev, gap, target, v_ref].iter().all(|x| x.is_finite()) {
+            return Err(InputError::NotFinite);
+        }
+        if !(v_prev >= F::ZERO && v_prev <= self.params.v_max()) {
+            return Err(InputError::SpeedOutOfRange);
+        }
+        Ok(self.plan_speed(v_prev, gap, target, v_ref))
+    }
+
+    fn plan_speed(&mut self, v_prev: F, gap: F, target: F, v_ref: F) -> Command<F> {
+        let p = self.params;
         let problem = SingleLaneProblem::<F, N>::new(
             &p,
-            obs.v_prev,
+            v_prev,
             gap,
             F::SAFETY_MARGIN_M,
             self.weights,
-            obs.target_x - obs.x,
-            obs.v_ref,
+            target,
+            v_ref,
         );
         let problem = match problem {
             Ok(pr) => pr,
-            // Inputs and weights were checked above, so only the invariant can fail here.
+            // Inputs and weights were checked by the callers, so only the invariant can
+            // fail here.
             Err(ProblemError::InvariantViolated)
             | Err(ProblemError::NotFinite)
             | Err(ProblemError::SpeedOutOfRange)
             | Err(ProblemError::InvalidWeights) => {
-                return Ok(self.fallback(obs.v_prev, gap, FallbackReason::InvariantViolated))
+                return self.fallback(v_prev, gap, FallbackReason::InvariantViolated)
             }
         };
-        let v_brake = safety::max_braking_command(&p, obs.v_prev);
+        let v_brake = safety::max_braking_command(&p, v_prev);
         let room = -problem.safety_value(p.h() * v_brake, v_brake);
         if room < F::from_f64(MIN_ROOM_M) {
-            return Ok(self.fallback(obs.v_prev, gap, FallbackReason::NoRoom));
+            return self.fallback(v_prev, gap, FallbackReason::NoRoom);
         }
         let warm = self.have_plan.then(|| shifted(&self.plan));
         let solution = match self.solver.solve(&problem, warm.as_ref()) {
             Ok(s) => s,
-            Err(e) => return Ok(self.fallback(obs.v_prev, gap, FallbackReason::Solver(e))),
+            Err(e) => return self.fallback(v_prev, gap, FallbackReason::Solver(e)),
         };
         match verify(&p, &problem, solution.v) {
             Ok(plan) => {
                 self.plan = plan;
                 self.have_plan = true;
-                Ok(Command {
+                Command {
                     v: plan.first().copied().unwrap_or(F::ZERO),
                     status: StepStatus::Solved {
                         iterations: solution.iterations,
                     },
                     gap,
-                })
+                }
             }
-            Err(v) => Ok(self.fallback(obs.v_prev, gap, FallbackReason::Verification(v))),
+            Err(v) => self.fallback(v_prev, gap, FallbackReason::Verification(v)),
         }
+    }
+
+    /// Replaces the plan by the max-braking sequence from `v_prev` (used when a caller
+    /// applies the fallback for reasons of its own, so the next warm start matches).
+    pub fn set_braking_plan(&mut self, v_prev: F) {
+        self.plan = safety::max_braking(&self.params, v_prev);
+        self.have_plan = true;
     }
 
     fn fallback(&mut self, v_prev: F, gap: F, why: FallbackReason<F>) -> Command<F> {

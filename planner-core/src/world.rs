@@ -4,6 +4,7 @@
 //! Bounded memory: at most `CAP` vehicles are tracked (a `heapless::Vec`); a message from
 //! a new vehicle when the view is full is rejected with an error, never dropped silently.
 
+use crate::lanes::Other;
 use crate::planner::Vehicle;
 use crate::real::Real;
 use heapless::Vec;
@@ -126,6 +127,27 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
     /// `true` when no vehicle is tracked.
     pub fn is_empty(&self) -> bool {
         self.known.is_empty()
+    }
+
+    /// Every tracked vehicle as the multi-lane planner wants it (all assumed `length`
+    /// long), with the age of its data at `now` (by its stamp), into `out` (cleared
+    /// first; at most `CAP`).
+    pub fn others(&self, now: F, length: F, out: &mut Vec<Other<F>, CAP>) {
+        out.clear();
+        for k in self.known.iter() {
+            let s = &k.state;
+            // Cannot fail: `out` has the same capacity as `known`.
+            let _ = out.push(Other {
+                id: s.id,
+                x: s.x,
+                v: s.v,
+                length,
+                lane: s.lane,
+                alpha: s.alpha,
+                beta: s.beta,
+                age: (now - s.stamp).max(F::ZERO),
+            });
+        }
     }
 
     /// The vehicles in `lane` (all assumed `length` long), as the single-lane planner

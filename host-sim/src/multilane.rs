@@ -1,0 +1,316 @@
+//! Multi-lane traffic (Sec. IV–V): the paper's experiment of Fig. 6/7 (SPEC §8), random
+//! traffic for Theorem 2, and the dead-end layout of Theorem 3.
+
+use crate::monitor::Limits;
+use crate::scenario::{DriverKind, Road, Scenario, VehicleSpec};
+use crate::sim::{
+    RunSummary, Simulation, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M, WIDTH_M,
+};
+use planner_core::free_space::FreeSpace;
+use planner_core::lane_change::commitment_distance;
+use planner_core::lanes::Band;
+use planner_core::{Params, Pose};
+use rand::Rng;
+use serde::Serialize;
+
+/// The paper's speed v0 in the multi-lane experiment (m/s).
+pub const V0: f64 = 15.0;
+/// How long each multi-lane run is simulated (s).
+pub const EXPERIMENT_DURATION_S: f64 = 30.0;
+
+/// The smallest extent-adjusted spacing at which a follower at `v` keeps the invariant
+/// with the scenario start margin: L + d0 + dS(v) + margin (centre to centre).
+pub fn safe_spacing(v: f64) -> f64 {
+    let lim = Limits::table_i();
+    LENGTH_M + lim.d0 + lim.safe_distance(v) + START_MARGIN_M
+}
+
+/// The paper's multi-lane experiment (SPEC §8): 3 lanes, 2 vehicles per lane spaced by
+/// the smallest safe gap, all at v0 = 15 m/s, each with a random target lane.
+pub fn paper_scenario(seed: u64) -> Scenario {
+    let mut rng = crate::instances::rng(seed ^ 0x6d75_6c74_696c_616e);
+    let spacing = safe_spacing(V0);
+    let mut vehicles = Vec::new();
+    for lane in 0..3u8 {
+        for (i, x) in [spacing, 0.0].into_iter().enumerate() {
+            vehicles.push(VehicleSpec {
+                id: u16::from(lane) * 2 + i as u16 + 1,
+                x,
+                lane,
+                v: V0,
+                target_lane: Some(rng.random_range(0..3u8)),
+                driver: DriverKind::Planner,
+                script: Vec::new(),
+                goal_x: None,
+                v_ref: Some(V0),
+            });
+        }
+    }
+    Scenario {
+        name: format!("multilane-{seed}"),
+        duration_s: EXPERIMENT_DURATION_S,
+        seed,
+        horizon: 20,
+        deadline_s: EXPERIMENT_DURATION_S,
+        road: Road {
+            lanes: 3,
+            end_x: None,
+        },
+        vehicles,
+    }
+}
+
+/// Random traffic for Theorem 2: 3–4 lanes, 5–`max_vehicles` planner-driven vehicles at
+/// random safe spacings and speeds, random reference speeds and random target lanes.
+pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> Scenario {
+    let lim = Limits::table_i();
+    let mut rng = crate::instances::rng(seed ^ 0x7468_656f_7265_6d32);
+    let lanes: u8 = rng.random_range(3..=4);
+    let n = rng.random_range(5..=max_vehicles.max(5));
+    // Per lane, the last placed vehicle (x, v): new ones go behind it.
+    let mut back: Vec<Option<(f64, f64)>> = vec![None; usize::from(lanes)];
+    let mut vehicles = Vec::with_capacity(n);
+    for i in 0..n {
+        let lane = rng.random_range(0..lanes);
+        let v = rng.random_range(0.0..0.9 * lim.v_max);
+        let slot = &mut back[usize::from(lane)];
+        let x = match *slot {
+            None => rng.random_range(0.0..60.0),
+            Some((xl, _)) => xl - safe_spacing(v) - rng.random_range(0.0..30.0),
+        };
+        *slot = Some((x, v));
+        vehicles.push(VehicleSpec {
+            id: i as u16 + 1,
+            x,
+            lane,
+            v,
+            target_lane: Some(rng.random_range(0..lanes)),
+            driver: DriverKind::Planner,
+            script: Vec::new(),
+            goal_x: None,
+            v_ref: Some(rng.random_range(3.0..lim.v_max)),
+        });
+    }
+    Scenario {
+        name: format!("random-traffic-{seed}"),
+        duration_s,
+        seed,
+        horizon: 20,
+        deadline_s: duration_s,
+        road: Road { lanes, end_x: None },
+        vehicles,
+    }
+}
+
+/// The commitment distance (23) for vehicle `index` at its start: M lane changes
+/// times dS(v) + dC(v) at the paper's speed `v`, with ρ_t = max(ρ^{H+}, ρ^{H−}) of its
+/// free space toward the first lane it has to enter. `None` if it needs no change.
+pub fn commitment_bound(
+    vehicles: &[VehicleSpec],
+    road: &Road,
+    index: usize,
+    v: f64,
+) -> Option<f64> {
+    let p = Params::<f64>::table_i();
+    let spec = vehicles.get(index)?;
+    let target = spec.target_lane.unwrap_or(spec.lane);
+    let m = spec.lane.abs_diff(target);
+    if m == 0 {
+        return None;
+    }
+    let next = if target > spec.lane {
+        spec.lane + 1
+    } else {
+        spec.lane - 1
+    };
+    let lo = f64::from(spec.lane.min(next)) * LANE_WIDTH_M + 0.5 * WIDTH_M;
+    let hi = f64::from(spec.lane.max(next) + 1) * LANE_WIDTH_M - 0.5 * WIDTH_M;
+    let pose = Pose {
+        x: spec.x,
+        y: (f64::from(spec.lane) + 0.5) * LANE_WIDTH_M,
+        theta: 0.0,
+    };
+    // x̄ toward the nearest vehicle ahead in either lane (or the road end).
+    let lim = Limits::table_i();
+    let ahead = vehicles
+        .iter()
+        .filter(|o| o.x > spec.x && (o.lane == spec.lane || o.lane == next))
+        .map(|o| o.x - LENGTH_M - lim.d0)
+        .chain(road.end_x.map(|e| e - 0.5 * LENGTH_M - lim.d0))
+        .fold(f64::INFINITY, f64::min);
+    let gap = (ahead - spec.x).min(planner_core::planner::free_road_gap(&p, 20));
+    let fs = FreeSpace::new(&p, pose, spec.v, 0.0, Band { lo, hi }, gap).ok()?;
+    let rho = |k: f64| if k > 0.0 { 1.0 / k } else { f64::INFINITY };
+    let rho_t = rho(fs.arc_h.kappa_plus).max(rho(fs.arc_h.kappa_minus));
+    Some(commitment_distance(&p, m, v, rho_t, 0.0))
+}
+
+/// The `experiment multilane` result.
+#[derive(Debug, Clone, Serialize)]
+pub struct MultilaneReport {
+    /// Runs (seeds).
+    pub runs: u64,
+    /// Collisions over all runs (pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations over all runs.
+    pub invariant_violations: u64,
+    /// Runs in which every vehicle reached its target lane.
+    pub completed: u64,
+    /// Latest time by which all lane changes of a run were done (s).
+    pub max_completion_time_s: f64,
+    /// Mean over runs of that time (s).
+    pub mean_completion_time_s: f64,
+    /// Longest x-distance from declaring an intention to completing the change (m).
+    pub max_lane_change_distance_m: f64,
+    /// The commitment distance (23) for the vehicle needing the most changes, at v0,
+    /// largest over runs (m).
+    pub bound_m: f64,
+    /// Lane changes completed.
+    pub lane_changes: u64,
+    /// Limit violations (speed, acceleration, heading) and road departures.
+    pub limit_violations: u64,
+    /// Planner steps that applied the certified fallback (not yield, not standstill).
+    pub fallback_steps: u64,
+    /// Planner steps braking under the Yield Protocol.
+    pub yield_steps: u64,
+    /// Planner steps.
+    pub planner_steps: u64,
+    /// Solver.
+    pub solver: SolverChoice,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// Runs one scenario to the end (horizon 20) and returns its summary.
+pub fn run_one(
+    scenario: Scenario,
+    solver: SolverChoice,
+    trace: &mut dyn FnMut(&TraceRow),
+) -> RunSummary {
+    let t0 = std::time::Instant::now();
+    let mut sim = Simulation::<20>::new(scenario, solver, None);
+    while !sim.finished() {
+        // The in-process bus cannot fail.
+        if sim.step(trace).is_err() {
+            break;
+        }
+    }
+    sim.summary(t0.elapsed().as_secs_f64())
+}
+
+/// `host-sim experiment multilane`: the paper's experiment on `seeds` seeds.
+pub fn experiment(
+    seeds: u64,
+    first_seed: u64,
+    solver: SolverChoice,
+    threads: usize,
+) -> MultilaneReport {
+    let t0 = std::time::Instant::now();
+    let results = crate::par::map_indexed(seeds as usize, threads, |i| {
+        let seed = first_seed + i as u64;
+        let sc = paper_scenario(seed);
+        let bound = (0..sc.vehicles.len())
+            .filter_map(|k| commitment_bound(&sc.vehicles, &sc.road, k, V0))
+            .fold(0.0, f64::max);
+        (run_one(sc, solver, &mut |_| {}), bound)
+    });
+    let times: Vec<f64> = results
+        .iter()
+        .filter_map(|(s, _)| s.lane_changes.all_done_at_s)
+        .collect();
+    MultilaneReport {
+        runs: seeds,
+        collisions: results.iter().map(|(s, _)| s.collisions).sum(),
+        invariant_violations: results.iter().map(|(s, _)| s.invariant_violations).sum(),
+        completed: times.len() as u64,
+        max_completion_time_s: times.iter().copied().fold(0.0, f64::max),
+        mean_completion_time_s: times.iter().sum::<f64>() / times.len().max(1) as f64,
+        max_lane_change_distance_m: results
+            .iter()
+            .map(|(s, _)| s.lane_changes.max_distance_m)
+            .fold(0.0, f64::max),
+        bound_m: results.iter().map(|(_, b)| *b).fold(0.0, f64::max),
+        lane_changes: results
+            .iter()
+            .map(|(s, _)| s.lane_changes.changes as u64)
+            .sum(),
+        limit_violations: results
+            .iter()
+            .map(|(s, _)| s.limit_violations + s.off_road)
+            .sum(),
+        fallback_steps: results.iter().map(|(s, _)| s.fallback_steps).sum(),
+        yield_steps: results.iter().map(|(s, _)| s.yield_steps).sum(),
+        planner_steps: results.iter().map(|(s, _)| s.planner_steps).sum(),
+        solver,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// The Theorem 2 sweep's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrafficReport {
+    /// Cases.
+    pub cases: u64,
+    /// Vehicles over all cases.
+    pub vehicles: u64,
+    /// Collisions.
+    pub collisions: u64,
+    /// Invariant violations.
+    pub invariant_violations: u64,
+    /// Limit violations and road departures.
+    pub limit_violations: u64,
+    /// Lane changes completed.
+    pub lane_changes: u64,
+    /// Vehicles in their target lane at the end.
+    pub in_target_lane: u64,
+    /// Certified-fallback steps (not yield, not standstill).
+    pub fallback_steps: u64,
+    /// Yield steps.
+    pub yield_steps: u64,
+    /// Planner steps.
+    pub planner_steps: u64,
+    /// Seeds of cases with a collision or violation (for replay).
+    pub failing_seeds: Vec<u64>,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// Theorem 2 sweep: `cases` random-traffic cases.
+pub fn traffic_sweep(
+    cases: u64,
+    first_seed: u64,
+    duration_s: f64,
+    threads: usize,
+) -> TrafficReport {
+    let t0 = std::time::Instant::now();
+    let results = crate::par::map_indexed(cases as usize, threads, |i| {
+        let seed = first_seed + i as u64;
+        (
+            seed,
+            run_one(
+                random_traffic(seed, 30, duration_s),
+                SolverChoice::Ours,
+                &mut |_| {},
+            ),
+        )
+    });
+    let sum = |f: fn(&RunSummary) -> u64| results.iter().map(|(_, s)| f(s)).sum::<u64>();
+    TrafficReport {
+        cases,
+        vehicles: sum(|s| s.vehicles as u64),
+        collisions: sum(|s| s.collisions),
+        invariant_violations: sum(|s| s.invariant_violations),
+        limit_violations: sum(|s| s.limit_violations + s.off_road),
+        lane_changes: sum(|s| s.lane_changes.changes as u64),
+        in_target_lane: sum(|s| s.lane_changes.in_target_lane as u64),
+        fallback_steps: sum(|s| s.fallback_steps),
+        yield_steps: sum(|s| s.yield_steps),
+        planner_steps: sum(|s| s.planner_steps),
+        failing_seeds: results
+            .iter()
+            .filter(|(_, s)| s.collisions + s.invariant_violations > 0)
+            .map(|(seed, _)| *seed)
+            .collect(),
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    }
+}

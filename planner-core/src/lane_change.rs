@@ -1,0 +1,676 @@
+//! The multi-lane planner (Sec. IV–V, SPEC §5–6): the MPC for lane change (13) on the
+//! unicycle (1), the Lane Change Protocol (16)–(18), the Yield Protocol (20)(21), dead
+//! ends (22) and the commitment distance (23)(24).
+//!
+//! One step, data flowing one way: observation → protocol bookkeeping (ℓ, α, β) → front
+//! sets and x̄ (15)(21)(22) → free space and Ω (28)–(31) → speeds (the convex part of
+//! (13), our interior-point solver, with dH in V^k_t) → yaw rates (the linearised
+//! lateral QP of [`crate::lateral`]) → verification on the exact model → command.
+//!
+//! Certified fallback. Lemma 7 shows that while dH > dL some braking motion with a
+//! turning radius in ⟦ρH⟧ stays in the band and stops. We apply one concrete motion —
+//! max braking (Lemma 2) with maximal straightening, ω = −sign θ · min(|θ|/h, v/ρmin)
+//! — and certify it directly rather than through the lemma's geometry: a command is
+//! applied only if, from the state it leads to, this braking motion keeps the vehicle's
+//! exact L × W rectangle inside its band and its heading within bounds until it stops
+//! ([`braking_tail_ok`]). So at every step the fallback is known safe before it is
+//! needed; longitudinally it is Lemma 2's, certified by the invariant toward (15).
+
+use crate::free_space::{FreeSpace, D_TURN_M};
+use crate::lanes::{in_behind_set, in_front_set, in_yield_set, Band, Key, Other, Road};
+use crate::lateral::{solve_lateral, LateralInput, LateralWeights};
+use crate::mpc::CostWeights;
+use crate::params::Params;
+use crate::planner::{free_road_gap, ConfigError, FallbackReason, InputError, Planner, StepStatus};
+use crate::real::Real;
+use crate::safety;
+use crate::solver::{IpmSolver, MpcSolver};
+use crate::unicycle::{lateral_half_extent, step, Pose};
+
+/// Heading (rad) below which a vehicle may start a lane change, and must be to end one:
+/// changes start and end (nearly) parallel to the road, as Lemma 12's S-curve does.
+pub const STRAIGHT_HEADING_RAD: f64 = 0.02;
+/// Margin (m) by which the lateral QP tightens the band: the QP's linearisation and
+/// move blocking are approximate; 5 cm keeps the exact check from failing on them.
+pub const LATERAL_MARGIN_M: f64 = 0.05;
+/// Margin (rad) by which the lateral QP tightens the heading bounds, for the same reason.
+pub const HEADING_MARGIN_RAD: f64 = 0.01;
+/// Shortest lane-change reference (m): a quintic S-curve over 3.6 m is steeper than
+/// θmax = π/6 below ~13 m; 16 m keeps its heading ≤ 0.4 rad.
+pub const MIN_CHANGE_LENGTH_M: f64 = 16.0;
+/// The longest braking tail the certificate simulates: vmax/(|amin| h) steps is 352 for
+/// Table I; the cap makes the loop bounded for any validated parameters.
+pub const MAX_TAIL_STEPS: usize = 8192;
+
+/// The lane event of a step, if any.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LaneEvent {
+    /// β set: the intention to change to this lane is declared.
+    Declared(u8),
+    /// α set: the change to this lane started (the Lane Change Protocol held).
+    Started(u8),
+    /// The change ended: this is now ℓ.
+    Completed(u8),
+}
+
+/// What the ego knows at time t on a multi-lane road.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LaneObservation<'a, F> {
+    /// Pose at t.
+    pub pose: Pose<F>,
+    /// v_{t−h}.
+    pub v_prev: F,
+    /// ω_{t−h}.
+    pub omega_prev: F,
+    /// The other vehicles (latest messages).
+    pub others: &'a [Other<F>],
+    /// The road.
+    pub road: Road<F>,
+    /// The lane the vehicle wants to end up in (its mission).
+    pub target_lane: u8,
+    /// x^f − x_t for the cost (ignored when its weight is 0).
+    pub target: F,
+    /// Reference speed.
+    pub v_ref: F,
+}
+
+/// The command for [t, t+h) and the vehicle's lane bookkeeping after this step (what it
+/// broadcasts next).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LaneCommand<F> {
+    /// v_t (m/s).
+    pub v: F,
+    /// ω_t (rad/s).
+    pub omega: F,
+    /// How it was obtained.
+    pub status: StepStatus<F>,
+    /// ℓ.
+    pub lane: u8,
+    /// α.
+    pub alpha: Option<u8>,
+    /// β.
+    pub beta: Option<u8>,
+    /// The lane event of this step.
+    pub event: Option<LaneEvent>,
+    /// The gap x̄_t − x_t used (m).
+    pub gap: F,
+    /// Iterations of the lateral QP (0 if not solved this step).
+    pub lateral_iterations: u32,
+}
+
+/// Bad multi-lane input: nothing changed; apply [`LanePlanner::braking_command`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LaneInputError {
+    /// The speed part is invalid.
+    Speed(InputError),
+    /// A pose, rate, other vehicle or road field is NaN or infinite.
+    NotFinite,
+    /// The road has no lanes, or a lane index (own, target, another vehicle's) is not on it.
+    NoSuchLane,
+    /// The lane width is not wider than the vehicle.
+    LaneTooNarrow,
+    /// The vehicle's reference point is outside its band.
+    OutsideBand,
+}
+
+/// A lane change's reference path: a quintic S-curve from (x0, y0) to (x0 + len, y1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Reference<F> {
+    x0: F,
+    y0: F,
+    y1: F,
+    len: F,
+}
+
+impl<F: Real> Reference<F> {
+    /// (y_ref, θ_ref) at x.
+    fn at(&self, x: F) -> (F, F) {
+        let u = ((x - self.x0) / self.len).max(F::ZERO).min(F::ONE);
+        let (u2, u3) = (u * u, u * u * u);
+        let s = u3 * (F::from_f64(10.0) - F::from_f64(15.0) * u + F::from_f64(6.0) * u2);
+        let ds = F::from_f64(30.0) * u2 * (F::ONE - u).sq();
+        let dy = self.y1 - self.y0;
+        (self.y0 + dy * s, (dy * ds / self.len).atan2(F::ONE))
+    }
+}
+
+/// One vehicle's multi-lane planner with horizon `N` and speed solver `S`.
+#[derive(Debug, Clone)]
+pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
+    speed: Planner<F, N, S>,
+    lateral_weights: LateralWeights<F>,
+    lane: u8,
+    alpha: Option<u8>,
+    beta: Option<u8>,
+    beta_steps: u32,
+    omega_plan: [F; N],
+    reference: Option<Reference<F>>,
+}
+
+impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
+    /// A planner in `lane` using our interior-point solver.
+    pub fn new(params: Params<F>, weights: CostWeights<F>, lane: u8) -> Result<Self, ConfigError> {
+        Self::with_solver(params, weights, IpmSolver::default(), lane)
+    }
+}
+
+impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
+    /// A planner in `lane` whose speed problems are solved by `solver`.
+    pub fn with_solver(
+        params: Params<F>,
+        weights: CostWeights<F>,
+        solver: S,
+        lane: u8,
+    ) -> Result<Self, ConfigError> {
+        Ok(Self {
+            speed: Planner::with_solver(params, weights, solver)?,
+            lateral_weights: LateralWeights::default(),
+            lane,
+            alpha: None,
+            beta: None,
+            beta_steps: 0,
+            omega_plan: [F::ZERO; N],
+            reference: None,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params<F> {
+        self.speed.params()
+    }
+    /// ℓ.
+    pub fn lane(&self) -> u8 {
+        self.lane
+    }
+    /// α.
+    pub fn alpha(&self) -> Option<u8> {
+        self.alpha
+    }
+    /// β.
+    pub fn beta(&self) -> Option<u8> {
+        self.beta
+    }
+
+    /// The certified fallback command from the current state (for use on bad input).
+    pub fn braking_command(&self, theta: F, v_prev: F) -> (F, F) {
+        let p = self.params();
+        let v = safety::max_braking_command(p, v_prev);
+        (v, straighten(p, theta, v))
+    }
+
+    fn check(&self, obs: &LaneObservation<'_, F>) -> Result<(), LaneInputError> {
+        let r = &obs.road;
+        let scalars = [
+            obs.pose.x,
+            obs.pose.y,
+            obs.pose.theta,
+            obs.v_prev,
+            obs.omega_prev,
+            obs.target,
+            obs.v_ref,
+            r.lane_width,
+        ];
+        if !scalars.iter().all(|x| x.is_finite())
+            || r.end_x.is_some_and(|x| !x.is_finite())
+            || obs
+                .others
+                .iter()
+                .any(|c| ![c.x, c.v, c.length, c.age].iter().all(|x| x.is_finite()))
+        {
+            return Err(LaneInputError::NotFinite);
+        }
+        if !(obs.v_prev >= F::ZERO && obs.v_prev <= self.params().v_max()) {
+            return Err(LaneInputError::Speed(InputError::SpeedOutOfRange));
+        }
+        if obs.others.iter().any(|c| !(c.length > F::ZERO)) {
+            return Err(LaneInputError::Speed(InputError::BadLength));
+        }
+        let lanes_ok = |c: &Other<F>| {
+            r.has_lane(c.lane)
+                && c.alpha.is_none_or(|a| r.has_lane(a))
+                && c.beta.is_none_or(|b| r.has_lane(b))
+        };
+        if !(r.has_lane(self.lane)
+            && r.has_lane(obs.target_lane)
+            && obs.others.iter().all(lanes_ok))
+        {
+            return Err(LaneInputError::NoSuchLane);
+        }
+        if !(r.lane_width > self.params().width()) {
+            return Err(LaneInputError::LaneTooNarrow);
+        }
+        let band = r.band(self.lane, self.alpha);
+        let hw = F::HALF * self.params().width();
+        if !(band.lo + hw <= obs.pose.y && obs.pose.y <= band.hi - hw) {
+            return Err(LaneInputError::OutsideBand);
+        }
+        Ok(())
+    }
+
+    /// x̄_t − x_t over the vehicles selected by `select` and the road end (22),
+    /// extent-adjusted; `None` if there is no obstacle.
+    fn gap_over(
+        &self,
+        obs: &LaneObservation<'_, F>,
+        select: impl Fn(&Other<F>) -> bool,
+    ) -> Option<F> {
+        let p = self.params();
+        let len = p.length();
+        let mut best = obs
+            .road
+            .end_x
+            .map(|xr| xr - F::HALF * len - p.d0() - obs.pose.x);
+        for c in obs.others.iter().filter(|c| select(c)) {
+            let g = c.x - F::HALF * (c.length + len) - p.d0() - obs.pose.x;
+            best = Some(best.map_or(g, |b| b.min(g)));
+        }
+        best
+    }
+
+    fn key(&self, obs: &LaneObservation<'_, F>) -> Key<F> {
+        Key {
+            x: obs.pose.x,
+            v: obs.v_prev,
+            lane: self.lane,
+            id: u16::MAX,
+        }
+    }
+
+    /// The gaps toward (15) alone and toward (15) ∪ (21), for lanes {ℓ, α} and intention β.
+    fn gaps(
+        &self,
+        obs: &LaneObservation<'_, F>,
+        alpha: Option<u8>,
+        beta: Option<u8>,
+    ) -> (Option<F>, Option<F>) {
+        let key = self.key(obs);
+        let x = obs.pose.x;
+        let lane = self.lane;
+        let safe = self.gap_over(obs, |c| in_front_set(x, lane, alpha, c));
+        let all = self.gap_over(obs, |c| {
+            in_front_set(x, lane, alpha, c) || in_yield_set(&key, alpha, beta, c)
+        });
+        (safe, all)
+    }
+
+    /// The Lane Change Protocol (16)(17) for a change into `m`, with (17) tested against
+    /// every vehicle of C⁻_t (18) (SPEC's choice), each inflated for the age of its data
+    /// (SPEC §9: up to vmax·age further on and amax·age faster), and the free-space
+    /// condition of Lemma 8 for the widened band.
+    fn may_start(&self, obs: &LaneObservation<'_, F>, m: u8) -> bool {
+        let p = self.params();
+        let x = obs.pose.x;
+        let len = p.length();
+        if !(obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD)) {
+            return false;
+        }
+        let (_, all) = self.gaps(obs, Some(m), None);
+        let free = free_road_gap(p, N);
+        let gap = all.map_or(free, |g| g.min(free));
+        // (16): x_t < x̄_t − dS(v_{t−h}) with the planner's margin.
+        if !safety::invariant_holds(p, obs.v_prev, gap - F::SAFETY_MARGIN_M) {
+            return false;
+        }
+        // (17) for every c ∈ C⁻_t.
+        for c in obs.others.iter().filter(|c| in_behind_set(x, m, c)) {
+            let reach = c.age * p.v_max();
+            let v = (c.v + c.age * p.a_max()).min(p.v_max());
+            let room = x - F::HALF * (c.length + len) - p.d0() - c.x - reach - F::SAFETY_MARGIN_M;
+            if !safety::invariant_holds(p, v, room) {
+                return false;
+            }
+        }
+        // Lemma 8 (i)(ii) in the widened band.
+        let band = obs
+            .road
+            .band(self.lane, Some(m))
+            .shrunk(F::HALF * p.width());
+        match FreeSpace::new(p, obs.pose, obs.v_prev, obs.omega_prev, band, gap) {
+            Ok(fs) => fs.d_h > fs.d_l && fs.lemma5_angles(),
+            Err(_) => false,
+        }
+    }
+
+    /// Protocol bookkeeping at the start of a step: completes, declares or starts a change.
+    fn update_lanes(&mut self, obs: &LaneObservation<'_, F>) -> Option<LaneEvent> {
+        let p = *self.params();
+        if let Some(m) = self.alpha {
+            let lane_m = obs.road.band(m, None);
+            let ext = lateral_half_extent(p.length(), p.width(), obs.pose.theta);
+            let inside = lane_m.lo <= obs.pose.y - ext && obs.pose.y + ext <= lane_m.hi;
+            if inside
+                && obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD)
+                && braking_tail_ok(&p, obs.pose, obs.v_prev, lane_m)
+            {
+                self.lane = m;
+                self.alpha = None;
+                self.reference = None;
+                return Some(LaneEvent::Completed(m));
+            }
+            return None;
+        }
+        if obs.target_lane == self.lane {
+            self.beta = None;
+            self.beta_steps = 0;
+            return None;
+        }
+        let want = if obs.target_lane > self.lane {
+            self.lane + 1
+        } else {
+            self.lane.saturating_sub(1)
+        };
+        if self.beta != Some(want) {
+            self.beta = Some(want);
+            self.beta_steps = 0;
+            return Some(LaneEvent::Declared(want));
+        }
+        // Start only once the intention has been broadcast, so that every vehicle that
+        // could start a conflicting change this step already treats the ego by (21).
+        if self.beta_steps >= 1 && self.may_start(obs, want) {
+            self.alpha = Some(want);
+            self.beta = None;
+            self.beta_steps = 0;
+            let dy = obs.road.lane_centre(want) - obs.pose.y;
+            // Length of Lemma 12's manoeuvre at the allowed radius: a quintic's peak
+            // curvature is 5.77 Δy / len², so len = sqrt(5.77 |Δy| ρ).
+            let band = obs
+                .road
+                .band(self.lane, Some(want))
+                .shrunk(F::HALF * p.width());
+            let free = safety::d_s(&p, obs.v_prev) + F::from_f64(D_TURN_M);
+            let kappa = FreeSpace::new(&p, obs.pose, obs.v_prev, obs.omega_prev, band, free)
+                .map(|fs| {
+                    if dy > F::ZERO {
+                        fs.arc_h.kappa_plus
+                    } else {
+                        fs.arc_h.kappa_minus
+                    }
+                })
+                .unwrap_or(F::ZERO);
+            let rho = if kappa > F::ZERO {
+                F::ONE / kappa
+            } else {
+                p.rho_min()
+            };
+            let len = (F::from_f64(5.77) * dy.abs() * rho.max(p.rho_min()))
+                .sqrt()
+                .max(F::from_f64(MIN_CHANGE_LENGTH_M));
+            self.reference = Some(Reference {
+                x0: obs.pose.x,
+                y0: obs.pose.y,
+                y1: obs.road.lane_centre(want),
+                len,
+            });
+            return Some(LaneEvent::Started(want));
+        }
+        None
+    }
+
+    /// One planning step at time t.
+    pub fn step(&mut self, obs: &LaneObservation<'_, F>) -> Result<LaneCommand<F>, LaneInputError> {
+        self.check(obs)?;
+        let p = *self.params();
+        let event = self.update_lanes(obs);
+        if self.beta.is_some() {
+            self.beta_steps = self.beta_steps.saturating_add(1);
+        }
+        let lanes = obs.road.band(self.lane, self.alpha);
+        let band = lanes.shrunk(F::HALF * p.width());
+        let (safe, all) = self.gaps(obs, self.alpha, self.beta);
+        let free = free_road_gap(&p, N);
+        let gap_all = all.map_or(free, |g| g.min(free));
+        let gap_safe = safe.map_or(free, |g| g.min(free));
+        let fs = FreeSpace::new(&p, obs.pose, obs.v_prev, obs.omega_prev, band, gap_all);
+        let Ok(fs) = fs else {
+            return Ok(self.fallback(obs, FallbackReason::Lateral, gap_all, event));
+        };
+        let cmd = self
+            .speed
+            .step_gap(obs.v_prev, fs.d_h, obs.target, obs.v_ref)
+            .map_err(LaneInputError::Speed)?;
+        match cmd.status {
+            StepStatus::Solved { .. } => {}
+            StepStatus::Fallback(FallbackReason::InvariantViolated) => {
+                // Still safe toward (15) and inside the band: the (21) set made it fail.
+                let d_safe = fs.d_h_hat.map_or(gap_safe, |d| d.min(gap_safe));
+                let why = if safety::invariant_holds(&p, obs.v_prev, d_safe - F::SAFETY_MARGIN_M) {
+                    FallbackReason::Yield
+                } else {
+                    FallbackReason::InvariantViolated
+                };
+                return Ok(self.fallback(obs, why, fs.d_h, event));
+            }
+            StepStatus::Fallback(why) => return Ok(self.fallback(obs, why, fs.d_h, event)),
+        }
+        let v_plan = match self.speed.plan() {
+            Some(v) => *v,
+            None => return Ok(self.fallback(obs, FallbackReason::Lateral, fs.d_h, event)),
+        };
+        // Lane keeping on the centre line, straight: no steering needed (and a one-lane
+        // road reduces exactly to the single-lane planner).
+        let centre = obs.road.lane_centre(self.lane);
+        let straight = self.alpha.is_none()
+            && obs.pose.theta == F::ZERO
+            && obs.omega_prev == F::ZERO
+            && obs.pose.y == centre;
+        let mut lateral_iterations = 0;
+        let omega = if straight {
+            [F::ZERO; N]
+        } else {
+            let mut y_ref = [F::ZERO; N];
+            let mut th_ref = [F::ZERO; N];
+            let mut lo = [F::ZERO; N];
+            let mut hi = [F::ZERO; N];
+            let mut x = obs.pose.x;
+            for (k, &vk) in v_plan.iter().enumerate() {
+                x += vk * p.h();
+                let (y, th) = match self.reference {
+                    Some(r) => r.at(x),
+                    None => (centre, F::ZERO),
+                };
+                let (l, u) = fs.omega_bounds(vk);
+                if let (Some(a), Some(b), Some(c), Some(d)) = (
+                    y_ref.get_mut(k),
+                    th_ref.get_mut(k),
+                    lo.get_mut(k),
+                    hi.get_mut(k),
+                ) {
+                    *a = y;
+                    *b = th;
+                    *c = l;
+                    *d = u;
+                }
+            }
+            let nominal = crate::planner::shifted(&self.omega_plan);
+            let margin = F::from_f64(LATERAL_MARGIN_M);
+            let tm = F::from_f64(HEADING_MARGIN_RAD);
+            let input = LateralInput {
+                h: p.h(),
+                y: obs.pose.y,
+                theta: obs.pose.theta,
+                omega_prev: obs.omega_prev,
+                v: &v_plan,
+                omega_nominal: &nominal,
+                y_ref: &y_ref,
+                theta_ref: &th_ref,
+                omega_lo: &lo,
+                omega_hi: &hi,
+                theta_bounds: (p.theta_min() + tm, p.theta_max() - tm),
+                band: (lanes.lo + margin, lanes.hi - margin),
+                half_length: F::HALF * p.length(),
+                half_width: F::HALF * p.width(),
+                weights: self.lateral_weights,
+            };
+            match solve_lateral(&input) {
+                Ok((w, it)) => {
+                    lateral_iterations = it;
+                    clamp_to_omega(&fs, &v_plan, w)
+                }
+                Err(_) => straightening_plan(&p, obs.pose.theta, &v_plan),
+            }
+        };
+        let omega = if verify_lateral(&p, obs.pose, &v_plan, &omega, lanes) {
+            omega
+        } else {
+            let alt = straightening_plan(&p, obs.pose.theta, &v_plan);
+            if verify_lateral(&p, obs.pose, &v_plan, &alt, lanes) {
+                alt
+            } else {
+                return Ok(self.fallback(obs, FallbackReason::Lateral, fs.d_h, event));
+            }
+        };
+        self.omega_plan = omega;
+        let (v, w) = (
+            v_plan.first().copied().unwrap_or(F::ZERO),
+            omega.first().copied().unwrap_or(F::ZERO),
+        );
+        Ok(LaneCommand {
+            v,
+            omega: w,
+            status: cmd.status,
+            lane: self.lane,
+            alpha: self.alpha,
+            beta: self.beta,
+            event,
+            gap: fs.d_h,
+            lateral_iterations,
+        })
+    }
+
+    fn fallback(
+        &mut self,
+        obs: &LaneObservation<'_, F>,
+        why: FallbackReason<F>,
+        gap: F,
+        event: Option<LaneEvent>,
+    ) -> LaneCommand<F> {
+        self.speed.set_braking_plan(obs.v_prev);
+        let (v, omega) = self.braking_command(obs.pose.theta, obs.v_prev);
+        self.omega_plan = [F::ZERO; N];
+        LaneCommand {
+            v,
+            omega,
+            status: StepStatus::Fallback(why),
+            lane: self.lane,
+            alpha: self.alpha,
+            beta: self.beta,
+            event,
+            gap,
+            lateral_iterations: 0,
+        }
+    }
+}
+
+/// The fallback's yaw rate at speed v: turn toward θ = 0 as fast as ρmin allows.
+#[inline]
+pub fn straighten<F: Real>(p: &Params<F>, theta: F, v: F) -> F {
+    let limit = v / p.rho_min();
+    (-theta / p.h()).max(-limit).min(limit)
+}
+
+/// ω_k clamped into Ω^k_t (31) exactly.
+fn clamp_to_omega<F: Real, const N: usize>(fs: &FreeSpace<F>, v: &[F; N], mut w: [F; N]) -> [F; N] {
+    for (wk, &vk) in w.iter_mut().zip(v.iter()) {
+        let (lo, hi) = fs.omega_bounds(vk);
+        *wk = wk.max(lo).min(hi);
+    }
+    w
+}
+
+/// Straightening yaw rates along a speed plan (used when the lateral QP has no answer).
+fn straightening_plan<F: Real, const N: usize>(p: &Params<F>, theta: F, v: &[F; N]) -> [F; N] {
+    let mut th = theta;
+    let mut out = [F::ZERO; N];
+    for (o, &vk) in out.iter_mut().zip(v.iter()) {
+        *o = straighten(p, th, vk);
+        th += *o * p.h();
+    }
+    out
+}
+
+/// `true` if the rectangle at `pose` is inside the lanes `band` and its heading within
+/// bounds.
+#[inline]
+fn pose_ok<F: Real>(p: &Params<F>, pose: Pose<F>, band: Band<F>) -> bool {
+    let ext = lateral_half_extent(p.length(), p.width(), pose.theta);
+    band.lo <= pose.y - ext
+        && pose.y + ext <= band.hi
+        && p.theta_min() <= pose.theta
+        && pose.theta <= p.theta_max()
+}
+
+/// The certificate of the fallback: from `pose` with v_{t−h} = `v_prev`, max braking
+/// with maximal straightening keeps the exact rectangle in the lanes `band` (edges, not
+/// shrunk) and the heading within bounds at every step until standstill.
+pub fn braking_tail_ok<F: Real>(p: &Params<F>, pose: Pose<F>, v_prev: F, band: Band<F>) -> bool {
+    if !pose_ok(p, pose, band) {
+        return false;
+    }
+    if pose.theta == F::ZERO {
+        // Straight: y never changes.
+        return true;
+    }
+    let mut q = pose;
+    let mut v = v_prev;
+    for _ in 0..MAX_TAIL_STEPS {
+        if !(v > F::ZERO) {
+            return true;
+        }
+        v = safety::max_braking_command(p, v);
+        let w = straighten(p, q.theta, v);
+        q = step(q, v, w, p.h());
+        if !pose_ok(p, q, band) {
+            return false;
+        }
+    }
+    false
+}
+
+/// Verifies a plan (v_k, ω_k) of (13) on the exact unicycle: every state of the horizon
+/// inside the lanes with its heading in bounds, and the fallback certificate from the
+/// state after the first step. (The longitudinal constraints were verified on the speeds
+/// with x_{k+1} − x_t ≤ h Σ v_j, which bounds the exact x since |cos θ| ≤ 1.)
+pub fn verify_lateral<F: Real, const N: usize>(
+    p: &Params<F>,
+    pose: Pose<F>,
+    v: &[F; N],
+    omega: &[F; N],
+    band: Band<F>,
+) -> bool {
+    let mut q = pose;
+    let mut first = None;
+    for (k, (&vk, &wk)) in v.iter().zip(omega.iter()).enumerate() {
+        if !(wk.is_finite() && wk.abs() * p.rho_min() <= vk * (F::ONE + F::EPSILON)) {
+            return false;
+        }
+        q = step(q, vk, wk, p.h());
+        if !pose_ok(p, q, band) {
+            return false;
+        }
+        if k == 0 {
+            first = Some((q, vk));
+        }
+    }
+    match first {
+        Some((q1, v0)) => braking_tail_ok(p, q1, v0, band),
+        None => true,
+    }
+}
+
+/// LC(ρ) of (24): the x-distance of Lemma 12's S-curve over one lane at radius ρ,
+/// 2 sqrt(Wl (2ρ − Wl)) − ρ θ_t.
+pub fn lane_change_length<F: Real>(p: &Params<F>, rho: F, theta: F) -> F {
+    let wl = p.spec().lane_width;
+    F::TWO * (wl * (F::TWO * rho - wl)).max(F::ZERO).sqrt() - rho * theta
+}
+
+/// dC(v) = max{dS(v), LC(ρ_t)}, eq. (24).
+pub fn d_c<F: Real>(p: &Params<F>, v: F, rho: F, theta: F) -> F {
+    safety::d_s(p, v).max(lane_change_length(p, rho, theta))
+}
+
+/// The commitment distance (23): a vehicle needing `m` lane changes can make them before
+/// x_R if x_R − x_t ≥ M (dS(v) + dC(v)); the paper takes v = vmax.
+pub fn commitment_distance<F: Real>(p: &Params<F>, m: u8, v: F, rho: F, theta: F) -> F {
+    F::from_usize(usize::from(m)) * (safety::d_s(p, v) + d_c(p, v, rho, theta))
+}

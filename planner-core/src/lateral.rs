@@ -1,0 +1,443 @@
+//! The lateral part of the lane-change MPC (13), linearised, and the small dense
+//! interior-point solver that solves it.
+//!
+//! (13) couples speed and steering through the unicycle (1). We solve it in two stages
+//! per step, the longitudinal one exactly convex (the speed problem of [`crate::mpc`]
+//! with dH, see [`crate::lane_change`]) and, given those speeds, this lateral QP in the
+//! yaw rates ω: the dynamics are linearised about the previous plan (one SQP iteration
+//! per control step, i.e. a real-time iteration), with
+//! - θ_{k+1} = θ_k + h ω_k (exact: linear already),
+//! - y_{k+1} = y_k + v_k h sin(θ_k + ω_k h/2) (chord form of (1), sinc ≈ 1), linearised
+//!   about the nominal heading.
+//!
+//! ω is blocked into [`BLOCKS`] piecewise-constant pieces over the horizon (move
+//! blocking keeps the QP at 4 variables whatever N is); θ bounds and the band are
+//! imposed at [`CHECKS`] points. Nothing here is trusted for safety: the planner
+//! simulates the result on the exact model and verifies every constraint of (13).
+//!
+//! Constraints: ω_k ∈ Ω^k_t (31); θmin ≤ θ_{k+1} ≤ θmax; and the vehicle's rectangle in
+//! the band, conservatively linear: y ± (W/2 + (L/2)|θ|) within [y̲, ȳ], using
+//! (L/2)|sin θ| + (W/2) cos θ ≤ W/2 + (L/2)|θ| and |θ| = max(θ, −θ).
+
+// Dense linear algebra on fixed-size arrays: every index below runs over the array's own
+// const length (BLOCKS, ROWS, CHECKS, N) or is proven in range where it is formed
+// (2b+1 < 2·BLOCKS, 2·BLOCKS + 6c + 5 < ROWS), so none can panic; iterator forms of the
+// triangular solves would obscure that more than they would check it.
+#![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+
+use crate::real::Real;
+
+/// Piecewise-constant pieces of ω over the horizon (the QP's variables).
+pub const BLOCKS: usize = 4;
+/// Points of the horizon at which θ and the band are constrained.
+pub const CHECKS: usize = 10;
+/// Inequality rows: ω box (2 per block), θ (2 per check), band (4 per check).
+pub const ROWS: usize = 2 * BLOCKS + 6 * CHECKS;
+/// Iteration cap of the dense interior-point method.
+pub const MAX_ITER: u32 = 50;
+
+/// Why the lateral QP has no answer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LateralError {
+    /// No convergence within [`MAX_ITER`] (e.g. the linearised band is infeasible).
+    NotConverged,
+    /// A non-finite number appeared.
+    NotFinite,
+    /// The reduced Newton matrix lost positive definiteness.
+    Singular,
+}
+
+/// Weights of the lateral cost, per step of the horizon.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LateralWeights<F> {
+    /// (y_{k+1} − y_ref)² (1/m²).
+    pub position: F,
+    /// (θ_{k+1} − θ_ref)² (1/rad²).
+    pub heading: F,
+    /// ω_k² (s²/rad²), > 0 (keeps the QP strictly convex).
+    pub rate: F,
+    /// (u_b − u_{b−1})² between blocks, u_{−1} = ω_{t−h} (s²/rad²).
+    pub rate_change: F,
+}
+
+impl<F: Real> Default for LateralWeights<F> {
+    fn default() -> Self {
+        Self {
+            position: F::ONE,
+            heading: F::from_f64(100.0),
+            rate: F::from_f64(0.5),
+            rate_change: F::from_f64(2.0),
+        }
+    }
+}
+
+/// A dense QP min ½ uᵀPu + qᵀu s.t. G u ≤ g with [`BLOCKS`] variables and [`ROWS`] rows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DenseQp<F> {
+    /// P (symmetric positive definite).
+    pub p: [[F; BLOCKS]; BLOCKS],
+    /// q.
+    pub q: [F; BLOCKS],
+    /// G.
+    pub g_mat: [[F; BLOCKS]; ROWS],
+    /// g.
+    pub g: [F; ROWS],
+}
+
+/// Relative tolerance of the dense solver (residuals and complementarity).
+fn tol<F: Real>() -> F {
+    F::SOLVER_TOL * F::from_f64(10.0)
+}
+
+fn dot<F: Real>(a: &[F; BLOCKS], b: &[F; BLOCKS]) -> F {
+    a.iter()
+        .zip(b.iter())
+        .fold(F::ZERO, |acc, (x, y)| acc + *x * *y)
+}
+
+/// Solves `m x = b` in place by Cholesky; `m` is overwritten.
+fn cholesky_solve<F: Real>(
+    m: &mut [[F; BLOCKS]; BLOCKS],
+    b: &mut [F; BLOCKS],
+) -> Result<(), LateralError> {
+    for j in 0..BLOCKS {
+        let mut d = m[j][j];
+        for k in 0..j {
+            d -= m[j][k] * m[j][k];
+        }
+        if !(d > F::EPSILON) {
+            return Err(LateralError::Singular);
+        }
+        let d = d.sqrt();
+        m[j][j] = d;
+        for i in (j + 1)..BLOCKS {
+            let mut s = m[i][j];
+            for k in 0..j {
+                s -= m[i][k] * m[j][k];
+            }
+            m[i][j] = s / d;
+        }
+    }
+    for i in 0..BLOCKS {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= m[i][k] * b[k];
+        }
+        b[i] = s / m[i][i];
+    }
+    for i in (0..BLOCKS).rev() {
+        let mut s = b[i];
+        for k in (i + 1)..BLOCKS {
+            s -= m[k][i] * b[k];
+        }
+        b[i] = s / m[i][i];
+    }
+    Ok(())
+}
+
+impl<F: Real> DenseQp<F> {
+    /// Mehrotra predictor–corrector interior-point method; at most [`MAX_ITER`]
+    /// iterations. Returns the minimiser and the iterations used.
+    pub fn solve(&self) -> Result<([F; BLOCKS], u32), LateralError> {
+        let mut u = [F::ZERO; BLOCKS];
+        let mut s = [F::ONE; ROWS];
+        let mut lam = [F::ONE; ROWS];
+        for i in 0..ROWS {
+            let r = self.g[i] - dot(&self.g_mat[i], &u);
+            s[i] = r.max(F::ONE);
+        }
+        let scale_g = self.g.iter().fold(F::ONE, |a, x| a.max(x.abs()));
+        let scale_q = self.q.iter().fold(F::ONE, |a, x| a.max(x.abs()));
+        let n = F::from_usize(ROWS);
+        for it in 0..MAX_ITER {
+            // Residuals.
+            let mut rd = self.q;
+            for (i, row) in self.p.iter().enumerate() {
+                rd[i] += dot(row, &u);
+            }
+            for r in 0..ROWS {
+                for i in 0..BLOCKS {
+                    rd[i] += self.g_mat[r][i] * lam[r];
+                }
+            }
+            let mut rp = [F::ZERO; ROWS];
+            let mut mu = F::ZERO;
+            for r in 0..ROWS {
+                rp[r] = dot(&self.g_mat[r], &u) + s[r] - self.g[r];
+                mu += s[r] * lam[r];
+            }
+            mu = mu / n;
+            let rp_max = rp.iter().fold(F::ZERO, |a, x| a.max(x.abs()));
+            let rd_max = rd.iter().fold(F::ZERO, |a, x| a.max(x.abs()));
+            if !(rp_max.is_finite() && rd_max.is_finite() && mu.is_finite()) {
+                return Err(LateralError::NotFinite);
+            }
+            if rp_max <= tol::<F>() * scale_g && rd_max <= tol::<F>() * scale_q && mu <= tol::<F>()
+            {
+                return Ok((u, it));
+            }
+            // Reduced matrix K = P + Gᵀ D G, D = λ/s.
+            let mut k = self.p;
+            let mut d = [F::ZERO; ROWS];
+            for r in 0..ROWS {
+                d[r] = lam[r] / s[r];
+                let row = &self.g_mat[r];
+                for i in 0..BLOCKS {
+                    for j in 0..BLOCKS {
+                        k[i][j] += row[i] * d[r] * row[j];
+                    }
+                }
+            }
+            let direction = |rc: &[F; ROWS]| -> Result<_, LateralError> {
+                // (P + GᵀDG) du = −r_d − Gᵀ(r_c/s + D r_p)
+                let mut rhs = rd.map(|x| -x);
+                for r in 0..ROWS {
+                    let w = rc[r] / s[r] + d[r] * rp[r];
+                    for i in 0..BLOCKS {
+                        rhs[i] -= self.g_mat[r][i] * w;
+                    }
+                }
+                let mut m = k;
+                cholesky_solve(&mut m, &mut rhs)?;
+                let du = rhs;
+                let mut ds = [F::ZERO; ROWS];
+                let mut dl = [F::ZERO; ROWS];
+                for r in 0..ROWS {
+                    ds[r] = -rp[r] - dot(&self.g_mat[r], &du);
+                    dl[r] = rc[r] / s[r] - d[r] * ds[r];
+                }
+                Ok((du, ds, dl))
+            };
+            let step_to_boundary = |ds: &[F; ROWS], dl: &[F; ROWS]| {
+                let mut a = F::ONE;
+                for r in 0..ROWS {
+                    if ds[r] < F::ZERO {
+                        a = a.min(-s[r] / ds[r]);
+                    }
+                    if dl[r] < F::ZERO {
+                        a = a.min(-lam[r] / dl[r]);
+                    }
+                }
+                a
+            };
+            // Predictor (affine scaling).
+            let mut rc = [F::ZERO; ROWS];
+            for r in 0..ROWS {
+                rc[r] = -s[r] * lam[r];
+            }
+            let (_, ds_a, dl_a) = direction(&rc)?;
+            let a_aff = step_to_boundary(&ds_a, &dl_a);
+            let mut mu_aff = F::ZERO;
+            for r in 0..ROWS {
+                mu_aff += (s[r] + a_aff * ds_a[r]) * (lam[r] + a_aff * dl_a[r]);
+            }
+            mu_aff = mu_aff / n;
+            let sigma = {
+                let ratio = mu_aff / mu;
+                ratio * ratio * ratio
+            };
+            // Corrector.
+            for r in 0..ROWS {
+                rc[r] = -s[r] * lam[r] + sigma * mu - ds_a[r] * dl_a[r];
+            }
+            let (du, ds, dl) = direction(&rc)?;
+            let a = (step_to_boundary(&ds, &dl) * F::from_f64(0.99)).min(F::ONE);
+            for i in 0..BLOCKS {
+                u[i] += a * du[i];
+            }
+            for r in 0..ROWS {
+                s[r] += a * ds[r];
+                lam[r] += a * dl[r];
+            }
+        }
+        Err(LateralError::NotConverged)
+    }
+}
+
+/// Which block step k of an N-step horizon belongs to.
+#[inline]
+pub fn block_of(k: usize, n: usize) -> usize {
+    (k * BLOCKS).checked_div(n).unwrap_or(0).min(BLOCKS - 1)
+}
+
+/// The steps at which θ and the band are constrained (spread evenly, last one at N−1).
+#[inline]
+pub fn check_step(i: usize, n: usize) -> usize {
+    ((i + 1) * n / CHECKS).max(1) - 1
+}
+
+/// Everything the lateral QP is built from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LateralInput<'a, F, const N: usize> {
+    /// h (s).
+    pub h: F,
+    /// y_t (m).
+    pub y: F,
+    /// θ_t (rad).
+    pub theta: F,
+    /// ω_{t−h} (rad/s).
+    pub omega_prev: F,
+    /// The planned speeds v_k.
+    pub v: &'a [F; N],
+    /// The nominal yaw rates to linearise about (the previous plan, shifted).
+    pub omega_nominal: &'a [F; N],
+    /// Reference y at step k+1.
+    pub y_ref: &'a [F; N],
+    /// Reference θ at step k+1.
+    pub theta_ref: &'a [F; N],
+    /// Ω^k_t lower ends.
+    pub omega_lo: &'a [F; N],
+    /// Ω^k_t upper ends.
+    pub omega_hi: &'a [F; N],
+    /// θ bounds, tightened.
+    pub theta_bounds: (F, F),
+    /// Band edges the rectangle must stay within (lane edges, tightened).
+    pub band: (F, F),
+    /// L/2 and W/2 (m).
+    pub half_length: F,
+    /// W/2 (m).
+    pub half_width: F,
+    /// Weights.
+    pub weights: LateralWeights<F>,
+}
+
+/// Builds the lateral QP and solves it; returns ω_0..ω_{N−1} and the iterations used.
+pub fn solve_lateral<F: Real, const N: usize>(
+    inp: &LateralInput<'_, F, N>,
+) -> Result<([F; N], u32), LateralError> {
+    if N == 0 {
+        return Ok(([F::ZERO; N], 0));
+    }
+    let h = inp.h;
+    let w = inp.weights;
+    let per_step = F::ONE / F::from_usize(N);
+    let mut qp = DenseQp {
+        p: [[F::ZERO; BLOCKS]; BLOCKS],
+        q: [F::ZERO; BLOCKS],
+        g_mat: [[F::ZERO; BLOCKS]; ROWS],
+        g: [F::ZERO; ROWS],
+    };
+    // Affine maps θ_{k+1} = cθ·u + θ0, y_{k+1} = cy·u + y_c, built step by step.
+    let mut c_theta = [F::ZERO; BLOCKS];
+    let mut c_y = [F::ZERO; BLOCKS];
+    let mut y_c = inp.y;
+    let mut theta_nom = inp.theta;
+    let mut maps_theta = [[F::ZERO; BLOCKS]; CHECKS];
+    let mut maps_y = [[F::ZERO; BLOCKS]; CHECKS];
+    let mut consts_y = [F::ZERO; CHECKS];
+    let mut next_check = 0usize;
+    let mut lo_b = [F::from_f64(-1e9); BLOCKS];
+    let mut hi_b = [F::from_f64(1e9); BLOCKS];
+    let mut count = [F::ZERO; BLOCKS];
+    let add_square = |qp: &mut DenseQp<F>, a: &[F; BLOCKS], c: F, weight: F| {
+        // weight (a·u + c)²: P += 2w a aᵀ, q += 2w c a.
+        for i in 0..BLOCKS {
+            for j in 0..BLOCKS {
+                qp.p[i][j] += F::TWO * weight * a[i] * a[j];
+            }
+            qp.q[i] += F::TWO * weight * c * a[i];
+        }
+    };
+    for k in 0..N {
+        let b = block_of(k, N);
+        let omega_nom = inp.omega_nominal[k];
+        let phi_nom = theta_nom + F::HALF * h * omega_nom;
+        let (sn, cs) = (phi_nom.sin(), phi_nom.cos());
+        let vh = inp.v[k] * h;
+        // φ_k = θ_k + (h/2) u_b; y_{k+1} = y_k + vh (sin φ̂ + cos φ̂ (φ − φ̂)).
+        let mut c_phi = c_theta;
+        c_phi[b] += F::HALF * h;
+        for i in 0..BLOCKS {
+            c_y[i] += vh * cs * c_phi[i];
+        }
+        y_c += vh * (sn + cs * (inp.theta - phi_nom));
+        c_theta[b] += h;
+        theta_nom += h * omega_nom;
+        lo_b[b] = lo_b[b].max(inp.omega_lo[k]);
+        hi_b[b] = hi_b[b].min(inp.omega_hi[k]);
+        count[b] += F::ONE;
+        add_square(&mut qp, &c_y, y_c - inp.y_ref[k], w.position * per_step);
+        add_square(
+            &mut qp,
+            &c_theta,
+            inp.theta - inp.theta_ref[k],
+            w.heading * per_step,
+        );
+        while next_check < CHECKS && check_step(next_check, N) == k {
+            maps_theta[next_check] = c_theta;
+            maps_y[next_check] = c_y;
+            consts_y[next_check] = y_c;
+            next_check += 1;
+        }
+    }
+    for b in 0..BLOCKS {
+        let mut e = [F::ZERO; BLOCKS];
+        e[b] = F::ONE;
+        // Σ_k ω_k² over the block.
+        add_square(
+            &mut qp,
+            &e,
+            F::ZERO,
+            w.rate * per_step * count[b].max(F::ONE),
+        );
+        let mut d = e;
+        let c = if b == 0 {
+            -inp.omega_prev
+        } else {
+            d[b - 1] = -F::ONE;
+            F::ZERO
+        };
+        add_square(&mut qp, &d, c, w.rate_change);
+        // Empty Ω (rounding) or unused block: pin to the middle, with a sliver of room.
+        let (lo, hi) = if hi_b[b] >= lo_b[b] {
+            (lo_b[b], hi_b[b])
+        } else {
+            let m = F::HALF * (lo_b[b] + hi_b[b]);
+            (m, m)
+        };
+        let room = F::from_f64(1e-9);
+        qp.g_mat[2 * b] = e;
+        qp.g[2 * b] = hi + room;
+        qp.g_mat[2 * b + 1] = e.map(|x| -x);
+        qp.g[2 * b + 1] = -lo + room;
+    }
+    let (tmin, tmax) = inp.theta_bounds;
+    let (ylo, yhi) = inp.band;
+    let (hl, hw) = (inp.half_length, inp.half_width);
+    for c in 0..CHECKS {
+        let base = 2 * BLOCKS + 6 * c;
+        let at = maps_theta[c];
+        let ay = maps_y[c];
+        let cy = consts_y[c];
+        let th0 = inp.theta;
+        let neg = |a: [F; BLOCKS]| a.map(|x| -x);
+        let comb = |s: F| {
+            let mut r = ay;
+            for i in 0..BLOCKS {
+                r[i] += s * hl * at[i];
+            }
+            r
+        };
+        // θ ≤ θmax, −θ ≤ −θmin.
+        qp.g_mat[base] = at;
+        qp.g[base] = tmax - th0;
+        qp.g_mat[base + 1] = neg(at);
+        qp.g[base + 1] = th0 - tmin;
+        // y ± (L/2)θ + W/2 ≤ ȳ.
+        qp.g_mat[base + 2] = comb(F::ONE);
+        qp.g[base + 2] = yhi - hw - cy - hl * th0;
+        qp.g_mat[base + 3] = comb(-F::ONE);
+        qp.g[base + 3] = yhi - hw - cy + hl * th0;
+        // y ± (L/2)θ − W/2 ≥ y̲.
+        qp.g_mat[base + 4] = neg(comb(F::ONE));
+        qp.g[base + 4] = -(ylo + hw) + cy + hl * th0;
+        qp.g_mat[base + 5] = neg(comb(-F::ONE));
+        qp.g[base + 5] = -(ylo + hw) + cy - hl * th0;
+    }
+    let (u, iters) = qp.solve()?;
+    let mut omega = [F::ZERO; N];
+    for (k, o) in omega.iter_mut().enumerate() {
+        *o = u[block_of(k, N)];
+    }
+    Ok((omega, iters))
+}
