@@ -5,6 +5,7 @@
 //! The trait is per node (`send` from a node, `receive` for a node), so a SocketCAN bus,
 //! where each node owns a socket, implements it the same way.
 
+use planner_core::crossing::CrossingReport;
 use planner_core::VehicleState;
 use std::collections::VecDeque;
 use std::fmt;
@@ -14,6 +15,21 @@ use std::fmt;
 pub enum Message {
     /// V2V vehicle state, broadcast every period.
     State(VehicleState<f64>),
+    /// V2I: a vehicle's position on its intersection route (registers it on arrival,
+    /// and tells the other vehicles where it is), with its time stamp.
+    Crossing(CrossingReport<f64>, f64),
+    /// V2X: vehicle `id` has left the area (its last position no longer stands).
+    Left {
+        /// The vehicle.
+        id: u16,
+    },
+    /// I2V: vehicle `id` may enter A_S until `until` (a lease, renewed while held).
+    Grant {
+        /// The permitted vehicle.
+        id: u16,
+        /// Lease end (intersection clock, s).
+        until: f64,
+    },
 }
 
 /// A delivered message and its receive time (receiver's clock, s).

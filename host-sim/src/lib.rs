@@ -10,6 +10,7 @@
 pub mod bench;
 pub mod bus;
 pub mod instances;
+pub mod intersection;
 pub mod monitor;
 pub mod multilane;
 pub mod par;

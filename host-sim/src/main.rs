@@ -160,7 +160,14 @@ fn run(
             return bad_input(format!("--plot {}: must end in .png or .svg", p.display()));
         }
     }
-    let scenario = match Scenario::load(&file) {
+    let text = match std::fs::read_to_string(&file) {
+        Ok(t) => t,
+        Err(e) => return bad_input(format!("{}: cannot read: {e}", file.display())),
+    };
+    if host_sim::intersection::is_crossing_scenario(&text) {
+        return run_crossing(&file, &text, json, plot, trace.is_some());
+    }
+    let scenario = match Scenario::parse(&text, &file) {
         Ok(s) => s,
         Err(e) => return bad_input(e),
     };
@@ -268,6 +275,25 @@ fn run(
 
 #[derive(Subcommand)]
 enum Experiment {
+    /// Fig. 9: closed system of 8 vehicles at the SPEC §8 intersection; STOP, FIFO, CON,
+    /// the starvation-free CON and the pipelined algorithm on identical seeds.
+    Throughput {
+        /// Simulated seconds per run.
+        #[arg(long, default_value_t = 300.0)]
+        duration: f64,
+        /// Runs per algorithm (seeds from --seed).
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Draw a Fig. 9-style bar chart to a .png or .svg file.
+        #[arg(long, value_name = "out.png|out.svg")]
+        plot: Option<PathBuf>,
+    },
     /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
     Multilane {
         /// Number of runs (seeds 1..=K, or from --seed).
@@ -286,6 +312,84 @@ enum Experiment {
         #[arg(long, value_enum, default_value = "ours")]
         solver: SolverArg,
     },
+}
+
+/// `host-sim run` on an intersection scenario (a file with an `[intersection]` table).
+fn run_crossing(
+    file: &std::path::Path,
+    text: &str,
+    json: bool,
+    plot: Option<PathBuf>,
+    trace: bool,
+) -> ExitCode {
+    if trace {
+        return bad_input("--trace is not available for intersection scenarios (yet)");
+    }
+    let sc = match host_sim::intersection::CrossingScenario::parse(text, file) {
+        Ok(s) => s,
+        Err(e) => return bad_input(e),
+    };
+    let mut data = PlotData::default();
+    let t0 = std::time::Instant::now();
+    let summary = sc.run(&mut |t, poses| {
+        if plot.is_some() && ((t * 100.0).round() as i64) % 10 == 0 {
+            for &(id, x, y, th, v) in poses {
+                data.series.entry(id).or_default().push((t, x, y, th, v));
+            }
+        }
+    });
+    if let Some(path) = &plot {
+        if let Err(e) = host_sim::plot::crossing(&data, &sc.layout, &sc.name, path) {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_UNSAFE);
+        }
+    }
+    let completed = summary.in_system == 0;
+    if json {
+        #[derive(serde::Serialize)]
+        struct Out<'a> {
+            scenario: &'a str,
+            vehicles: usize,
+            completed: bool,
+            #[serde(flatten)]
+            summary: &'a host_sim::intersection::CrossingSummary,
+            wall_seconds: f64,
+        }
+        if let Err(code) = print_json(&Out {
+            scenario: &sc.name,
+            vehicles: sc.placements.len(),
+            completed,
+            summary: &summary,
+            wall_seconds: t0.elapsed().as_secs_f64(),
+        }) {
+            return code;
+        }
+    } else {
+        println!(
+            "{}: {} vehicles, {} crossed in {:.2} s ({}); collisions {}, invariant violations {}, \
+             entries without permission {}",
+            sc.name,
+            sc.placements.len(),
+            summary.crossed,
+            summary.sim_seconds,
+            summary.algorithm,
+            summary.collisions,
+            summary.invariant_violations,
+            summary.unpermitted_entries
+        );
+    }
+    if summary.collisions
+        + summary.invariant_violations
+        + summary.limit_violations
+        + summary.unpermitted_entries
+        > 0
+    {
+        ExitCode::from(EXIT_UNSAFE)
+    } else if !completed {
+        ExitCode::from(EXIT_NOT_LIVE)
+    } else {
+        ExitCode::SUCCESS
+    }
 }
 
 fn main() -> ExitCode {
@@ -412,6 +516,44 @@ fn main() -> ExitCode {
                 ExitCode::from(EXIT_UNSAFE)
             } else if r.completed != r.runs {
                 ExitCode::from(EXIT_NOT_LIVE)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Command::Experiment(Experiment::Throughput {
+            duration,
+            seeds,
+            seed,
+            json,
+            plot,
+        }) => {
+            if !(duration > 0.0 && duration <= 3600.0) {
+                return bad_input(format!("--duration must be in (0, 3600], got {duration}"));
+            }
+            if let Some(p) = &plot {
+                if !matches!(p.extension().and_then(|e| e.to_str()), Some("png" | "svg")) {
+                    return bad_input(format!("--plot {}: must end in .png or .svg", p.display()));
+                }
+            }
+            let r = host_sim::intersection::throughput(seeds, seed, duration, 0);
+            if let Some(path) = plot {
+                if let Err(e) = host_sim::plot::bars(&r, &path) {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(EXIT_UNSAFE);
+                }
+            }
+            if json {
+                if let Err(code) = print_json(&r) {
+                    return code;
+                }
+            } else {
+                println!("{r:#?}");
+            }
+            if r.results.iter().any(|x| {
+                x.collisions + x.invariant_violations + x.limit_violations + x.unpermitted_entries
+                    > 0
+            }) {
+                ExitCode::from(EXIT_UNSAFE)
             } else {
                 ExitCode::SUCCESS
             }

@@ -207,3 +207,247 @@ where
     }
     Ok(())
 }
+
+/// Fig. 9-style bars: vehicles crossed (mean ± std) and mean crossing time per algorithm.
+pub fn bars(r: &crate::intersection::ThroughputReport, path: &Path) -> Result<(), PlotError> {
+    register_font()?;
+    let size = (1200, 520);
+    match path.extension().and_then(|s| s.to_str()) {
+        Some("png") => {
+            let root = BitMapBackend::new(path, size).into_drawing_area();
+            draw_bars(r, &root)?;
+            root.present().map_err(e)
+        }
+        Some("svg") => {
+            let root = SVGBackend::new(path, size).into_drawing_area();
+            draw_bars(r, &root)?;
+            root.present().map_err(e)
+        }
+        _ => Err(PlotError(format!(
+            "{}: the plot file must end in .png or .svg",
+            path.display()
+        ))),
+    }
+}
+
+fn draw_bars<DB: DrawingBackend>(
+    r: &crate::intersection::ThroughputReport,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(e)?;
+    let title = format!(
+        "intersection throughput, {} s, {} seeds (Fig. 9 style)",
+        r.duration_s, r.seeds
+    );
+    let root = root.titled(&title, ("sans-serif", 24)).map_err(e)?;
+    let (left, right) = root.split_horizontally(600);
+    let n = r.results.len();
+    let names: Vec<&str> = r.results.iter().map(|x| x.algorithm).collect();
+    type Metric = Box<dyn Fn(&crate::intersection::ThroughputRow) -> (f64, f64)>;
+    let panels: [(&DrawingArea<DB, Shift>, &str, Metric); 2] = [
+        (
+            &left,
+            "vehicles crossed",
+            Box::new(|x| (x.crossed_mean, x.crossed_std)),
+        ),
+        (
+            &right,
+            "mean crossing time (s)",
+            Box::new(|x| (x.crossing_time_mean_s, 0.0)),
+        ),
+    ];
+    for (area, caption, value) in panels {
+        let top = r
+            .results
+            .iter()
+            .map(|x| {
+                let (v, s) = value(x);
+                v + s
+            })
+            .fold(1.0, f64::max)
+            * 1.15;
+        let mut chart = ChartBuilder::on(area)
+            .margin(20)
+            .caption(caption, ("sans-serif", 20))
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..n as f64, 0.0..top)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(2 * n + 1)
+            .x_label_formatter(&|x| {
+                // Ticks fall every half unit; name the ones at bar centres.
+                if (x.fract() - 0.5).abs() < 0.01 {
+                    names
+                        .get(x.floor() as usize)
+                        .copied()
+                        .unwrap_or("")
+                        .to_string()
+                } else {
+                    String::new()
+                }
+            })
+            .draw()
+            .map_err(e)?;
+        for (i, row) in r.results.iter().enumerate() {
+            let (v, s) = value(row);
+            let x0 = i as f64 + 0.2;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(x0, 0.0), (x0 + 0.6, v)],
+                    palette(i).filled(),
+                )))
+                .map_err(e)?;
+            if s > 0.0 {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        vec![(x0 + 0.3, v - s), (x0 + 0.3, v + s)],
+                        BLACK.stroke_width(2),
+                    )))
+                    .map_err(e)?;
+            }
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    format!("{v:.1}"),
+                    (x0 + 0.1, v + top * 0.02),
+                    ("sans-serif", 16),
+                )))
+                .map_err(e)?;
+        }
+    }
+    Ok(())
+}
+
+/// An intersection run: trajectories over the layout (A_S red, A_C grey, Fig. 8 style)
+/// with L × W rectangles at snapshots, and speeds.
+pub fn crossing(
+    data: &PlotData,
+    layout: &planner_core::intersection::Layout<f64>,
+    title: &str,
+    path: &Path,
+) -> Result<(), PlotError> {
+    register_font()?;
+    let size = (1500, 860);
+    match path.extension().and_then(|s| s.to_str()) {
+        Some("png") => {
+            let root = BitMapBackend::new(path, size).into_drawing_area();
+            draw_crossing(data, layout, title, &root)?;
+            root.present().map_err(e)
+        }
+        Some("svg") => {
+            let root = SVGBackend::new(path, size).into_drawing_area();
+            draw_crossing(data, layout, title, &root)?;
+            root.present().map_err(e)
+        }
+        _ => Err(PlotError(format!(
+            "{}: the plot file must end in .png or .svg",
+            path.display()
+        ))),
+    }
+}
+
+fn draw_crossing<DB: DrawingBackend>(
+    data: &PlotData,
+    layout: &planner_core::intersection::Layout<f64>,
+    title: &str,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(e)?;
+    let root = root.titled(title, ("sans-serif", 26)).map_err(e)?;
+    let (left, right) = root.split_horizontally(820);
+    let a = layout.spec.half_size;
+    let c = a + layout.spec.comm_margin;
+    let r = a + layout.spec.inlet_length.max(layout.spec.outlet_length) * 0.7;
+    let mut xy = ChartBuilder::on(&left)
+        .margin(15)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .caption("trajectories: A_S (red), A_C (grey)", ("sans-serif", 18))
+        .build_cartesian_2d(-r..r, -r..r)
+        .map_err(e)?;
+    xy.configure_mesh()
+        .disable_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .draw()
+        .map_err(e)?;
+    let square = |h: f64| vec![(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)];
+    xy.draw_series(std::iter::once(PathElement::new(square(c), BLACK.mix(0.3))))
+        .map_err(e)?;
+    xy.draw_series(std::iter::once(PathElement::new(
+        square(a),
+        RED.stroke_width(2),
+    )))
+    .map_err(e)?;
+    // Road edges: 4 lanes (2 in, 2 out) per road.
+    let w = 2.0 * LANE_WIDTH_M;
+    for (p, q) in [
+        ((-r, -w), (-a, -w)),
+        ((-r, w), (-a, w)),
+        ((a, -w), (r, -w)),
+        ((a, w), (r, w)),
+        ((-w, -r), (-w, -a)),
+        ((w, -r), (w, -a)),
+        ((-w, a), (-w, r)),
+        ((w, a), (w, r)),
+    ] {
+        xy.draw_series(LineSeries::new([p, q], BLACK.mix(0.5)))
+            .map_err(e)?;
+    }
+    let t1 = data
+        .series
+        .values()
+        .flatten()
+        .map(|p| p.0)
+        .fold(0.0, f64::max);
+    for (i, (id, s)) in data.series.iter().enumerate() {
+        let col = palette(i);
+        xy.draw_series(LineSeries::new(s.iter().map(|p| (p.1, p.2)), col.mix(0.7)))
+            .map_err(e)?
+            .label(format!("vehicle {id}"))
+            .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
+        for p in s.iter().step_by(20) {
+            let (sn, cs) = p.3.sin_cos();
+            let (hl, hw) = (0.5 * LENGTH_M, 0.5 * WIDTH_M);
+            let pts: Vec<(f64, f64)> = [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw), (hl, hw)]
+                .iter()
+                .map(|&(u, v)| (p.1 + u * cs - v * sn, p.2 + u * sn + v * cs))
+                .collect();
+            xy.draw_series(std::iter::once(Polygon::new(pts.clone(), col.mix(0.3))))
+                .map_err(e)?;
+            xy.draw_series(std::iter::once(PathElement::new(pts, col)))
+                .map_err(e)?;
+        }
+    }
+    xy.configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(e)?;
+    let mut sv = ChartBuilder::on(&right)
+        .margin(15)
+        .x_label_area_size(35)
+        .y_label_area_size(50)
+        .caption("speed", ("sans-serif", 18))
+        .build_cartesian_2d(0.0..t1.max(1e-3), 0.0..(layout.spec.v_limit * 1.2))
+        .map_err(e)?;
+    sv.configure_mesh()
+        .x_desc("t (s)")
+        .y_desc("v (m/s)")
+        .draw()
+        .map_err(e)?;
+    for (i, s) in data.series.values().enumerate() {
+        sv.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.4)), palette(i)))
+            .map_err(e)?;
+    }
+    Ok(())
+}

@@ -158,7 +158,7 @@ pub struct Scenario {
     pub vehicles: Vec<VehicleSpec>,
 }
 
-fn line_of(text: &str, span: Range<usize>) -> usize {
+pub(crate) fn line_of(text: &str, span: Range<usize>) -> usize {
     let end = span.start.min(text.len());
     text.get(..end).map_or(1, |s| s.matches('\n').count() + 1)
 }

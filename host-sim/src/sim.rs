@@ -418,9 +418,10 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                     others,
                 } => {
                     for r in &self.inbox {
-                        let Message::State(s) = r.msg;
-                        if world.update(&s, r.at).is_err() {
-                            self.rejected += 1;
+                        if let Message::State(s) = r.msg {
+                            if world.update(&s, r.at).is_err() {
+                                self.rejected += 1;
+                            }
                         }
                     }
                     world.others(t, LENGTH_M, others);

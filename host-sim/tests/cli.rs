@@ -288,3 +288,74 @@ fn a_multilane_scenario_runs_with_clarabel_too() {
     assert_eq!(v["invariant_violations"], 0);
     assert_eq!(v["completed"], true, "{v}");
 }
+
+#[test]
+fn intersection_run_and_throughput_experiment() {
+    let png = tmp("fig8.png");
+    let out = bin()
+        .arg("run")
+        .arg(scenario("intersection.toml"))
+        .args(["--json", "--plot"])
+        .arg(&png)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(
+        &out.stdout,
+        &["scenario", "completed", "crossed", "collisions"],
+    );
+    assert_eq!(v["completed"], true);
+    assert_eq!(v["crossed"], 8);
+    assert!(std::fs::read(&png).expect("plot").starts_with(b"\x89PNG"));
+    let bars = tmp("fig9.svg");
+    let out = bin()
+        .args([
+            "experiment",
+            "throughput",
+            "--duration",
+            "20",
+            "--seeds",
+            "1",
+            "--json",
+            "--plot",
+        ])
+        .arg(&bars)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(&out.stdout, &["results"]);
+    let rows = v["results"].as_array().expect("rows");
+    assert_eq!(rows.len(), 5);
+    for row in rows {
+        for k in [
+            "algorithm",
+            "crossed_mean",
+            "crossed_std",
+            "crossing_time_mean_s",
+            "crossing_time_max_s",
+            "collisions",
+            "invariant_violations",
+        ] {
+            assert!(row.get(k).is_some(), "{k} in {row}");
+        }
+    }
+    assert!(std::fs::read_to_string(&bars)
+        .expect("svg")
+        .contains("<svg"));
+    for args in [
+        vec!["experiment", "throughput", "--duration", "-1"],
+        vec!["experiment", "throughput", "--seeds", "0"],
+        vec!["experiment", "throughput", "--plot", "x.bmp"],
+    ] {
+        let out = bin().args(&args).output().expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+    }
+}

@@ -300,3 +300,90 @@ fn multilane_experiment_completes_with_either_solver() {
         "{c:?}"
     );
 }
+
+/// Fig. 8: one vehicle per inlet on random routes at vImax; under every algorithm all
+/// cross, none collide, nobody enters A_S without a permission.
+#[test]
+fn intersection_scenario_all_cross_under_every_algorithm() {
+    use host_sim::intersection::CrossingScenario;
+    let path = builtin("intersection.toml");
+    let text = std::fs::read_to_string(&path).expect("read");
+    for alg in ["concurrent", "fifo", "stop", "concurrent_fair", "pipelined"] {
+        let t = text.replace(
+            "algorithm = \"concurrent\"",
+            &format!("algorithm = \"{alg}\""),
+        );
+        let sc = CrossingScenario::parse(&t, &path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(sc.placements.len(), 8);
+        let s = sc.run(&mut |_, _| {});
+        assert_eq!(
+            (
+                s.collisions,
+                s.invariant_violations,
+                s.limit_violations,
+                s.unpermitted_entries
+            ),
+            (0, 0, 0, 0),
+            "{alg}: {s:?}"
+        );
+        assert_eq!((s.crossed, s.in_system), (8, 0), "{alg}: {s:?}");
+    }
+}
+
+/// Layouts that break the paper's assumptions, and routes that do not exist, are
+/// rejected with file:line.
+#[test]
+fn bad_intersection_scenarios_are_rejected_with_file_line() {
+    use host_sim::intersection::CrossingScenario;
+    let base = "name = \"x\"\nduration_s = 10.0\nalgorithm = \"fifo\"\n[intersection]\ncomm_margin = 10.0\n[[vehicle]]\nid = 1\nheading = \"east\"\nlane = 0\nmovement = \"straight\"\ns = 10.0\nv = 5.0\n";
+    let e = CrossingScenario::parse(base, Path::new("t.toml")).unwrap_err();
+    assert_eq!(e.line, Some(4), "{e}");
+    assert!(e.problem.contains("Spaciousness Assumption (27)"), "{e}");
+    let t = base.replace("comm_margin = 10.0", "half_size = 10.0");
+    let e = CrossingScenario::parse(&t, Path::new("t.toml")).unwrap_err();
+    assert!(e.problem.contains("ρmin"), "{e}");
+    let t = base
+        .replace("comm_margin = 10.0\n", "")
+        .replace("\"straight\"", "\"right\"");
+    let e = CrossingScenario::parse(&t, Path::new("t.toml")).unwrap_err();
+    assert_eq!(e.line, Some(5), "{e}");
+    assert!(e.problem.contains("not a route from lane 0"), "{e}");
+    let t = base
+        .replace("comm_margin = 10.0\n", "")
+        .replace("s = 10.0", "s = 95.0")
+        .replace("v = 5.0", "v = 13.0");
+    let e = CrossingScenario::parse(&t, Path::new("t.toml")).unwrap_err();
+    assert!(
+        e.problem.contains("cannot stop before the stop line"),
+        "{e}"
+    );
+}
+
+/// Fig. 9 in brief (CI): a closed system of 8 vehicles, every algorithm on the same
+/// seed; all safe; the pipelined algorithm crosses the most.
+#[test]
+fn throughput_all_algorithms_safe_and_pipelined_fastest() {
+    let r = host_sim::intersection::throughput(1, 1, 120.0, 0);
+    for row in &r.results {
+        assert_eq!(
+            (
+                row.collisions,
+                row.invariant_violations,
+                row.limit_violations,
+                row.unpermitted_entries
+            ),
+            (0, 0, 0, 0),
+            "{row:?}"
+        );
+        assert!(row.crossed_mean > 0.0, "{row:?}");
+    }
+    let get = |n: &str| {
+        r.results
+            .iter()
+            .find(|x| x.algorithm == n)
+            .expect("row")
+            .crossed_mean
+    };
+    assert!(get("PIPE") > get("CON-fair"), "{r:?}");
+    assert!(get("CON-fair") > get("FIFO"), "{r:?}");
+}

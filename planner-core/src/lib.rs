@@ -37,7 +37,9 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod banded;
+pub mod crossing;
 pub mod free_space;
+pub mod intersection;
 pub mod lane_change;
 pub mod lanes;
 pub mod lateral;

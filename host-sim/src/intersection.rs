@@ -1,0 +1,968 @@
+//! Intersection crossing (Sec. VI–VII, SPEC §7–8): vehicles follow their routes (inlet
+//! track, a line or arc through A_S, outlet track), each running its own planner along
+//! its path; the intersection manager is one more node on the bus. Vehicles and the
+//! manager know of each other only through bus messages: vehicles broadcast
+//! [`Message::Crossing`] reports, the manager broadcasts [`Message::Grant`] leases.
+//!
+//! Vehicle side, the IC Protocol: (i) no lane change inside A_C (vehicles keep their
+//! inlet lane; routes start in the lane they need); (ii) without a live permission the
+//! stop line (the entry of A_S) is x_R in (22); (iii) permissions come from the
+//! manager. Once its front is past the stop line a vehicle is committed and goes on
+//! (Lemma 14 (ii): a permission is kept until the vehicle is on its outlet). Target
+//! switching of Sec. VII-B: x^f = end of inlet while not permitted, end of route when
+//! permitted, end of outlet after A_S.
+
+use crate::bus::{Bus, InProcessBus, Message, Received};
+use crate::monitor::{rectangles_overlap, Limits, Truth};
+use crate::sim::{LENGTH_M, WIDTH_M};
+use planner_core::crossing::{Algorithm, CrossingPlanner, CrossingReport, Manager};
+use planner_core::intersection::{Layout, LayoutSpec, ROUTES};
+use planner_core::{CostWeights, Params, ParamsSpec, Planner, StepStatus};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+/// A vehicle's (id, x, y, θ, v) at one instant.
+pub type PoseSample = (u16, f64, f64, f64, f64);
+
+/// The manager's bus node.
+pub const MANAGER_NODE: u16 = 0;
+/// Lease of a permission (s): renewed every period while held; 0.1 s lets a few
+/// messages go missing before a vehicle that has not yet entered A_S must stop.
+pub const LEASE_S: f64 = 0.1;
+/// Vehicles the manager can track.
+pub const MANAGER_CAP: usize = 64;
+/// Horizon of the intersection planners.
+pub const HORIZON: usize = 20;
+
+/// Cost of the intersection planners: the default, plus a small pull toward the target
+/// of Sec. VII-B (x^f), so that the target switching is part of J.
+pub fn weights() -> CostWeights<f64> {
+    CostWeights {
+        target_position: 1e-3,
+        ..CostWeights::default()
+    }
+}
+
+/// Table I with vmax replaced by the intersection's speed limit vImax (SPEC §1).
+pub fn params(v_limit: f64) -> Params<f64> {
+    let spec = ParamsSpec {
+        v_max: v_limit,
+        ..ParamsSpec::table_i()
+    };
+    // vImax = vmax/2 keeps every Table I relation; a user layout is checked in `new`.
+    Params::new(spec).unwrap_or_else(|_| Params::table_i())
+}
+
+struct Car {
+    id: u16,
+    route: u8,
+    s: f64,
+    v: f64,
+    v_before: f64,
+    planner: Box<CrossingPlanner<f64, HORIZON, MANAGER_CAP>>,
+    arrived_at: Option<f64>,
+    left_as_at: Option<f64>,
+    waited_s: f64,
+}
+
+/// A vehicle to place.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// Id (≥ 1; 0 is the manager).
+    pub id: u16,
+    /// Route index.
+    pub route: u8,
+    /// Centre distance along the route's path (m).
+    pub s: f64,
+    /// Speed (m/s).
+    pub v: f64,
+}
+
+/// Results of an intersection run.
+#[derive(Debug, Clone, Serialize)]
+pub struct CrossingSummary {
+    /// Algorithm.
+    pub algorithm: &'static str,
+    /// Simulated time (s).
+    pub sim_seconds: f64,
+    /// Vehicles that left A_C on their outlet.
+    pub crossed: u64,
+    /// Mean time from arrival (entering A_C) to leaving A_C (s).
+    pub crossing_time_mean_s: f64,
+    /// Longest such time (s).
+    pub crossing_time_max_s: f64,
+    /// Collisions (pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations between vehicles sharing a path piece (pairs × steps).
+    pub invariant_violations: u64,
+    /// Speed or acceleration limit violations.
+    pub limit_violations: u64,
+    /// Steps × vehicles inside A_S without a permission having been granted.
+    pub unpermitted_entries: u64,
+    /// Planner steps that applied the certified fallback (not standstill).
+    pub fallback_steps: u64,
+    /// Vehicles still in the system at the end.
+    pub in_system: usize,
+}
+
+/// The simulation.
+pub struct CrossingSim {
+    layout: Layout<f64>,
+    params: Params<f64>,
+    lim: Limits,
+    manager: Manager<f64, MANAGER_CAP>,
+    cars: Vec<Car>,
+    bus: InProcessBus,
+    inbox: Vec<Received>,
+    t: f64,
+    /// Closed system: respawn a vehicle when one leaves A_C.
+    respawn: Option<Box<ChaCha8Rng>>,
+    pending: Vec<(u16, u8)>,
+    times: Vec<f64>,
+    crossed: u64,
+    collisions: u64,
+    invariant_violations: u64,
+    limit_violations: u64,
+    unpermitted: u64,
+    fallback_steps: u64,
+    ever_permitted: Vec<u16>,
+}
+
+impl CrossingSim {
+    /// A simulation of `placements` on `layout` under `algorithm`; with `respawn_seed`,
+    /// a closed system (SPEC §8 throughput): whenever a vehicle leaves A_C a new one with
+    /// a random route is spawned at the start of its inlet track once the invariant holds
+    /// for it there.
+    pub fn new(
+        layout: Layout<f64>,
+        algorithm: Algorithm,
+        placements: &[Placement],
+        respawn_seed: Option<u64>,
+    ) -> Self {
+        let params = params(layout.spec.v_limit);
+        let mut nodes: Vec<u16> = placements.iter().map(|p| p.id).collect();
+        nodes.push(MANAGER_NODE);
+        let cars = placements.iter().map(|p| Self::car(&params, p)).collect();
+        let mut lim = Limits::table_i();
+        lim.v_max = layout.spec.v_limit;
+        Self {
+            manager: Manager::new(layout.clone(), algorithm),
+            layout,
+            params,
+            lim,
+            cars,
+            bus: InProcessBus::new(&nodes),
+            inbox: Vec::new(),
+            t: 0.0,
+            respawn: respawn_seed.map(|s| Box::new(crate::instances::rng(s ^ 0x1c))),
+            pending: Vec::new(),
+            times: Vec::new(),
+            crossed: 0,
+            collisions: 0,
+            invariant_violations: 0,
+            limit_violations: 0,
+            unpermitted: 0,
+            fallback_steps: 0,
+            ever_permitted: Vec::new(),
+        }
+    }
+
+    fn car(params: &Params<f64>, p: &Placement) -> Car {
+        Car {
+            id: p.id,
+            route: p.route,
+            s: p.s,
+            v: p.v,
+            v_before: p.v,
+            planner: Box::new(CrossingPlanner::new(
+                Planner::new(*params, weights())
+                    .unwrap_or_else(|_| unreachable!("the weights are valid")),
+                p.id,
+                p.route,
+                LENGTH_M,
+            )),
+            arrived_at: None,
+            left_as_at: None,
+            waited_s: 0.0,
+        }
+    }
+
+    /// Current time (s).
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+
+    /// Poses of the vehicles now.
+    pub fn poses(&self) -> Vec<PoseSample> {
+        self.cars
+            .iter()
+            .map(|c| {
+                let q = self.path(c).pose_at(c.s);
+                (c.id, q.x, q.y, q.theta, c.v)
+            })
+            .collect()
+    }
+
+    fn path(&self, c: &Car) -> planner_core::intersection::Path<f64> {
+        self.layout
+            .route(usize::from(c.route))
+            .map_or(self.layout.routes[0].path, |r| r.path)
+    }
+
+    /// One period h.
+    pub fn step(&mut self) {
+        let t = self.t;
+        let h = self.lim.h;
+        // 1. Vehicles report (V2V and V2I in one broadcast).
+        for c in &self.cars {
+            let r = CrossingReport {
+                id: c.id,
+                route: c.route,
+                s: c.s,
+                v: c.v,
+                length: LENGTH_M,
+            };
+            let _ = self.bus.send(c.id, &Message::Crossing(r, t), t);
+        }
+        // 2. The manager hears them, decides, and grants leases.
+        self.inbox.clear();
+        let _ = self.bus.receive(MANAGER_NODE, t, &mut self.inbox);
+        for r in &self.inbox {
+            match r.msg {
+                Message::Crossing(rep, _) => {
+                    let _ = self.manager.observe(&rep, t);
+                }
+                Message::Left { id } => self.manager.forget(id),
+                _ => {}
+            }
+        }
+        self.manager.update();
+        let granted: Vec<u16> = self
+            .manager
+            .entries()
+            .iter()
+            .filter(|e| e.permitted)
+            .map(|e| e.id)
+            .collect();
+        for id in granted {
+            let _ = self.bus.send(
+                MANAGER_NODE,
+                &Message::Grant {
+                    id,
+                    until: t + LEASE_S,
+                },
+                t,
+            );
+        }
+        // 3. Every vehicle plans from what it heard.
+        let mut commands = Vec::with_capacity(self.cars.len());
+        let layout = &self.layout;
+        for i in 0..self.cars.len() {
+            self.inbox.clear();
+            let id = self.cars[i].id;
+            let _ = self.bus.receive(id, t, &mut self.inbox);
+            let c = &mut self.cars[i];
+            for r in &self.inbox {
+                match r.msg {
+                    Message::Grant { id, until } => c.planner.hear_grant(id, until),
+                    Message::Left { id } => c.planner.hear_left(id),
+                    Message::Crossing(rep, stamp) => {
+                        // The view holds MANAGER_CAP vehicles, as many as the manager.
+                        let _ = c.planner.hear_report(&rep, stamp);
+                    }
+                    _ => {}
+                }
+            }
+            let permitted = c.planner.permitted(layout, c.s, t);
+            let v = match c.planner.step(layout, c.s, c.v, t) {
+                Ok(cmd) => {
+                    if let StepStatus::Fallback(why) = cmd.status {
+                        if why != planner_core::FallbackReason::NoRoom {
+                            self.fallback_steps += 1;
+                            if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                                eprintln!(
+                                    "t={t:.2} id={} route={} s={:.2} v={:.2} permitted={permitted} {why:?} gap={:.3}",
+                                    c.id, c.route, c.s, c.v, cmd.gap
+                                );
+                            }
+                        }
+                    }
+                    cmd.v
+                }
+                Err(_) => {
+                    self.fallback_steps += 1;
+                    planner_core::safety::max_braking_command(&self.params, c.v)
+                }
+            };
+            if !permitted && c.arrived_at.is_some() {
+                c.waited_s += h;
+            }
+            commands.push(v);
+        }
+        // 4. Move along the paths; bookkeeping of arrivals and departures.
+        for (c, v) in self.cars.iter_mut().zip(commands) {
+            c.v_before = c.v;
+            c.v = v;
+            c.s += v * h;
+        }
+        self.t = t + h;
+        let mut leaving = Vec::new();
+        for (i, c) in self.cars.iter_mut().enumerate() {
+            let Some(route) = self.layout.route(usize::from(c.route)) else {
+                continue;
+            };
+            let q = route.path.pose_at(c.s);
+            let inside_ac = self.layout.in_comm_region(q.x, q.y);
+            if inside_ac && c.arrived_at.is_none() {
+                c.arrived_at = Some(self.t);
+            }
+            if c.s - 0.5 * LENGTH_M >= route.path.exit() && c.left_as_at.is_none() {
+                c.left_as_at = Some(self.t);
+            }
+            // Crossed: it arrived, went through A_S, and has left A_C on its outlet.
+            let done = c.arrived_at.is_some() && !inside_ac && c.left_as_at.is_some();
+            if done {
+                if let Some(a) = c.arrived_at {
+                    self.times.push(self.t - a);
+                }
+                self.crossed += 1;
+                leaving.push(i);
+            }
+        }
+        for &i in leaving.iter().rev() {
+            let c = self.cars.remove(i);
+            let _ = self.bus.send(c.id, &Message::Left { id: c.id }, self.t);
+            if let Some(rng) = self.respawn.as_mut() {
+                let route = rng.random_range(0..ROUTES as u8);
+                self.pending.push((c.id, route));
+            }
+        }
+        self.spawn_pending();
+        self.monitor();
+    }
+
+    fn spawn_pending(&mut self) {
+        let mut still = Vec::new();
+        for (id, route) in std::mem::take(&mut self.pending) {
+            let Some(r) = self.layout.route(usize::from(route)) else {
+                continue;
+            };
+            let v = self.layout.spec.v_limit;
+            let s0 = 0.5 * LENGTH_M;
+            // Spawn only where the invariant holds toward the nearest vehicle ahead on
+            // the same inlet (with the f64 start margin).
+            let ok = self.cars.iter().all(|o| {
+                let Some(or) = self.layout.route(usize::from(o.route)) else {
+                    return true;
+                };
+                if or.inlet != r.inlet || o.s >= or.path.entry() + 0.5 * LENGTH_M {
+                    return true;
+                }
+                let gap = o.s - s0 - LENGTH_M;
+                gap - self.lim.d0 > self.lim.safe_distance(v) + crate::sim::START_MARGIN_M
+            });
+            if ok {
+                let car = Self::car(
+                    &self.params,
+                    &Placement {
+                        id,
+                        route,
+                        s: s0,
+                        v,
+                    },
+                );
+                self.cars.push(car);
+            } else {
+                still.push((id, route));
+            }
+        }
+        self.pending = still;
+    }
+
+    /// The independent checks of one instant.
+    fn monitor(&mut self) {
+        let truths: Vec<(usize, Truth)> = self
+            .cars
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let q = self.path(c).pose_at(c.s);
+                (
+                    i,
+                    Truth {
+                        x: q.x,
+                        y: q.y,
+                        theta: q.theta,
+                        length: LENGTH_M,
+                        width: WIDTH_M,
+                        lane: 0,
+                        keeps_invariant: true,
+                        v: c.v,
+                        v_before: c.v_before,
+                    },
+                )
+            })
+            .collect();
+        for (k, (_, a)) in truths.iter().enumerate() {
+            for (_, b) in truths.iter().skip(k + 1) {
+                if rectangles_overlap(a, b) {
+                    self.collisions += 1;
+                }
+            }
+        }
+        // The invariant between vehicles sharing a path piece (same route; same inlet
+        // while the leader is on it; same outlet once both are on it).
+        for a in &self.cars {
+            for b in &self.cars {
+                if a.id == b.id {
+                    continue;
+                }
+                let (Some(ra), Some(rb)) = (
+                    self.layout.route(usize::from(a.route)),
+                    self.layout.route(usize::from(b.route)),
+                ) else {
+                    continue;
+                };
+                let (fa, fb) = if a.route == b.route
+                    || (ra.inlet == rb.inlet && b.s < rb.path.entry())
+                {
+                    (a.s, b.s)
+                } else if ra.outlet == rb.outlet && a.s >= ra.path.exit() && b.s >= rb.path.exit() {
+                    (a.s - ra.path.exit(), b.s - rb.path.exit())
+                } else {
+                    continue;
+                };
+                if fa < fb {
+                    let gap = fb - fa - LENGTH_M;
+                    if gap - self.lim.d0 <= self.lim.safe_distance(a.v) {
+                        self.invariant_violations += 1;
+                    }
+                }
+            }
+        }
+        for c in &self.cars {
+            let dv = c.v - c.v_before;
+            if c.v < 0.0
+                || c.v > self.lim.v_max + 1e-9
+                || dv > self.lim.a_max * self.lim.h + 1e-9
+                || dv < -self.lim.brake * self.lim.h - 1e-9
+            {
+                self.limit_violations += 1;
+            }
+        }
+        // IC Protocol (ii): nobody inside A_S who was never permitted.
+        for e in self.manager.entries().iter().filter(|e| e.permitted) {
+            if !self.ever_permitted.contains(&e.id) {
+                self.ever_permitted.push(e.id);
+            }
+        }
+        for c in &self.cars {
+            let Some(r) = self.layout.route(usize::from(c.route)) else {
+                continue;
+            };
+            let front = c.s + 0.5 * LENGTH_M;
+            if front > r.path.entry()
+                && c.s - 0.5 * LENGTH_M < r.path.exit()
+                && !self.ever_permitted.contains(&c.id)
+            {
+                self.unpermitted += 1;
+            }
+        }
+    }
+
+    /// Every vehicle's (id, route, s, v, lease end) and the manager's entries, for
+    /// diagnosing a run.
+    pub fn describe(&self) -> String {
+        let cars: Vec<String> = self
+            .cars
+            .iter()
+            .map(|c| format!("id {} route {} s {:.2} v {:.2}", c.id, c.route, c.s, c.v))
+            .collect();
+        format!(
+            "t {:.2}: cars [{}]; manager {:?}",
+            self.t,
+            cars.join("; "),
+            self.manager.entries()
+        )
+    }
+
+    /// Summary so far.
+    pub fn summary(&self) -> CrossingSummary {
+        let n = self.times.len().max(1) as f64;
+        CrossingSummary {
+            algorithm: self.manager.algorithm().name(),
+            sim_seconds: self.t,
+            crossed: self.crossed,
+            crossing_time_mean_s: self.times.iter().sum::<f64>() / n,
+            crossing_time_max_s: self.times.iter().copied().fold(0.0, f64::max),
+            collisions: self.collisions,
+            invariant_violations: self.invariant_violations,
+            limit_violations: self.limit_violations,
+            unpermitted_entries: self.unpermitted,
+            fallback_steps: self.fallback_steps,
+            in_system: self.cars.len(),
+        }
+    }
+}
+
+/// The Fig. 8 start: one vehicle on each of the 8 inlets, random routes, at vImax,
+/// staggered along their inlets.
+pub fn fig8_placements(layout: &Layout<f64>, seed: u64) -> Vec<Placement> {
+    let mut rng = crate::instances::rng(seed ^ 0xf18);
+    let mut out = Vec::new();
+    for heading in 0..4u8 {
+        for lane in 0..2u8 {
+            let movement = if rng.random_bool(0.5) {
+                planner_core::intersection::Movement::Straight
+            } else if lane == 0 {
+                planner_core::intersection::Movement::Left
+            } else {
+                planner_core::intersection::Movement::Right
+            };
+            let route = Layout::<f64>::route_index(heading, lane, movement) as u8;
+            out.push(Placement {
+                id: out.len() as u16 + 1,
+                route,
+                s: 0.5 * LENGTH_M + rng.random_range(0.0..30.0),
+                v: layout.spec.v_limit,
+            });
+        }
+    }
+    out
+}
+
+/// The SPEC §8 layout.
+pub fn spec8_layout() -> Layout<f64> {
+    let p = Params::<f64>::table_i();
+    // The SPEC §8 values satisfy every check (tested).
+    Layout::new(&p, LayoutSpec::spec8(&p))
+        .unwrap_or_else(|_| unreachable!("SPEC §8 layout is valid"))
+}
+
+/// Runs a closed system of 8 vehicles for `duration` s under `algorithm` (Fig. 9).
+pub fn throughput_run(algorithm: Algorithm, seed: u64, duration: f64) -> CrossingSummary {
+    let layout = spec8_layout();
+    let placements = fig8_placements(&layout, seed);
+    let mut sim = CrossingSim::new(layout, algorithm, &placements, Some(seed));
+    let steps = (duration / 0.01).round() as u64;
+    for _ in 0..steps {
+        sim.step();
+    }
+    if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+        eprintln!("{}", sim.describe());
+    }
+    sim.summary()
+}
+
+/// One algorithm's row of the throughput experiment.
+#[derive(Debug, Clone, Serialize)]
+pub struct ThroughputRow {
+    /// Algorithm.
+    pub algorithm: &'static str,
+    /// Mean over seeds of vehicles crossed.
+    pub crossed_mean: f64,
+    /// Standard deviation over seeds of vehicles crossed.
+    pub crossed_std: f64,
+    /// Mean time from arrival to leaving A_C (s), over all vehicles of all seeds.
+    pub crossing_time_mean_s: f64,
+    /// Longest such time (s).
+    pub crossing_time_max_s: f64,
+    /// Collisions over all seeds.
+    pub collisions: u64,
+    /// Invariant violations over all seeds.
+    pub invariant_violations: u64,
+    /// Limit violations over all seeds.
+    pub limit_violations: u64,
+    /// Entries into A_S without a permission.
+    pub unpermitted_entries: u64,
+    /// Certified-fallback steps.
+    pub fallback_steps: u64,
+}
+
+/// The `experiment throughput` result.
+#[derive(Debug, Clone, Serialize)]
+pub struct ThroughputReport {
+    /// Rows, one per algorithm.
+    pub results: Vec<ThroughputRow>,
+    /// Seeds.
+    pub seeds: u64,
+    /// Duration of each run (s).
+    pub duration_s: f64,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// Fig. 9: every algorithm on the same seeds.
+pub fn throughput(seeds: u64, first_seed: u64, duration: f64, threads: usize) -> ThroughputReport {
+    let t0 = std::time::Instant::now();
+    let jobs: Vec<(Algorithm, u64)> = Algorithm::ALL
+        .iter()
+        .flat_map(|&a| (0..seeds).map(move |k| (a, first_seed + k)))
+        .collect();
+    let runs = crate::par::map_indexed(jobs.len(), threads, |i| {
+        let (a, s) = jobs[i];
+        (a, throughput_run(a, s, duration))
+    });
+    let results = Algorithm::ALL
+        .iter()
+        .map(|&a| {
+            let mine: Vec<&CrossingSummary> = runs
+                .iter()
+                .filter(|(b, _)| *b == a)
+                .map(|(_, s)| s)
+                .collect();
+            let n = mine.len().max(1) as f64;
+            let mean = mine.iter().map(|s| s.crossed as f64).sum::<f64>() / n;
+            let var = mine
+                .iter()
+                .map(|s| (s.crossed as f64 - mean).powi(2))
+                .sum::<f64>()
+                / (n - 1.0).max(1.0);
+            let total: f64 = mine.iter().map(|s| s.crossed as f64).sum::<f64>().max(1.0);
+            ThroughputRow {
+                algorithm: a.name(),
+                crossed_mean: mean,
+                crossed_std: var.sqrt(),
+                crossing_time_mean_s: mine
+                    .iter()
+                    .map(|s| s.crossing_time_mean_s * s.crossed as f64)
+                    .sum::<f64>()
+                    / total,
+                crossing_time_max_s: mine
+                    .iter()
+                    .map(|s| s.crossing_time_max_s)
+                    .fold(0.0, f64::max),
+                collisions: mine.iter().map(|s| s.collisions).sum(),
+                invariant_violations: mine.iter().map(|s| s.invariant_violations).sum(),
+                limit_violations: mine.iter().map(|s| s.limit_violations).sum(),
+                unpermitted_entries: mine.iter().map(|s| s.unpermitted_entries).sum(),
+                fallback_steps: mine.iter().map(|s| s.fallback_steps).sum(),
+            }
+        })
+        .collect();
+    ThroughputReport {
+        results,
+        seeds,
+        duration_s: duration,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// The `[intersection]` table of a scenario file (SPEC §8 defaults).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayoutToml {
+    /// Half-size a of A_S (m).
+    #[serde(default = "d_half")]
+    pub half_size: f64,
+    /// A_C = A_S grown by this (m).
+    #[serde(default = "d_comm")]
+    pub comm_margin: f64,
+    /// Inlet length before the stop line (m).
+    #[serde(default = "d_inlet")]
+    pub inlet_length: f64,
+    /// Outlet length past A_S (m).
+    #[serde(default = "d_outlet")]
+    pub outlet_length: f64,
+    /// Speed limit vImax (m/s).
+    #[serde(default = "d_limit")]
+    pub v_limit: f64,
+}
+fn d_half() -> f64 {
+    12.0
+}
+fn d_comm() -> f64 {
+    50.0
+}
+fn d_inlet() -> f64 {
+    100.0
+}
+fn d_outlet() -> f64 {
+    60.0
+}
+fn d_limit() -> f64 {
+    13.9
+}
+
+/// A vehicle of an intersection scenario.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CrossingVehicleToml {
+    /// Id (≥ 1).
+    pub id: u16,
+    /// Inlet: the heading of travel, "east" | "north" | "west" | "south".
+    pub heading: Heading,
+    /// Inlet lane: 0 inner, 1 outer.
+    pub lane: u8,
+    /// "straight" | "left" (inner lane) | "right" (outer lane).
+    pub movement: MovementToml,
+    /// Centre distance from the start of the inlet track (m).
+    pub s: f64,
+    /// Speed (m/s).
+    pub v: f64,
+}
+
+/// Heading of travel of an inlet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Heading {
+    /// From the west.
+    East,
+    /// From the south.
+    North,
+    /// From the east.
+    West,
+    /// From the north.
+    South,
+}
+
+/// A manoeuvre.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MovementToml {
+    /// Straight on.
+    Straight,
+    /// Left turn.
+    Left,
+    /// Right turn.
+    Right,
+}
+
+/// The crossing algorithm, as written in a scenario file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlgorithmToml {
+    /// All-Way STOP.
+    Stop,
+    /// FIFO Crossing.
+    Fifo,
+    /// Concurrent Crossing as written.
+    Concurrent,
+    /// Starvation-free Concurrent Crossing.
+    ConcurrentFair,
+    /// Pipelined (ours).
+    Pipelined,
+}
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCrossing {
+    name: String,
+    duration_s: toml::Spanned<f64>,
+    #[serde(default)]
+    seed: u64,
+    algorithm: AlgorithmToml,
+    intersection: toml::Spanned<LayoutToml>,
+    #[serde(rename = "vehicle")]
+    vehicles: Vec<toml::Spanned<CrossingVehicleToml>>,
+}
+
+/// A validated intersection scenario.
+#[derive(Debug, Clone)]
+pub struct CrossingScenario {
+    /// Name.
+    pub name: String,
+    /// Duration (s); every vehicle must have crossed by then.
+    pub duration_s: f64,
+    /// Seed (recorded).
+    pub seed: u64,
+    /// Algorithm.
+    pub algorithm: Algorithm,
+    /// Layout.
+    pub layout: Layout<f64>,
+    /// Vehicles.
+    pub placements: Vec<Placement>,
+}
+
+/// `true` if the TOML text is an intersection scenario (has an `[intersection]` table).
+pub fn is_crossing_scenario(text: &str) -> bool {
+    toml::from_str::<toml::Table>(text).is_ok_and(|t| t.contains_key("intersection"))
+}
+
+impl CrossingScenario {
+    /// Parses and validates; `path` only names the file in errors.
+    pub fn parse(
+        text: &str,
+        path: &std::path::Path,
+    ) -> Result<Self, crate::scenario::ScenarioError> {
+        let err = |span: Option<std::ops::Range<usize>>, problem: String| {
+            crate::scenario::ScenarioError {
+                file: path.to_path_buf(),
+                line: span.map(|s| crate::scenario::line_of(text, s)),
+                problem,
+            }
+        };
+        let raw: RawCrossing =
+            toml::from_str(text).map_err(|e| err(e.span(), e.message().to_string()))?;
+        let duration_s = *raw.duration_s.get_ref();
+        if !(duration_s > 0.0 && duration_s <= crate::scenario::MAX_DURATION_S) {
+            return Err(err(
+                Some(raw.duration_s.span()),
+                format!("duration_s must be positive, got {duration_s}"),
+            ));
+        }
+        let p = Params::<f64>::table_i();
+        let span = raw.intersection.span();
+        let lt = raw.intersection.into_inner();
+        let spec = LayoutSpec {
+            half_size: lt.half_size,
+            comm_margin: lt.comm_margin,
+            inlet_length: lt.inlet_length,
+            outlet_length: lt.outlet_length,
+            lane_width: crate::sim::LANE_WIDTH_M,
+            v_limit: lt.v_limit,
+        };
+        if !(lt.v_limit > 0.0 && lt.v_limit <= p.v_max()) {
+            return Err(err(
+                Some(span),
+                format!("v_limit must be in (0, {}], got {}", p.v_max(), lt.v_limit),
+            ));
+        }
+        let layout = Layout::new(&p, spec).map_err(|e| {
+            let why = match e {
+                planner_core::intersection::LayoutError::NotPositive => {
+                    "every length must be positive and finite".to_string()
+                }
+                planner_core::intersection::LayoutError::LanesDoNotFit => {
+                    "half_size must hold the two inlet lanes (2 × 3.6 m)".to_string()
+                }
+                planner_core::intersection::LayoutError::TurnTooTight { radius } => format!(
+                    "the right turn's radius a − 1.5 Wl = {radius:.2} m is below ρmin = {} m",
+                    p.rho_min()
+                ),
+                planner_core::intersection::LayoutError::NotSpacious { margin, needed } => format!(
+                    "violates the Spaciousness Assumption (27): A_C is {margin:.2} m from A_S, \
+                     needs at least dS(vImax) + vImax h = {needed:.2} m"
+                ),
+                planner_core::intersection::LayoutError::InletShorterThanCommRegion => {
+                    "inlet_length must reach back to the edge of A_C (≥ comm_margin)".to_string()
+                }
+            };
+            err(Some(span.clone()), format!("intersection: {why}"))
+        })?;
+        let algorithm = match raw.algorithm {
+            AlgorithmToml::Stop => Algorithm::AllWayStop,
+            AlgorithmToml::Fifo => Algorithm::Fifo,
+            AlgorithmToml::Concurrent => Algorithm::Concurrent,
+            AlgorithmToml::ConcurrentFair => Algorithm::ConcurrentFair,
+            AlgorithmToml::Pipelined => Algorithm::Pipelined,
+        };
+        if raw.vehicles.is_empty() || raw.vehicles.len() > MANAGER_CAP {
+            return Err(err(
+                None,
+                format!("1 to {MANAGER_CAP} vehicles, got {}", raw.vehicles.len()),
+            ));
+        }
+        let lim = {
+            let mut l = Limits::table_i();
+            l.v_max = lt.v_limit;
+            l
+        };
+        let mut placements: Vec<(Placement, std::ops::Range<usize>)> = Vec::new();
+        for sv in raw.vehicles {
+            let span = sv.span();
+            let v = sv.into_inner();
+            let bad = |m: String| err(Some(span.clone()), format!("vehicle {}: {m}", v.id));
+            if v.id == MANAGER_NODE {
+                return Err(bad("id 0 is the intersection's".into()));
+            }
+            if placements.iter().any(|(o, _)| o.id == v.id) {
+                return Err(bad("duplicate id".into()));
+            }
+            let movement = match (v.lane, v.movement) {
+                (0 | 1, MovementToml::Straight) => planner_core::intersection::Movement::Straight,
+                (0, MovementToml::Left) => planner_core::intersection::Movement::Left,
+                (1, MovementToml::Right) => planner_core::intersection::Movement::Right,
+                (l, m) if l > 1 => {
+                    return Err(bad(format!(
+                        "lane must be 0 (inner) or 1 (outer), got {l} ({m:?})"
+                    )))
+                }
+                (l, m) => {
+                    return Err(bad(format!(
+                    "{m:?} is not a route from lane {l} (left: inner lane 0, right: outer lane 1)"
+                )))
+                }
+            };
+            let heading = match v.heading {
+                Heading::East => 0,
+                Heading::North => 1,
+                Heading::West => 2,
+                Heading::South => 3,
+            };
+            let route = Layout::<f64>::route_index(heading, v.lane, movement) as u8;
+            let entry = lt.inlet_length;
+            if !(v.s >= 0.5 * LENGTH_M && v.s + 0.5 * LENGTH_M + lim.d0 < entry) {
+                return Err(bad(format!(
+                    "s must put the vehicle on its inlet before the stop line, got {}",
+                    v.s
+                )));
+            }
+            if !(v.v >= 0.0 && v.v <= lt.v_limit) {
+                return Err(bad(format!(
+                    "v must be in [0, {}], got {}",
+                    lt.v_limit, v.v
+                )));
+            }
+            let room = entry - v.s - 0.5 * LENGTH_M - lim.d0;
+            if !(room > lim.safe_distance(v.v) + crate::sim::START_MARGIN_M) {
+                return Err(bad(format!("cannot stop before the stop line: {room:.2} m of room, needs more than dS(v) = {:.2} m", lim.safe_distance(v.v))));
+            }
+            placements.push((
+                Placement {
+                    id: v.id,
+                    route,
+                    s: v.s,
+                    v: v.v,
+                },
+                span,
+            ));
+        }
+        // Same inlet: no overlap, and the invariant for every follower.
+        for (a, span) in &placements {
+            for (b, _) in &placements {
+                let (Some(ra), Some(rb)) = (
+                    layout.route(usize::from(a.route)),
+                    layout.route(usize::from(b.route)),
+                ) else {
+                    continue;
+                };
+                if a.id != b.id && ra.inlet == rb.inlet && a.s <= b.s {
+                    let gap = b.s - a.s - LENGTH_M;
+                    if !(gap - lim.d0 > lim.safe_distance(a.v) + crate::sim::START_MARGIN_M) {
+                        return Err(err(Some(span.clone()), format!(
+                            "vehicle {} violates the safety invariant behind vehicle {} on its inlet (bumper gap {gap:.2} m)",
+                            a.id, b.id
+                        )));
+                    }
+                }
+            }
+        }
+        Ok(Self {
+            name: raw.name,
+            duration_s,
+            seed: raw.seed,
+            algorithm,
+            layout,
+            placements: placements.into_iter().map(|(p, _)| p).collect(),
+        })
+    }
+
+    /// Runs it; `sample` sees every vehicle's (t, id, x, y, θ, v) each step.
+    pub fn run(&self, sample: &mut dyn FnMut(f64, &[PoseSample])) -> CrossingSummary {
+        let mut sim = CrossingSim::new(self.layout.clone(), self.algorithm, &self.placements, None);
+        let steps = (self.duration_s / 0.01).round() as u64;
+        for _ in 0..steps {
+            sample(sim.time(), &sim.poses());
+            sim.step();
+            if sim.cars.is_empty() {
+                break;
+            }
+        }
+        if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+            eprintln!("{}", sim.describe());
+        }
+        sim.summary()
+    }
+}

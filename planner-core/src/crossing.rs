@@ -1,0 +1,507 @@
+//! The intersection manager (Sec. VI, SPEC §7): arrival registration by the
+//! intersection's clock, and the crossing algorithms that decide which vehicles of C^I_t
+//! (25) may enter A_S — the maximal elements of the ordering ≺^I_t (26).
+//!
+//! Sans-IO and bounded: the manager is fed vehicle reports and the time, and answers
+//! which vehicles hold a permission; it tracks at most `CAP` vehicles.
+
+use crate::intersection::{Layout, CONFLICT_SAMPLE_M, ROUTES};
+use crate::real::Real;
+use core::cmp::Ordering;
+use heapless::Vec;
+
+/// The crossing algorithm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Algorithm {
+    /// All-Way STOP (SPEC's choice): every vehicle stops at its stop line; vehicles are
+    /// served in the order they stopped, one vehicle inside A_S at a time.
+    AllWayStop,
+    /// FIFO Crossing: order by arrival τ, ties by route index Ψ; only the first vehicle,
+    /// and only when no other holds a permission.
+    Fifo,
+    /// Concurrent Crossing, exactly the paper's Steps 1–5.
+    Concurrent,
+    /// Concurrent Crossing that never admits a vehicle ahead of an earlier waiting
+    /// vehicle whose route it conflicts with (closes SPEC §7's liveness gap).
+    ConcurrentFair,
+    /// Beyond the paper: starvation-free Concurrent Crossing with three relaxations that
+    /// keep every safety guarantee.
+    ///
+    /// 1. *Following on the same route.* A vehicle may be permitted while a vehicle ahead
+    ///    of it on the same route holds a permission (the paper's own conclusion): both
+    ///    share one path from inlet to outlet, on which the follower's planner treats the
+    ///    leader as its x̄ (2), so Theorem 1 keeps them apart.
+    /// 2. *Releasing a conflict zone once passed.* A permitted vehicle on route γ blocks
+    ///    route γ′ only until its centre has passed the last point of γ whose L × W
+    ///    footprint (plus margin) meets γ′'s swept area. Vehicles never reverse (v ≥ 0),
+    ///    so from then on its footprint cannot meet any vehicle on γ′ inside A_S.
+    /// 3. *Requesting just in time.* Only vehicles within [`REQUEST_DISTANCE_M`] of their
+    ///    stop line compete for permissions, so a permission is not held for the whole
+    ///    approach through A_C. Permissions are only ever an addition to the stop line
+    ///    (IC Protocol (ii)); a vehicle without one still stops before A_S.
+    ///
+    /// No two permitted vehicles ever have footprints that can meet inside A_S except
+    /// followers on one route, which Theorem 1 covers; every other guarantee (the stop
+    /// line, Spaciousness, the outlet invariant) is the paper's.
+    Pipelined,
+}
+
+impl Algorithm {
+    /// Every algorithm, in the order of the paper's Fig. 9 plus ours.
+    pub const ALL: [Algorithm; 5] = [
+        Algorithm::AllWayStop,
+        Algorithm::Fifo,
+        Algorithm::Concurrent,
+        Algorithm::ConcurrentFair,
+        Algorithm::Pipelined,
+    ];
+    /// Short name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Algorithm::AllWayStop => "STOP",
+            Algorithm::Fifo => "FIFO",
+            Algorithm::Concurrent => "CON",
+            Algorithm::ConcurrentFair => "CON-fair",
+            Algorithm::Pipelined => "PIPE",
+        }
+    }
+}
+
+/// Distance (m) from the stop line within which a vehicle competes for a permission
+/// under [`Algorithm::Pipelined`]: 30 m is dS(vImax) ≈ 12.4 m plus ~1.2 s at vImax, so a
+/// vehicle granted at once never has to brake for its stop line.
+pub const REQUEST_DISTANCE_M: f64 = 30.0;
+
+/// How close (m) to its stop line a vehicle at standstill counts as "stopped at the line"
+/// for All-Way STOP: the planner halts its front d0 = 0.5 m before the line; 1.5 m allows
+/// for the last centimetres of its approach.
+pub const STOP_LINE_ZONE_M: f64 = 1.5;
+
+/// What a vehicle reports about itself to the intersection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CrossingReport<F> {
+    /// Vehicle id.
+    pub id: u16,
+    /// Its route (index into [`Layout::routes`]).
+    pub route: u8,
+    /// Its centre's distance along the route's whole path (m).
+    pub s: F,
+    /// Its speed (m/s).
+    pub v: F,
+    /// Its length (m).
+    pub length: F,
+}
+
+/// Why a report was not taken.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ManagerError {
+    /// No such route.
+    UnknownRoute,
+    /// A field is NaN, infinite or out of range.
+    BadValue,
+    /// The manager already tracks `CAP` vehicles.
+    Full,
+    /// The vehicle changed its route after registering (the IC Protocol forbids it).
+    RouteChanged,
+}
+
+/// A registered vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Entry<F> {
+    /// Id.
+    pub id: u16,
+    /// Route.
+    pub route: u8,
+    /// Arrival τ(c): when it entered A_C, by the intersection's clock.
+    pub tau: F,
+    /// Distance of its centre past the A_S entry (negative before).
+    pub progress: F,
+    /// Distance from its front to the stop line (negative once inside).
+    pub to_line: F,
+    /// When it was first seen stopped at its stop line (All-Way STOP).
+    pub stopped_at: Option<F>,
+    /// It holds a permission.
+    pub permitted: bool,
+}
+
+/// The intersection manager for up to `CAP` vehicles.
+#[derive(Debug, Clone)]
+pub struct Manager<F, const CAP: usize> {
+    layout: Layout<F>,
+    algorithm: Algorithm,
+    entries: Vec<Entry<F>, CAP>,
+    crossed: u32,
+}
+
+impl<F: Real, const CAP: usize> Manager<F, CAP> {
+    /// A manager for `layout` running `algorithm`.
+    pub fn new(layout: Layout<F>, algorithm: Algorithm) -> Self {
+        Self {
+            layout,
+            algorithm,
+            entries: Vec::new(),
+            crossed: 0,
+        }
+    }
+
+    /// The layout.
+    pub fn layout(&self) -> &Layout<F> {
+        &self.layout
+    }
+
+    /// The algorithm.
+    pub fn algorithm(&self) -> Algorithm {
+        self.algorithm
+    }
+
+    /// Registered vehicles (C^I_t).
+    pub fn entries(&self) -> &[Entry<F>] {
+        &self.entries
+    }
+
+    /// Vehicles that reached their outlet track so far.
+    pub fn crossed(&self) -> u32 {
+        self.crossed
+    }
+
+    /// `true` if vehicle `id` holds a permission.
+    pub fn permitted(&self, id: u16) -> bool {
+        self.entries.iter().any(|e| e.id == id && e.permitted)
+    }
+
+    /// Takes a vehicle's report at time `now`: registers it when it is first seen inside
+    /// A_C (τ = now), tracks its progress, and removes it once it is on its outlet track
+    /// (its rear past A_S). A bad report changes nothing.
+    pub fn observe(&mut self, r: &CrossingReport<F>, now: F) -> Result<(), ManagerError> {
+        let route = self
+            .layout
+            .route(usize::from(r.route))
+            .ok_or(ManagerError::UnknownRoute)?;
+        if !([r.s, r.v, r.length, now].iter().all(|x| x.is_finite())
+            && r.v >= F::ZERO
+            && r.length > F::ZERO)
+        {
+            return Err(ManagerError::BadValue);
+        }
+        let (entry, exit) = (route.path.entry(), route.path.exit());
+        let half = F::HALF * r.length;
+        let pose = route.path.pose_at(r.s);
+        let idx = self.entries.iter().position(|e| e.id == r.id);
+        if r.s - half >= exit {
+            // On its outlet track: no longer in C^I_t (25).
+            if let Some(i) = idx {
+                self.entries.swap_remove(i);
+                self.crossed = self.crossed.saturating_add(1);
+            }
+            return Ok(());
+        }
+        let to_line = entry - (r.s + half);
+        let stopped =
+            r.v == F::ZERO && to_line >= F::ZERO && to_line <= F::from_f64(STOP_LINE_ZONE_M);
+        match idx.and_then(|i| self.entries.get_mut(i)) {
+            Some(e) => {
+                if e.route != r.route {
+                    return Err(ManagerError::RouteChanged);
+                }
+                e.progress = r.s - entry;
+                e.to_line = to_line;
+                if stopped && e.stopped_at.is_none() {
+                    e.stopped_at = Some(now);
+                }
+            }
+            None => {
+                if !self.layout.in_comm_region(pose.x, pose.y) {
+                    return Ok(());
+                }
+                self.entries
+                    .push(Entry {
+                        id: r.id,
+                        route: r.route,
+                        tau: now,
+                        progress: r.s - entry,
+                        to_line,
+                        stopped_at: stopped.then_some(now),
+                        permitted: false,
+                    })
+                    .map_err(|_| ManagerError::Full)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Forgets vehicle `id` (e.g. its messages stopped: its permission lapses).
+    pub fn forget(&mut self, id: u16) {
+        self.entries.retain(|e| e.id != id);
+    }
+
+    /// Recomputes the permissions by the algorithm.
+    pub fn update(&mut self) {
+        // FIFO order: τ, then route index Ψ, then id (total on any input).
+        let fifo = |a: &Entry<F>, b: &Entry<F>| {
+            a.tau
+                .partial_cmp(&b.tau)
+                .unwrap_or(Ordering::Equal)
+                .then(a.route.cmp(&b.route))
+                .then(a.id.cmp(&b.id))
+        };
+        match self.algorithm {
+            Algorithm::Fifo | Algorithm::AllWayStop => {
+                if self.entries.iter().any(|e| e.permitted) {
+                    return;
+                }
+                let stop = self.algorithm == Algorithm::AllWayStop;
+                let mut best: Option<usize> = None;
+                for (i, e) in self.entries.iter().enumerate() {
+                    if stop && e.stopped_at.is_none() {
+                        continue;
+                    }
+                    let better = match best.and_then(|b| self.entries.get(b)) {
+                        None => true,
+                        Some(b) => {
+                            let key = |x: &Entry<F>| if stop { x.stopped_at } else { Some(x.tau) };
+                            match key(e).partial_cmp(&key(b)).unwrap_or(Ordering::Equal) {
+                                Ordering::Equal => fifo(e, b) == Ordering::Less,
+                                o => o == Ordering::Less,
+                            }
+                        }
+                    };
+                    if better {
+                        best = Some(i);
+                    }
+                }
+                if let Some(e) = best.and_then(|b| self.entries.get_mut(b)) {
+                    e.permitted = true;
+                }
+            }
+            Algorithm::Concurrent | Algorithm::ConcurrentFair | Algorithm::Pipelined => {
+                // Step 1: the permitted keep their permission (they are still in C^I_t).
+                // Step 2: the rest in FIFO order (indices sorted, bounded by CAP).
+                let mut order: Vec<usize, CAP> = Vec::new();
+                for (i, e) in self.entries.iter().enumerate() {
+                    if !e.permitted {
+                        let _ = order.push(i);
+                    }
+                }
+                let entries = &self.entries;
+                order.sort_unstable_by(|&a, &b| match (entries.get(a), entries.get(b)) {
+                    (Some(x), Some(y)) => fifo(x, y),
+                    _ => Ordering::Equal,
+                });
+                // Steps 3–5.
+                let mut waiting: u32 = 0;
+                let mut grant: Vec<usize, CAP> = Vec::new();
+                for &i in order.iter() {
+                    let Some(c) = self.entries.get(i) else {
+                        continue;
+                    };
+                    if self.algorithm == Algorithm::Pipelined
+                        && !(c.to_line <= F::from_f64(REQUEST_DISTANCE_M))
+                    {
+                        continue;
+                    }
+                    let ok = self.admissible(c, &grant) && {
+                        let fair = self.algorithm != Algorithm::Concurrent;
+                        !(fair
+                            && self
+                                .layout
+                                .conflicts
+                                .get(usize::from(c.route))
+                                .is_some_and(|m| m & waiting != 0))
+                    };
+                    if ok {
+                        let _ = grant.push(i);
+                    } else {
+                        waiting |= 1 << c.route;
+                    }
+                }
+                for i in grant {
+                    if let Some(e) = self.entries.get_mut(i) {
+                        e.permitted = true;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Step 4's test: c's route conflicts with no route held by a permitted vehicle or
+    /// one granted earlier in this scan (with the pipelined relaxations when chosen).
+    fn admissible(&self, c: &Entry<F>, granted_now: &[usize]) -> bool {
+        let holders = self
+            .entries
+            .iter()
+            .filter(|e| e.permitted)
+            .chain(granted_now.iter().filter_map(|&i| self.entries.get(i)));
+        for h in holders {
+            let (hr, cr) = (usize::from(h.route), usize::from(c.route));
+            if !self.layout.conflict(hr, cr) {
+                continue;
+            }
+            if self.algorithm == Algorithm::Pipelined {
+                if hr == cr && h.progress > c.progress {
+                    // 1: following on the same route, behind the holder.
+                    continue;
+                }
+                let end = self
+                    .layout
+                    .zone_end
+                    .get(hr)
+                    .and_then(|row| row.get(cr))
+                    .copied()
+                    .unwrap_or(F::from_f64(1e30));
+                // 2: the holder's centre is past its conflict zone with c's route.
+                if hr != cr && h.progress > end + F::from_f64(CONFLICT_SAMPLE_M) {
+                    continue;
+                }
+            }
+            return false;
+        }
+        true
+    }
+}
+
+/// Routes of the layout, for convenience.
+pub const fn route_count() -> usize {
+    ROUTES
+}
+
+/// The vehicle side of the Intersection-Crossing Protocol: one vehicle's planner along
+/// its route's path (inlet track, route through A_S, outlet track), fed with what it
+/// hears (other vehicles' reports, permissions, departures).
+///
+/// (i) No lane change inside A_C: the route is fixed for the whole path. (ii) Without a
+/// live permission the stop line — the entry of A_S — is x_R in (22); once its front is
+/// past the line the vehicle is committed (Lemma 14 (ii): a permission is kept until
+/// the vehicle is on its outlet). (iii) Permissions are leases from the manager.
+/// Obstacles along the path: vehicles on the same route; vehicles on the same inlet
+/// until their rear has left it; vehicles whose front is on the same outlet. Positions
+/// only grow (v ≥ 0), so stale reports are conservative. Target switching of Sec. VII-B:
+/// x^f is the end of the inlet while not permitted, the end of the route when permitted,
+/// the end of the outlet after A_S.
+#[derive(Debug, Clone)]
+pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
+    planner: crate::planner::Planner<F, N>,
+    route: u8,
+    id: u16,
+    length: F,
+    lease_until: F,
+    others: Vec<(u16, u8, F, F), CAP>,
+    obstacles: Vec<crate::planner::Vehicle<F>, CAP>,
+}
+
+impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
+    /// Vehicle `id` of `length` on `route`, planning with `planner`.
+    pub fn new(planner: crate::planner::Planner<F, N>, id: u16, route: u8, length: F) -> Self {
+        Self {
+            planner,
+            route,
+            id,
+            length,
+            lease_until: F::from_f64(-1e30),
+            others: Vec::new(),
+            obstacles: Vec::new(),
+        }
+    }
+
+    /// The route.
+    pub fn route(&self) -> u8 {
+        self.route
+    }
+
+    /// Takes another vehicle's report stamped `stamp`; older or duplicate reports and
+    /// its own are ignored. `Err(Full)` if `CAP` vehicles are already known.
+    pub fn hear_report(&mut self, r: &CrossingReport<F>, stamp: F) -> Result<(), ManagerError> {
+        if r.id == self.id {
+            return Ok(());
+        }
+        if !([r.s, stamp].iter().all(|x| x.is_finite())) {
+            return Err(ManagerError::BadValue);
+        }
+        match self.others.iter_mut().find(|o| o.0 == r.id) {
+            Some(o) => {
+                if stamp > o.3 {
+                    *o = (r.id, r.route, r.s, stamp);
+                }
+                Ok(())
+            }
+            None => self
+                .others
+                .push((r.id, r.route, r.s, stamp))
+                .map_err(|_| ManagerError::Full),
+        }
+    }
+
+    /// Takes a permission lease addressed to anyone (only its own counts).
+    pub fn hear_grant(&mut self, id: u16, until: F) {
+        if id == self.id && until.is_finite() {
+            self.lease_until = self.lease_until.max(until);
+        }
+    }
+
+    /// Vehicle `id` has left the area.
+    pub fn hear_left(&mut self, id: u16) {
+        self.others.retain(|o| o.0 != id);
+    }
+
+    /// `true` if, at `now` and position `s`, the vehicle may be in A_S.
+    pub fn permitted(&self, layout: &Layout<F>, s: F, now: F) -> bool {
+        let entry = layout
+            .route(usize::from(self.route))
+            .map_or(F::ZERO, |r| r.path.entry());
+        s + F::HALF * self.length > entry || self.lease_until >= now
+    }
+
+    /// One planning step at `now`, at path position `s` with v_{t−h} = `v_prev`.
+    pub fn step(
+        &mut self,
+        layout: &Layout<F>,
+        s: F,
+        v_prev: F,
+        now: F,
+    ) -> Result<crate::planner::Command<F>, crate::planner::InputError> {
+        let Some(route) = layout.route(usize::from(self.route)) else {
+            return Err(crate::planner::InputError::NotFinite);
+        };
+        let (entry, exit) = (route.path.entry(), route.path.exit());
+        let permitted = self.permitted(layout, s, now);
+        let half = F::HALF * self.length;
+        self.obstacles.clear();
+        for &(_, r, x, _) in self.others.iter() {
+            let Some(other) = layout.route(usize::from(r)) else {
+                continue;
+            };
+            let (oe, ox) = (other.path.entry(), other.path.exit());
+            let on_my_path = if r == self.route || (other.inlet == route.inlet && x - half < oe) {
+                // Same route, or still partly on our common inlet.
+                Some(x)
+            } else if other.outlet == route.outlet && x + half > ox {
+                // Its front is on my outlet: where it is along my path.
+                Some(exit + (x - ox))
+            } else {
+                None
+            };
+            if let Some(x) = on_my_path {
+                let _ = self.obstacles.push(crate::planner::Vehicle {
+                    x,
+                    length: self.length,
+                });
+            }
+        }
+        let front = s + half;
+        let target = if !permitted {
+            entry
+        } else if front <= exit {
+            exit
+        } else {
+            route.path.length()
+        };
+        let obs = crate::planner::Observation {
+            x: s,
+            v_prev,
+            vehicles: &self.obstacles,
+            stop_line: (!permitted).then_some(entry),
+            target_x: target,
+            v_ref: self.planner.params().v_max(),
+        };
+        self.planner.step(&obs)
+    }
+}

@@ -1,0 +1,612 @@
+//! Intersections (Sec. VI, SPEC §7): the layout (A_S, A_C, inlet and outlet tracks,
+//! routes as lines and arcs), route conflicts from the area a vehicle sweeps, the
+//! Spaciousness Assumption (27), and the intersection manager with its crossing
+//! algorithms: FIFO, Concurrent Crossing (Steps 1–5), a starvation-free variant, the
+//! All-Way STOP baseline, and a less conservative pipelined algorithm.
+//!
+//! Geometry (SPEC §8's choice): four roads meet at the origin; A_S is the square
+//! |x|, |y| ≤ a; A_C is A_S grown by `comm_margin`. Right-hand traffic, two inlet and two
+//! outlet lanes per road; lane 0 is the inner one. Inlets are numbered by the heading of
+//! travel d (0 east, 1 north, 2 west, 3 south): inlet (d, l) comes from the side opposite
+//! d. The inner lane goes straight or turns left into the inner outlet lane; the outer
+//! lane goes straight or turns right into the outer outlet lane: 16 routes. Everything is
+//! built for d = 0 and rotated by d · 90°.
+
+use crate::params::Params;
+use crate::real::Real;
+use crate::safety;
+use crate::unicycle::Pose;
+use heapless::Vec;
+
+/// Routes of the four-road layout.
+pub const ROUTES: usize = 16;
+/// Spacing (m) of the poses sampled along a route to compute conflicts: 0.25 m is a
+/// fraction of the vehicle width, so no overlap of swept areas falls between samples
+/// by more than the margin below.
+pub const CONFLICT_SAMPLE_M: f64 = 0.25;
+/// Margin (m) added around the vehicle rectangle when computing conflicts, covering
+/// the sampling (a chord error below 0.25²/(8·6.6) m) with room to spare.
+pub const CONFLICT_MARGIN_M: f64 = 0.1;
+
+/// A manoeuvre through A_S.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Movement {
+    /// Straight on, same lane.
+    Straight,
+    /// Left turn, inner lane to inner lane.
+    Left,
+    /// Right turn, outer lane to outer lane.
+    Right,
+}
+
+/// A track: heading of travel d (0 east, 1 north, 2 west, 3 south) and lane (0 inner).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Track {
+    /// Heading of travel, 0..4.
+    pub heading: u8,
+    /// Lane, 0 (inner) or 1 (outer).
+    pub lane: u8,
+}
+
+/// A path piece.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Segment<F> {
+    /// From `start` along `heading` for `length`.
+    Line {
+        /// Start pose (x, y, heading).
+        start: Pose<F>,
+        /// Length (m).
+        length: F,
+    },
+    /// Circular arc: centre, radius, start angle of the radius vector, signed sweep
+    /// (positive = counter-clockwise).
+    Arc {
+        /// Centre x (m).
+        cx: F,
+        /// Centre y (m).
+        cy: F,
+        /// Radius (m).
+        radius: F,
+        /// Angle of the start point seen from the centre (rad).
+        start_angle: F,
+        /// Signed sweep (rad).
+        sweep: F,
+    },
+}
+
+impl<F: Real> Segment<F> {
+    /// Length (m).
+    pub fn length(&self) -> F {
+        match *self {
+            Segment::Line { length, .. } => length,
+            Segment::Arc { radius, sweep, .. } => radius * sweep.abs(),
+        }
+    }
+
+    /// Pose at distance `s` from its start (clamped to the piece).
+    pub fn pose_at(&self, s: F) -> Pose<F> {
+        let s = s.max(F::ZERO).min(self.length());
+        match *self {
+            Segment::Line { start, .. } => Pose {
+                x: start.x + s * start.theta.cos(),
+                y: start.y + s * start.theta.sin(),
+                theta: start.theta,
+            },
+            Segment::Arc {
+                cx,
+                cy,
+                radius,
+                start_angle,
+                sweep,
+            } => {
+                let dir = if sweep >= F::ZERO { F::ONE } else { -F::ONE };
+                let ang = start_angle + dir * s / radius;
+                Pose {
+                    x: cx + radius * ang.cos(),
+                    y: cy + radius * ang.sin(),
+                    theta: ang + dir * F::FRAC_PI_2,
+                }
+            }
+        }
+    }
+}
+
+/// A vehicle's whole path: inlet track, route through A_S, outlet track.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Path<F> {
+    /// The three pieces.
+    pub pieces: [Segment<F>; 3],
+}
+
+impl<F: Real> Path<F> {
+    fn piece_length(&self, i: usize) -> F {
+        self.pieces.get(i).map_or(F::ZERO, Segment::length)
+    }
+    /// Distance from the path start to A_S (the stop line).
+    pub fn entry(&self) -> F {
+        self.piece_length(0)
+    }
+    /// Distance from the path start to where A_S ends (start of the outlet track).
+    pub fn exit(&self) -> F {
+        self.piece_length(0) + self.piece_length(1)
+    }
+    /// Total length.
+    pub fn length(&self) -> F {
+        self.exit() + self.piece_length(2)
+    }
+    /// Pose at `s` along the path (clamped).
+    pub fn pose_at(&self, s: F) -> Pose<F> {
+        let mut rest = s;
+        let last = self.pieces.len() - 1;
+        for (i, piece) in self.pieces.iter().enumerate() {
+            let l = piece.length();
+            if rest <= l || i == last {
+                return piece.pose_at(rest);
+            }
+            rest -= l;
+        }
+        Pose::default()
+    }
+}
+
+/// A route through A_S.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Route<F> {
+    /// Inlet track.
+    pub inlet: Track,
+    /// Outlet track.
+    pub outlet: Track,
+    /// Manoeuvre.
+    pub movement: Movement,
+    /// Inlet, route and outlet as one path.
+    pub path: Path<F>,
+}
+
+/// What a layout is built from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LayoutSpec<F> {
+    /// Half-size a of the square A_S (m).
+    pub half_size: F,
+    /// A_C = A_S grown by this (m).
+    pub comm_margin: F,
+    /// Inlet track length before the stop line (m).
+    pub inlet_length: F,
+    /// Outlet track length past A_S (m).
+    pub outlet_length: F,
+    /// Lane width (m).
+    pub lane_width: F,
+    /// Speed limit inside the intersection scenario vImax (m/s).
+    pub v_limit: F,
+}
+
+impl<F: Real> LayoutSpec<F> {
+    /// SPEC §8: a = 12 m, A_C 50 m around A_S, inlets 100 m, outlets 60 m, vImax = vmax/2.
+    pub fn spec8(p: &Params<F>) -> Self {
+        Self {
+            half_size: F::from_f64(12.0),
+            comm_margin: F::from_f64(50.0),
+            inlet_length: F::from_f64(100.0),
+            outlet_length: F::from_f64(60.0),
+            lane_width: p.spec().lane_width,
+            v_limit: F::HALF * p.v_max(),
+        }
+    }
+}
+
+/// Why a layout is rejected.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LayoutError<F> {
+    /// A value is NaN, infinite or not positive.
+    NotPositive,
+    /// The two inlet lanes (2 Wl) do not fit in the half-size a.
+    LanesDoNotFit,
+    /// A turn's radius would be below ρmin (the right turn has radius a − 1.5 Wl).
+    TurnTooTight {
+        /// The radius the layout gives (m).
+        radius: F,
+    },
+    /// The Spaciousness Assumption (27) fails: ∂A_C is `margin` from A_S but must be at
+    /// least dS(vImax) + vImax h = `needed`.
+    NotSpacious {
+        /// The layout's margin (m).
+        margin: F,
+        /// dS(vImax) + vImax h (m).
+        needed: F,
+    },
+    /// The inlet track does not reach back to ∂A_C (vehicles must arrive through A_C).
+    InletShorterThanCommRegion,
+}
+
+/// The intersection: geometry, routes and their conflicts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layout<F> {
+    /// The spec it was built from.
+    pub spec: LayoutSpec<F>,
+    /// The 16 routes, indexed by [`Layout::route_index`]; the index is also the fixed
+    /// route order Ψ of the FIFO tie-break.
+    pub routes: [Route<F>; ROUTES],
+    /// conflicts[i] bit j: γ_i ⊗ γ_j.
+    pub conflicts: [u32; ROUTES],
+    /// zone_end[i][j]: along route i (distance from its A_S entry), where the part of its
+    /// path whose footprint meets route j's swept area ends; NEG if none.
+    pub zone_end: [[F; ROUTES]; ROUTES],
+}
+
+fn rotate<F: Real>(p: Pose<F>, quarter_turns: u8) -> Pose<F> {
+    let (mut x, mut y) = (p.x, p.y);
+    for _ in 0..quarter_turns % 4 {
+        let t = x;
+        x = -y;
+        y = t;
+    }
+    Pose {
+        x,
+        y,
+        theta: p.theta + F::from_usize(usize::from(quarter_turns % 4)) * F::FRAC_PI_2,
+    }
+}
+
+fn rotate_segment<F: Real>(s: Segment<F>, q: u8) -> Segment<F> {
+    match s {
+        Segment::Line { start, length } => Segment::Line {
+            start: rotate(start, q),
+            length,
+        },
+        Segment::Arc {
+            cx,
+            cy,
+            radius,
+            start_angle,
+            sweep,
+        } => {
+            let c = rotate(
+                Pose {
+                    x: cx,
+                    y: cy,
+                    theta: F::ZERO,
+                },
+                q,
+            );
+            Segment::Arc {
+                cx: c.x,
+                cy: c.y,
+                radius,
+                start_angle: start_angle + F::from_usize(usize::from(q % 4)) * F::FRAC_PI_2,
+                sweep,
+            }
+        }
+    }
+}
+
+/// Corners of an L × W rectangle (inflated by `m`) at a pose.
+fn corners<F: Real>(q: Pose<F>, hl: F, hw: F) -> [(F, F); 4] {
+    let (s, c) = (q.theta.sin(), q.theta.cos());
+    [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw)]
+        .map(|(u, w)| (q.x + u * c - w * s, q.y + u * s + w * c))
+}
+
+/// Separating-axis test of two oriented rectangles (touching counts as overlap).
+pub fn rectangles_meet<F: Real>(a: Pose<F>, b: Pose<F>, hl: F, hw: F) -> bool {
+    let reach = F::TWO * (hl + hw);
+    if (a.x - b.x).abs() > reach || (a.y - b.y).abs() > reach {
+        return false;
+    }
+    let (ca, cb) = (corners(a, hl, hw), corners(b, hl, hw));
+    for q in [a, b] {
+        let (s, c) = (q.theta.sin(), q.theta.cos());
+        for (ax, ay) in [(c, s), (-s, c)] {
+            let proj = |cs: &[(F, F); 4]| {
+                cs.iter().fold(
+                    (F::from_f64(1e30), F::from_f64(-1e30)),
+                    |(lo, hi), &(x, y)| {
+                        let p = x * ax + y * ay;
+                        (lo.min(p), hi.max(p))
+                    },
+                )
+            };
+            let (a0, a1) = proj(&ca);
+            let (b0, b1) = proj(&cb);
+            if a1 < b0 || b1 < a0 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+impl<F: Real> Layout<F> {
+    /// Route index of (inlet heading, lane, movement): 4 per heading.
+    pub fn route_index(heading: u8, lane: u8, movement: Movement) -> usize {
+        let k = match (lane, movement) {
+            (0, Movement::Straight) => 0,
+            (0, _) => 1,
+            (_, Movement::Straight) => 2,
+            (_, _) => 3,
+        };
+        usize::from(heading % 4) * 4 + k
+    }
+
+    /// Builds and checks a layout.
+    pub fn new(p: &Params<F>, spec: LayoutSpec<F>) -> Result<Self, LayoutError<F>> {
+        let vals = [
+            spec.half_size,
+            spec.comm_margin,
+            spec.inlet_length,
+            spec.outlet_length,
+            spec.lane_width,
+            spec.v_limit,
+        ];
+        if !vals.iter().all(|v| v.is_finite() && *v > F::ZERO) {
+            return Err(LayoutError::NotPositive);
+        }
+        let (a, wl) = (spec.half_size, spec.lane_width);
+        if !(F::TWO * wl <= a) {
+            return Err(LayoutError::LanesDoNotFit);
+        }
+        let r_right = a - F::from_f64(1.5) * wl;
+        if !(r_right >= p.rho_min()) {
+            return Err(LayoutError::TurnTooTight { radius: r_right });
+        }
+        let needed = safety::d_s(p, spec.v_limit) + spec.v_limit * p.h();
+        if !(spec.comm_margin >= needed) {
+            return Err(LayoutError::NotSpacious {
+                margin: spec.comm_margin,
+                needed,
+            });
+        }
+        if !(spec.inlet_length >= spec.comm_margin) {
+            return Err(LayoutError::InletShorterThanCommRegion);
+        }
+        let half_pi = F::FRAC_PI_2;
+        let mut routes = [Route {
+            inlet: Track {
+                heading: 0,
+                lane: 0,
+            },
+            outlet: Track {
+                heading: 0,
+                lane: 0,
+            },
+            movement: Movement::Straight,
+            path: Path {
+                pieces: [Segment::Line {
+                    start: Pose::default(),
+                    length: F::ZERO,
+                }; 3],
+            },
+        }; ROUTES];
+        for d in 0..4u8 {
+            for (lane, movement) in [
+                (0u8, Movement::Straight),
+                (0, Movement::Left),
+                (1, Movement::Straight),
+                (1, Movement::Right),
+            ] {
+                let y = -(F::from_usize(usize::from(lane)) + F::HALF) * wl;
+                let inlet = Segment::Line {
+                    start: Pose {
+                        x: -a - spec.inlet_length,
+                        y,
+                        theta: F::ZERO,
+                    },
+                    length: spec.inlet_length,
+                };
+                let (route, out_heading, end) = match movement {
+                    Movement::Straight => (
+                        Segment::Line {
+                            start: Pose {
+                                x: -a,
+                                y,
+                                theta: F::ZERO,
+                            },
+                            length: F::TWO * a,
+                        },
+                        0u8,
+                        Pose {
+                            x: a,
+                            y,
+                            theta: F::ZERO,
+                        },
+                    ),
+                    Movement::Left => {
+                        // Quarter circle about (−a, a), radius a + Wl/2 (a pure arc).
+                        let r = a - y;
+                        (
+                            Segment::Arc {
+                                cx: -a,
+                                cy: a,
+                                radius: r,
+                                start_angle: -half_pi,
+                                sweep: half_pi,
+                            },
+                            1,
+                            Pose {
+                                x: -a + r,
+                                y: a,
+                                theta: half_pi,
+                            },
+                        )
+                    }
+                    Movement::Right => {
+                        // Quarter circle about (−a, −a), radius a − 1.5 Wl.
+                        let r = a + y;
+                        (
+                            Segment::Arc {
+                                cx: -a,
+                                cy: -a,
+                                radius: r,
+                                start_angle: half_pi,
+                                sweep: -half_pi,
+                            },
+                            3,
+                            Pose {
+                                x: -a + r,
+                                y: -a,
+                                theta: -half_pi,
+                            },
+                        )
+                    }
+                };
+                let outlet = Segment::Line {
+                    start: end,
+                    length: spec.outlet_length,
+                };
+                let i = Self::route_index(d, lane, movement);
+                if let Some(slot) = routes.get_mut(i) {
+                    *slot = Route {
+                        inlet: Track { heading: d, lane },
+                        outlet: Track {
+                            heading: (d + out_heading) % 4,
+                            lane,
+                        },
+                        movement,
+                        path: Path {
+                            pieces: [inlet, route, outlet].map(|s| rotate_segment(s, d)),
+                        },
+                    };
+                }
+            }
+        }
+        let mut layout = Self {
+            spec,
+            routes,
+            conflicts: [0; ROUTES],
+            zone_end: [[F::from_f64(-1.0); ROUTES]; ROUTES],
+        };
+        layout.compute_conflicts(p);
+        Ok(layout)
+    }
+
+    /// γ_i ⊗ γ_j from the swept areas (sampled L × W rectangles plus a margin), plus
+    /// SPEC's rule: a route conflicts with itself and with routes sharing its inlet or
+    /// outlet. Also where, along each route, its conflict zone with each other ends.
+    fn compute_conflicts(&mut self, p: &Params<F>) {
+        let m = F::from_f64(CONFLICT_MARGIN_M);
+        let (hl, hw) = (F::HALF * p.length() + m, F::HALF * p.width() + m);
+        let step = F::from_f64(CONFLICT_SAMPLE_M);
+        let samples = |r: &Route<F>| {
+            let mut out: Vec<(F, Pose<F>), 256> = Vec::new();
+            let (s0, s1) = (r.path.entry(), r.path.exit());
+            let mut s = s0;
+            while s <= s1 && out.len() < 255 {
+                let _ = out.push((s - s0, r.path.pose_at(s)));
+                s += step;
+            }
+            let _ = out.push((s1 - s0, r.path.pose_at(s1)));
+            out
+        };
+        for i in 0..ROUTES {
+            for j in 0..ROUTES {
+                let (Some(ri), Some(rj)) = (self.routes.get(i), self.routes.get(j)) else {
+                    continue;
+                };
+                let shared = i == j || ri.inlet == rj.inlet || ri.outlet == rj.outlet;
+                let (si, sj) = (samples(ri), samples(rj));
+                let mut end: Option<F> = None;
+                for &(s, q) in si.iter() {
+                    if sj.iter().any(|&(_, b)| rectangles_meet(q, b, hl, hw)) {
+                        end = Some(s);
+                    }
+                }
+                if shared || end.is_some() {
+                    if let Some(c) = self.conflicts.get_mut(i) {
+                        *c |= 1 << j;
+                    }
+                }
+                if let (Some(row), Some(e)) = (self.zone_end.get_mut(i), end) {
+                    if let Some(z) = row.get_mut(j) {
+                        *z = e;
+                    }
+                }
+            }
+        }
+    }
+
+    /// `true` if routes i and j conflict.
+    pub fn conflict(&self, i: usize, j: usize) -> bool {
+        j < ROUTES && self.conflicts.get(i).is_some_and(|c| c >> j & 1 == 1)
+    }
+
+    /// The route with index `i`.
+    pub fn route(&self, i: usize) -> Option<&Route<F>> {
+        self.routes.get(i)
+    }
+
+    /// `true` if `pose` is inside A_C (the square of half-size a + comm_margin).
+    pub fn in_comm_region(&self, x: F, y: F) -> bool {
+        let r = self.spec.half_size + self.spec.comm_margin;
+        x.abs() <= r && y.abs() <= r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec8_layout_conflicts_and_geometry() {
+        let p = Params::<f64>::table_i();
+        let l = Layout::new(&p, LayoutSpec::spec8(&p)).unwrap();
+        let idx = Layout::<f64>::route_index;
+        let ws = idx(0, 0, Movement::Straight); // from the west, straight, inner
+        let es = idx(2, 0, Movement::Straight); // from the east, straight, inner
+        let wl = idx(0, 0, Movement::Left);
+        let el = idx(2, 0, Movement::Left);
+        let wr = idx(0, 1, Movement::Right);
+        let ns = idx(3, 0, Movement::Straight); // from the north, heading south
+                                                // Opposite straights and opposite lefts (right-hand traffic) do not meet; crossing
+                                                // straights do; a route meets itself and its inlet's other route.
+        assert!(!l.conflict(ws, es));
+        assert!(!l.conflict(wl, el));
+        assert!(l.conflict(ws, ns));
+        assert!(l.conflict(ws, ws) && l.conflict(ws, wl));
+        assert!(
+            l.conflict(wl, es),
+            "a left turn crosses the opposing straight"
+        );
+        // The right turn from the west meets only what shares its lanes or pieces of road.
+        assert!(!l.conflict(wr, es));
+        for i in 0..ROUTES {
+            for j in 0..ROUTES {
+                assert_eq!(l.conflict(i, j), l.conflict(j, i), "symmetric {i} {j}");
+            }
+        }
+        // Path geometry: the left turn from the west ends heading north at (1.8, 12).
+        let r = l.route(wl).unwrap();
+        let end = r.path.pose_at(r.path.exit());
+        assert!((end.x - 1.8).abs() < 1e-9 && (end.y - 12.0).abs() < 1e-9);
+        assert!((end.theta - core::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert!(
+            (r.path.exit() - r.path.entry() - 13.8 * core::f64::consts::FRAC_PI_2).abs() < 1e-9
+        );
+        // The north inlet (heading south) drives on the west half (x = −1.8 inner).
+        let n = l.route(ns).unwrap().path.pose_at(50.0);
+        assert!((n.x + 1.8).abs() < 1e-9 && n.y > 12.0);
+    }
+
+    #[test]
+    fn layouts_that_break_assumptions_are_rejected() {
+        let p = Params::<f64>::table_i();
+        let mut s = LayoutSpec::spec8(&p);
+        s.comm_margin = 10.0;
+        assert!(matches!(
+            Layout::new(&p, s),
+            Err(LayoutError::NotSpacious { .. })
+        ));
+        let mut s = LayoutSpec::spec8(&p);
+        s.half_size = 10.0;
+        assert!(matches!(
+            Layout::new(&p, s),
+            Err(LayoutError::TurnTooTight { .. })
+        ));
+        let mut s = LayoutSpec::spec8(&p);
+        s.half_size = f64::NAN;
+        assert_eq!(Layout::new(&p, s), Err(LayoutError::NotPositive));
+        let mut s = LayoutSpec::spec8(&p);
+        s.inlet_length = 30.0;
+        assert_eq!(
+            Layout::new(&p, s),
+            Err(LayoutError::InletShorterThanCommRegion)
+        );
+    }
+}

@@ -1,0 +1,183 @@
+//! The intersection manager: the liveness gap of the paper's Concurrent Crossing (SPEC
+//! §7) on a constructed arrival stream, the bounded wait of the starvation-free variant,
+//! and the permission invariants of every algorithm.
+
+use planner_core::crossing::{Algorithm, CrossingReport, Manager};
+use planner_core::intersection::{Layout, LayoutSpec, ROUTES};
+use planner_core::Params;
+
+fn layout() -> Layout<f64> {
+    let p = Params::<f64>::table_i();
+    Layout::new(&p, LayoutSpec::spec8(&p)).unwrap()
+}
+
+/// Routes a, x, y with a ⊗ x, a ⊗ y and x, y compatible.
+fn starving_triple(l: &Layout<f64>) -> (u8, u8, u8) {
+    for a in 0..ROUTES {
+        for x in 0..ROUTES {
+            for y in 0..ROUTES {
+                if l.conflict(a, x) && l.conflict(a, y) && !l.conflict(x, y) && x != a && y != a {
+                    return (a as u8, x as u8, y as u8);
+                }
+            }
+        }
+    }
+    panic!("no such routes in the layout");
+}
+
+#[derive(Clone, Copy)]
+enum At {
+    Waiting,
+    Inside,
+    Gone,
+}
+
+fn report(l: &Layout<f64>, id: u16, route: u8, at: At) -> CrossingReport<f64> {
+    let path = l.route(usize::from(route)).unwrap().path;
+    let s = match at {
+        At::Waiting => path.entry() - 0.5 - 2.25,
+        At::Inside => path.entry() + 3.0,
+        At::Gone => path.exit() + 2.25 + 0.1,
+    };
+    CrossingReport {
+        id,
+        route,
+        s,
+        v: if matches!(at, At::Waiting) { 0.0 } else { 10.0 },
+        length: 4.5,
+    }
+}
+
+/// The constructed stream: x- and y-vehicles alternate, each arriving while the other
+/// kind holds a permission, so some route conflicting with a's is always held. Returns
+/// the time at which the a-vehicle (arrived at t = 1, before every y and every later x)
+/// was first permitted, if ever within 40 cycles.
+fn starve(algorithm: Algorithm) -> Option<u32> {
+    let l = layout();
+    let (a, x, y) = starving_triple(&l);
+    let mut m = Manager::<f64, 64>::new(l.clone(), algorithm);
+    // Vehicle ids: a = 1; stream vehicles 100.. alternate routes x, y.
+    let mut stream: Vec<(u16, u8)> = Vec::new();
+    let mut next_id = 100u16;
+    let mut inside_since: std::collections::HashMap<u16, u32> = Default::default();
+    let mut first_permit = None;
+    for cycle in 0..40u32 {
+        let t = cycle;
+        // Arrivals: the first x at t = 0, a at t = 1, then one stream vehicle per cycle,
+        // alternating y, x, y, …
+        if cycle == 0 {
+            stream.push((next_id, x));
+            next_id += 1;
+        } else {
+            stream.push((next_id, if cycle % 2 == 1 { y } else { x }));
+            next_id += 1;
+        }
+        for &(id, r) in stream.iter() {
+            let at = match inside_since.get(&id) {
+                Some(&since) if t >= since + 2 => At::Gone,
+                Some(_) => At::Inside,
+                None => At::Waiting,
+            };
+            m.observe(&report(&l, id, r, at), f64::from(t)).unwrap();
+        }
+        stream.retain(|(id, _)| inside_since.get(id).is_none_or(|&s| t < s + 2));
+        if cycle >= 1 {
+            let at = match first_permit {
+                None => At::Waiting,
+                Some(p) if t < p + 2 => At::Inside,
+                Some(_) => At::Gone,
+            };
+            m.observe(&report(&l, 1, a, at), f64::from(t)).unwrap();
+        }
+        m.update();
+        // Invariant of every algorithm: permitted routes are pairwise compatible, except
+        // the pipelined algorithm's followers on one route.
+        let held: Vec<_> = m.entries().iter().filter(|e| e.permitted).collect();
+        for (i, p) in held.iter().enumerate() {
+            for q in held.iter().skip(i + 1) {
+                let pipelined_follow = algorithm == Algorithm::Pipelined && p.route == q.route;
+                assert!(
+                    !l.conflict(usize::from(p.route), usize::from(q.route)) || pipelined_follow,
+                    "{algorithm:?}: conflicting routes {} and {} both permitted",
+                    p.route,
+                    q.route
+                );
+            }
+        }
+        for &(id, _) in stream.iter() {
+            if m.permitted(id) {
+                inside_since.entry(id).or_insert(t);
+            }
+        }
+        if first_permit.is_none() && m.permitted(1) {
+            first_permit = Some(t);
+        }
+    }
+    first_permit
+}
+
+#[test]
+fn concurrent_crossing_as_written_starves_an_earlier_vehicle() {
+    assert_eq!(
+        starve(Algorithm::Concurrent),
+        None,
+        "the paper's algorithm lets later vehicles pass forever"
+    );
+}
+
+#[test]
+fn the_fair_variant_bounds_the_wait() {
+    // a arrives at t = 1 behind the first x (held until it leaves at t = 2): permitted
+    // as soon as that x is out, before any later conflicting vehicle.
+    let t = starve(Algorithm::ConcurrentFair).expect("never starved");
+    assert!(t <= 3, "permitted at {t}");
+    let t = starve(Algorithm::Pipelined).expect("never starved");
+    assert!(t <= 3, "permitted at {t}");
+}
+
+#[test]
+fn fifo_and_stop_permit_one_at_a_time_and_bad_reports_change_nothing() {
+    let l = layout();
+    for alg in [Algorithm::Fifo, Algorithm::AllWayStop] {
+        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+        for (id, r) in [(1u16, 0u8), (2, 8), (3, 5)] {
+            m.observe(&report(&l, id, r, At::Waiting), f64::from(id))
+                .unwrap();
+        }
+        m.update();
+        let held: Vec<_> = m
+            .entries()
+            .iter()
+            .filter(|e| e.permitted)
+            .map(|e| e.id)
+            .collect();
+        assert_eq!(held, vec![1], "{alg:?}");
+        m.update();
+        assert_eq!(m.entries().iter().filter(|e| e.permitted).count(), 1);
+        // Vehicle 1 leaves: the next in order is served.
+        m.observe(&report(&l, 1, 0, At::Gone), 9.0).unwrap();
+        m.update();
+        assert!(m.permitted(2) && !m.permitted(3), "{alg:?}");
+        assert_eq!(m.crossed(), 1);
+        let before = m.entries().to_vec();
+        let mut bad = report(&l, 3, 5, At::Waiting);
+        bad.s = f64::NAN;
+        assert!(m.observe(&bad, 10.0).is_err());
+        bad = report(&l, 3, 5, At::Waiting);
+        bad.route = 200;
+        assert!(m.observe(&bad, 10.0).is_err());
+        bad = report(&l, 3, 6, At::Waiting);
+        assert!(m.observe(&bad, 10.0).is_err(), "route change");
+        assert_eq!(m.entries(), &before[..]);
+    }
+    // All-Way STOP serves only vehicles that have stopped at their line.
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::AllWayStop);
+    let mut moving = report(&l, 1, 0, At::Waiting);
+    moving.v = 5.0;
+    m.observe(&moving, 0.0).unwrap();
+    m.update();
+    assert!(!m.permitted(1));
+    m.observe(&report(&l, 1, 0, At::Waiting), 1.0).unwrap();
+    m.update();
+    assert!(m.permitted(1));
+}
