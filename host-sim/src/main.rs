@@ -314,6 +314,29 @@ enum Experiment {
     },
 }
 
+/// Prints a result (one JSON object, or its debug form) and picks the exit code.
+fn finish<T: serde::Serialize + std::fmt::Debug>(
+    r: &T,
+    json: bool,
+    safe: bool,
+    live: bool,
+) -> ExitCode {
+    if json {
+        if let Err(code) = print_json(r) {
+            return code;
+        }
+    } else {
+        println!("{r:#?}");
+    }
+    if !safe {
+        ExitCode::from(EXIT_UNSAFE)
+    } else if !live {
+        ExitCode::from(EXIT_NOT_LIVE)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
 /// `host-sim run` on an intersection scenario (a file with an `[intersection]` table).
 fn run_crossing(
     file: &std::path::Path,
@@ -416,18 +439,12 @@ fn main() -> ExitCode {
             }
             let r =
                 host_sim::scale::run(vehicles as usize, duration, platoon as usize, threads, seed);
-            if json {
-                if let Err(code) = print_json(&r) {
-                    return code;
-                }
-            } else {
-                println!("{r:#?}");
-            }
-            if r.collisions + r.invariant_violations + r.limit_violations > 0 {
-                ExitCode::from(EXIT_UNSAFE)
-            } else {
-                ExitCode::SUCCESS
-            }
+            finish(
+                &r,
+                json,
+                r.collisions + r.invariant_violations + r.limit_violations == 0,
+                true,
+            )
         }
         Command::BenchPlanner {
             json,
@@ -505,20 +522,12 @@ fn main() -> ExitCode {
                     return ExitCode::from(EXIT_UNSAFE);
                 }
             }
-            if json {
-                if let Err(code) = print_json(&r) {
-                    return code;
-                }
-            } else {
-                println!("{r:#?}");
-            }
-            if r.collisions + r.invariant_violations + r.limit_violations > 0 {
-                ExitCode::from(EXIT_UNSAFE)
-            } else if r.completed != r.runs {
-                ExitCode::from(EXIT_NOT_LIVE)
-            } else {
-                ExitCode::SUCCESS
-            }
+            finish(
+                &r,
+                json,
+                r.collisions + r.invariant_violations + r.limit_violations == 0,
+                r.completed == r.runs,
+            )
         }
         Command::Experiment(Experiment::Throughput {
             duration,
@@ -542,21 +551,18 @@ fn main() -> ExitCode {
                     return ExitCode::from(EXIT_UNSAFE);
                 }
             }
-            if json {
-                if let Err(code) = print_json(&r) {
-                    return code;
-                }
-            } else {
-                println!("{r:#?}");
-            }
-            if r.results.iter().any(|x| {
-                x.collisions + x.invariant_violations + x.limit_violations + x.unpermitted_entries
-                    > 0
-            }) {
-                ExitCode::from(EXIT_UNSAFE)
-            } else {
-                ExitCode::SUCCESS
-            }
+            finish(
+                &r,
+                json,
+                r.results.iter().all(|x| {
+                    x.collisions
+                        + x.invariant_violations
+                        + x.limit_violations
+                        + x.unpermitted_entries
+                        == 0
+                }),
+                true,
+            )
         }
         Command::Traffic {
             cases,
@@ -568,33 +574,21 @@ fn main() -> ExitCode {
                 return bad_input(format!("--duration must be in (0, 3600], got {duration}"));
             }
             let r = host_sim::multilane::traffic_sweep(cases, seed, duration, 0);
-            if json {
-                if let Err(code) = print_json(&r) {
-                    return code;
-                }
-            } else {
-                println!("{r:#?}");
-            }
-            if r.collisions + r.invariant_violations + r.limit_violations > 0 {
-                ExitCode::from(EXIT_UNSAFE)
-            } else {
-                ExitCode::SUCCESS
-            }
+            finish(
+                &r,
+                json,
+                r.collisions + r.invariant_violations + r.limit_violations == 0,
+                true,
+            )
         }
         Command::Platoons { cases, seed, json } => {
             let s = host_sim::platoon::sweep(cases, seed);
-            if json {
-                if let Err(code) = print_json(&s) {
-                    return code;
-                }
-            } else {
-                println!("{s:#?}");
-            }
-            if s.collisions + s.invariant_violations + s.limit_violations > 0 || s.cases != cases {
-                ExitCode::from(EXIT_UNSAFE)
-            } else {
-                ExitCode::SUCCESS
-            }
+            finish(
+                &s,
+                json,
+                s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == cases,
+                true,
+            )
         }
     }
 }

@@ -167,12 +167,7 @@ where
                 .iter()
                 .min_by(|a, b| (a.0 - t_snap).abs().total_cmp(&(b.0 - t_snap).abs()))
             {
-                let (sn, cs) = p.3.sin_cos();
-                let (hl, hw) = (0.5 * LENGTH_M, 0.5 * WIDTH_M);
-                let pts: Vec<(f64, f64)> = [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw), (hl, hw)]
-                    .iter()
-                    .map(|&(u, w)| (p.1 + u * cs - w * sn, p.2 + u * sn + w * cs))
-                    .collect();
+                let pts = footprint(p);
                 xy.draw_series(std::iter::once(Polygon::new(pts.clone(), c.mix(0.35))))
                     .map_err(e)?;
                 xy.draw_series(std::iter::once(PathElement::new(pts, c.stroke_width(1))))
@@ -189,12 +184,35 @@ where
             .draw()
             .map_err(e)?;
     }
-    let mut sv = ChartBuilder::on(&bottom)
+    speed_panel(data, &bottom, t1, 30.0)
+}
+
+/// The closed outline of a vehicle's L × W rectangle at a sample's pose.
+fn footprint(p: &Sample) -> Vec<(f64, f64)> {
+    let (sn, cs) = p.3.sin_cos();
+    let (hl, hw) = (0.5 * LENGTH_M, 0.5 * WIDTH_M);
+    [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw), (hl, hw)]
+        .iter()
+        .map(|&(u, w)| (p.1 + u * cs - w * sn, p.2 + u * sn + w * cs))
+        .collect()
+}
+
+/// Speed over time, one line per vehicle, in the same colours as the trajectories.
+fn speed_panel<DB: DrawingBackend>(
+    data: &PlotData,
+    area: &DrawingArea<DB, Shift>,
+    t1: f64,
+    v_top: f64,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    let mut sv = ChartBuilder::on(area)
         .margin(15)
         .x_label_area_size(40)
         .y_label_area_size(60)
         .caption("speed", ("sans-serif", 20))
-        .build_cartesian_2d(0.0..t1.max(1e-3), 0.0..30.0)
+        .build_cartesian_2d(0.0..t1.max(1e-3), 0.0..v_top)
         .map_err(e)?;
     sv.configure_mesh()
         .x_desc("t (s)")
@@ -415,12 +433,7 @@ where
             .label(format!("vehicle {id}"))
             .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
         for p in s.iter().step_by(20) {
-            let (sn, cs) = p.3.sin_cos();
-            let (hl, hw) = (0.5 * LENGTH_M, 0.5 * WIDTH_M);
-            let pts: Vec<(f64, f64)> = [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw), (hl, hw)]
-                .iter()
-                .map(|&(u, v)| (p.1 + u * cs - v * sn, p.2 + u * sn + v * cs))
-                .collect();
+            let pts = footprint(p);
             xy.draw_series(std::iter::once(Polygon::new(pts.clone(), col.mix(0.3))))
                 .map_err(e)?;
             xy.draw_series(std::iter::once(PathElement::new(pts, col)))
@@ -433,21 +446,5 @@ where
         .border_style(BLACK)
         .draw()
         .map_err(e)?;
-    let mut sv = ChartBuilder::on(&right)
-        .margin(15)
-        .x_label_area_size(35)
-        .y_label_area_size(50)
-        .caption("speed", ("sans-serif", 18))
-        .build_cartesian_2d(0.0..t1.max(1e-3), 0.0..(layout.spec.v_limit * 1.2))
-        .map_err(e)?;
-    sv.configure_mesh()
-        .x_desc("t (s)")
-        .y_desc("v (m/s)")
-        .draw()
-        .map_err(e)?;
-    for (i, s) in data.series.values().enumerate() {
-        sv.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.4)), palette(i)))
-            .map_err(e)?;
-    }
-    Ok(())
+    speed_panel(data, &right, t1, layout.spec.v_limit * 1.2)
 }
