@@ -1,8 +1,35 @@
 //! # can-gateway
 //!
-//! Will map the planners' V2V/V2I messages onto CAN frames (a `no_std` codec over the
-//! `embedded-can` traits, SocketCAN on Linux, a DBC file). Nothing is implemented yet:
-//! this crate is an empty placeholder so that the workspace layout is in place, and it
-//! provides no API.
+//! The planners' V2V and V2I messages on classic CAN frames: a `no_std`, allocation-free
+//! codec generic over [`embedded_can::Frame`], with AUTOSAR-E2E-style protection (an
+//! alive counter and a CRC-8 per message) and a reassembler that turns any byte
+//! sequence into either a message or a typed error, never a panic.
+//!
+//! - [`wire`]: the frame layout (29-bit J1939-style identifiers), units and resolutions;
+//! - [`crc`]: CRC-8 SAE J1850;
+//! - [`codec`]: encoding messages into frames and reassembling frames into messages.
+//!
+//! `can-gateway.dbc` (in this crate) describes every frame for standard tools.
 #![no_std]
 #![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented
+    )
+)]
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod codec;
+pub mod crc;
+pub mod log;
+pub mod wire;
+
+pub use codec::{encode, DecodeError, EncodeError, Frames, Reassembler};
+pub use wire::{Message, MessageKind};

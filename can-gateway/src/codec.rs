@@ -1,0 +1,645 @@
+//! Encoding messages into frames, and reassembling frames into messages.
+//!
+//! The decoder is total: every input frame yields `Ok(None)` (part of a message stored),
+//! `Ok(Some(message))` (a whole, verified message) or a typed [`DecodeError`], and a
+//! frame that yields an error leaves the reassembler exactly as it was.
+
+use crate::crc;
+use crate::wire::{
+    frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, HEADING_RES, MAX_FRAMES,
+    NO_LANE, POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES, YAW_RATE_RES,
+};
+use embedded_can::{ExtendedId, Frame, Id};
+use heapless::Vec;
+use planner_core::{Real, VehicleState};
+
+/// The frames of one message.
+pub type Frames<Fr> = Vec<Fr, MAX_FRAMES>;
+
+/// Which field could not be encoded or was implausible on decoding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Field {
+    /// x.
+    X,
+    /// y.
+    Y,
+    /// Heading.
+    Heading,
+    /// Speed.
+    Speed,
+    /// Yaw rate.
+    YawRate,
+    /// A lane.
+    Lane,
+    /// A time.
+    Time,
+    /// A position along a path.
+    PathPosition,
+    /// A track's heading.
+    TrackHeading,
+}
+
+/// Why a message could not be encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EncodeError {
+    /// A value is NaN, infinite or outside what its field can carry.
+    OutOfRange(Field),
+    /// The frame type refused the identifier or data (never for a conforming type).
+    Frame,
+}
+
+/// Why a frame was rejected (the reassembler is unchanged).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DecodeError {
+    /// A standard (11-bit) identifier or a remote frame: not ours.
+    NotOurs,
+    /// Extended identifier outside this protocol (priority, data page, PDU format).
+    ForeignId,
+    /// Unknown message kind code.
+    UnknownKind(u8),
+    /// The frame index is not below the kind's frame count.
+    BadFrameIndex,
+    /// Not 8 data bytes.
+    BadLength,
+    /// The header's frame index differs from the identifier's.
+    HeaderMismatch,
+    /// A continuation frame without its message's first frame, or with another alive
+    /// counter, or out of order.
+    OutOfSequence,
+    /// The message CRC does not match.
+    Crc,
+    /// A field is outside its plausible range.
+    OutOfRange(Field),
+    /// The sender's address differs from the id in the message.
+    SenderMismatch,
+    /// Same alive counter as the last accepted message of this sender and kind.
+    Duplicate,
+    /// Time stamp not newer than the last accepted state of this sender.
+    Stale,
+    /// The reassembler tracks as many senders as it can hold.
+    Full,
+}
+
+fn q<F: Real>(x: F, res: f64, lo: f64, hi: f64, field: Field) -> Result<i64, EncodeError> {
+    let v = x.to_f64() / res;
+    if !(v.is_finite() && v >= lo && v <= hi) {
+        return Err(EncodeError::OutOfRange(field));
+    }
+    // Round half away from zero without std.
+    Ok(if v >= 0.0 {
+        (v + 0.5) as i64
+    } else {
+        (v - 0.5) as i64
+    })
+}
+
+fn lane_nibble(l: Option<u8>) -> Result<u8, EncodeError> {
+    match l {
+        None => Ok(NO_LANE),
+        Some(x) if x < NO_LANE => Ok(x),
+        Some(_) => Err(EncodeError::OutOfRange(Field::Lane)),
+    }
+}
+
+fn time<F: Real>(t: F) -> Result<u32, EncodeError> {
+    Ok(q(t, TIME_RES, 0.0, f64::from(u32::MAX), Field::Time)? as u32)
+}
+
+/// The payload bytes of a message (without CRC), and their length.
+fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize), EncodeError> {
+    let mut b = [0u8; MAX_FRAMES * CHUNK];
+    let mut w = Writer { b: &mut b, at: 0 };
+    match m {
+        Message::State(s) => {
+            // Frame 0: id, x, lanes; frame 1: y, heading, speed, β; frame 2: yaw rate,
+            // stamp, CRC (no field straddles two frames).
+            w.put(&s.id.to_le_bytes());
+            w.put(
+                &(q(
+                    s.x,
+                    POS_RES,
+                    f64::from(i32::MIN),
+                    f64::from(i32::MAX),
+                    Field::X,
+                )? as i32)
+                    .to_le_bytes(),
+            );
+            w.put(&[lane_nibble(Some(s.lane))? | lane_nibble(s.alpha)? << 4]);
+            w.put(&(q(s.y, POS_RES, -32768.0, 32767.0, Field::Y)? as i16).to_le_bytes());
+            let pi = core::f64::consts::PI;
+            let th = s.theta.to_f64();
+            // Wrap into (−π, π] so any heading fits the i16 field.
+            let th = th - 2.0 * pi * libm_floor((th + pi) / (2.0 * pi));
+            w.put(
+                &(q(
+                    F::from_f64(th),
+                    HEADING_RES,
+                    -32768.0,
+                    32767.0,
+                    Field::Heading,
+                )? as i16)
+                    .to_le_bytes(),
+            );
+            w.put(&(q(s.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16).to_le_bytes());
+            w.put(&[lane_nibble(s.beta)?]);
+            w.put(
+                &(q(s.omega, YAW_RATE_RES, -32768.0, 32767.0, Field::YawRate)? as i16)
+                    .to_le_bytes(),
+            );
+            w.put(&time(s.stamp)?.to_le_bytes());
+        }
+        Message::Request(r) => {
+            let track = |t: TrackWire| {
+                if t.heading < 4 && t.lane < 16 {
+                    Ok(t.heading | t.lane << 4)
+                } else {
+                    Err(EncodeError::OutOfRange(Field::TrackHeading))
+                }
+            };
+            // Frame 0: id, inlet, outlet, s; frame 1: arrival, speed, CRC.
+            w.put(&r.id.to_le_bytes());
+            w.put(&[track(r.inlet)?, track(r.outlet)?]);
+            let s = q(
+                r.s,
+                POS_RES,
+                0.0,
+                f64::from(0xFF_FFFFu32),
+                Field::PathPosition,
+            )? as u32;
+            w.put(s.to_le_bytes().get(..3).unwrap_or(&[0, 0, 0]));
+            w.put(&time(r.arrival)?.to_le_bytes());
+            w.put(&(q(r.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16).to_le_bytes());
+        }
+        Message::Grant { id, until: t }
+        | Message::Revoke { id, at: t }
+        | Message::Exit { id, at: t } => {
+            w.put(&id.to_le_bytes());
+            w.put(&time(*t)?.to_le_bytes());
+        }
+    }
+    let n = w.at;
+    Ok((b, n))
+}
+
+fn libm_floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+struct Writer<'a> {
+    b: &'a mut [u8; MAX_FRAMES * CHUNK],
+    at: usize,
+}
+
+impl Writer<'_> {
+    fn put(&mut self, bytes: &[u8]) {
+        for &x in bytes {
+            if let Some(slot) = self.b.get_mut(self.at) {
+                *slot = x;
+            }
+            self.at += 1;
+        }
+    }
+}
+
+/// The E2E CRC of a message: Data ID (kind code, source address), counter, payload.
+fn message_crc(kind: MessageKind, sa: u8, counter: u8, payload: &[u8]) -> u8 {
+    let c = crc::update(crc::INIT, &[kind as u8, sa, counter & 0x0F]);
+    crc::finish(crc::update(c, payload))
+}
+
+/// Encodes `msg`, sent by node `sa` with alive counter `counter` (taken mod 16), into
+/// its frames.
+pub fn encode<F: Real, Fr: Frame>(
+    msg: &Message<F>,
+    sa: u8,
+    counter: u8,
+) -> Result<Frames<Fr>, EncodeError> {
+    let kind = msg.kind();
+    let (mut bytes, n) = payload(msg)?;
+    let total = kind.frames() * CHUNK;
+    // Payload, zero padding, CRC in the last byte.
+    let crc = message_crc(kind, sa, counter, bytes.get(..total - 1).unwrap_or(&[]));
+    let _ = n;
+    if let Some(last) = bytes.get_mut(total - 1) {
+        *last = crc;
+    }
+    let mut out = Frames::new();
+    for i in 0..kind.frames() {
+        let mut data = [0u8; 8];
+        data[0] = (i as u8) << 4 | (counter & 0x0F);
+        if let (Some(dst), Some(src)) = (data.get_mut(1..), bytes.get(i * CHUNK..(i + 1) * CHUNK)) {
+            dst.copy_from_slice(src);
+        }
+        let id = ExtendedId::new(frame_id(kind, i as u8, sa)).ok_or(EncodeError::Frame)?;
+        let f = Fr::new(Id::Extended(id), &data).ok_or(EncodeError::Frame)?;
+        out.push(f).map_err(|_| EncodeError::Frame)?;
+    }
+    Ok(out)
+}
+
+/// Reassembly and acceptance state for one sender and kind.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Slot {
+    sa: u8,
+    kind: MessageKind,
+    /// Counter of the message being reassembled and frames seen (bit i = frame i).
+    partial: Option<(u8, u8)>,
+    bytes: [u8; MAX_FRAMES * CHUNK],
+    /// Counter of the last accepted message.
+    last_counter: Option<u8>,
+    /// Stamp of the last accepted state (ms).
+    last_stamp: Option<u32>,
+}
+
+/// Reassembles frames into verified messages, for up to `CAP` (sender, kind) pairs.
+#[derive(Debug, Clone)]
+pub struct Reassembler<const CAP: usize> {
+    slots: Vec<Slot, CAP>,
+}
+
+impl<const CAP: usize> Default for Reassembler<CAP> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+fn rd_u16(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([
+        b.get(at).copied().unwrap_or(0),
+        b.get(at + 1).copied().unwrap_or(0),
+    ])
+}
+fn rd_u32(b: &[u8], at: usize) -> u32 {
+    u32::from(rd_u16(b, at)) | u32::from(rd_u16(b, at + 2)) << 16
+}
+
+impl<const CAP: usize> Reassembler<CAP> {
+    /// An empty reassembler.
+    pub fn new() -> Self {
+        Self { slots: Vec::new() }
+    }
+
+    /// Takes one received frame.
+    pub fn push<F: Real, Fr: Frame>(
+        &mut self,
+        frame: &Fr,
+    ) -> Result<Option<Message<F>>, DecodeError> {
+        let raw = match frame.id() {
+            Id::Extended(e) if !frame.is_remote_frame() => e.as_raw(),
+            _ => return Err(DecodeError::NotOurs),
+        };
+        let (code, index, sa) = split_id(raw).ok_or(DecodeError::ForeignId)?;
+        let kind = MessageKind::from_code(code).ok_or(DecodeError::UnknownKind(code))?;
+        let n = kind.frames();
+        if usize::from(index) >= n {
+            return Err(DecodeError::BadFrameIndex);
+        }
+        let data = frame.data();
+        if data.len() != 8 {
+            return Err(DecodeError::BadLength);
+        }
+        let header = data.first().copied().unwrap_or(0);
+        if header >> 4 != index {
+            return Err(DecodeError::HeaderMismatch);
+        }
+        let counter = header & 0x0F;
+        // Work on a copy: an error must leave the reassembler unchanged.
+        let pos = self.slots.iter().position(|s| s.sa == sa && s.kind == kind);
+        let mut slot = match pos.and_then(|i| self.slots.get(i)) {
+            Some(s) => *s,
+            None => Slot {
+                sa,
+                kind,
+                partial: None,
+                bytes: [0; MAX_FRAMES * CHUNK],
+                last_counter: None,
+                last_stamp: None,
+            },
+        };
+        let seen = match (index, slot.partial) {
+            (0, _) => 0u8,
+            (i, Some((c, seen))) if c == counter && seen == (1u8 << i) - 1 => seen,
+            _ => return Err(DecodeError::OutOfSequence),
+        };
+        let at = usize::from(index) * CHUNK;
+        if let (Some(dst), Some(src)) = (slot.bytes.get_mut(at..at + CHUNK), data.get(1..)) {
+            dst.copy_from_slice(src);
+        }
+        let seen = seen | 1 << index;
+        let mut result = None;
+        if usize::from(index) + 1 < n {
+            slot.partial = Some((counter, seen));
+        } else {
+            slot.partial = None;
+            let total = n * CHUNK;
+            let body = slot.bytes.get(..total - 1).unwrap_or(&[]);
+            let crc = slot.bytes.get(total - 1).copied().unwrap_or(0);
+            if message_crc(kind, sa, counter, body) != crc {
+                return Err(DecodeError::Crc);
+            }
+            if slot.last_counter == Some(counter) {
+                return Err(DecodeError::Duplicate);
+            }
+            let msg = decode_body::<F>(kind, body)?;
+            let sender_ok = match &msg {
+                Message::State(s) => s.id & 0xFF == u16::from(sa),
+                Message::Request(r) => r.id & 0xFF == u16::from(sa),
+                Message::Exit { id, .. } => id & 0xFF == u16::from(sa),
+                // Grants and revokes come from the intersection about another vehicle.
+                Message::Grant { .. } | Message::Revoke { .. } => true,
+            };
+            if !sender_ok {
+                return Err(DecodeError::SenderMismatch);
+            }
+            if kind == MessageKind::State {
+                let stamp = rd_u32(body, 16);
+                if slot.last_stamp.is_some_and(|l| stamp <= l) {
+                    return Err(DecodeError::Stale);
+                }
+                slot.last_stamp = Some(stamp);
+            }
+            slot.last_counter = Some(counter);
+            result = Some(msg);
+        }
+        match pos.and_then(|i| self.slots.get_mut(i)) {
+            Some(s) => *s = slot,
+            None => self.slots.push(slot).map_err(|_| DecodeError::Full)?,
+        }
+        Ok(result)
+    }
+}
+
+fn lane(n: u8) -> Option<u8> {
+    (n != NO_LANE).then_some(n)
+}
+
+/// Decodes a verified payload and checks plausibility.
+fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, DecodeError> {
+    let f = |x: f64| F::from_f64(x);
+    let byte = |i: usize| b.get(i).copied().unwrap_or(0);
+    Ok(match kind {
+        MessageKind::State => {
+            let lanes = byte(6);
+            let v = f64::from(rd_u16(b, 11)) * SPEED_RES;
+            if v > SPEED_LIMIT {
+                return Err(DecodeError::OutOfRange(Field::Speed));
+            }
+            let own = lanes & 0x0F;
+            if own == NO_LANE {
+                return Err(DecodeError::OutOfRange(Field::Lane));
+            }
+            if byte(13) & 0xF0 != 0 {
+                return Err(DecodeError::OutOfRange(Field::Lane));
+            }
+            let th = f64::from(rd_u16(b, 9) as i16) * HEADING_RES;
+            if th.abs() > core::f64::consts::PI + HEADING_RES {
+                return Err(DecodeError::OutOfRange(Field::Heading));
+            }
+            Message::State(VehicleState {
+                id: rd_u16(b, 0),
+                x: f(f64::from(rd_u32(b, 2) as i32) * POS_RES),
+                y: f(f64::from(rd_u16(b, 7) as i16) * POS_RES),
+                theta: f(th),
+                v: f(v),
+                omega: f(f64::from(rd_u16(b, 14) as i16) * YAW_RATE_RES),
+                lane: own,
+                alpha: lane(lanes >> 4),
+                beta: lane(byte(13)),
+                stamp: f(f64::from(rd_u32(b, 16)) * TIME_RES),
+            })
+        }
+        MessageKind::Request => {
+            let track = |x: u8| TrackWire {
+                heading: x & 0x0F,
+                lane: x >> 4,
+            };
+            let (inlet, outlet) = (track(byte(2)), track(byte(3)));
+            if inlet.heading > 3 || outlet.heading > 3 {
+                return Err(DecodeError::OutOfRange(Field::TrackHeading));
+            }
+            let s = u32::from(rd_u16(b, 4)) | u32::from(byte(6)) << 16;
+            let v = f64::from(rd_u16(b, 11)) * SPEED_RES;
+            if v > SPEED_LIMIT {
+                return Err(DecodeError::OutOfRange(Field::Speed));
+            }
+            Message::Request(Request {
+                id: rd_u16(b, 0),
+                inlet,
+                outlet,
+                arrival: f(f64::from(rd_u32(b, 7)) * TIME_RES),
+                s: f(f64::from(s) * POS_RES),
+                v: f(v),
+            })
+        }
+        MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit => {
+            let id = rd_u16(b, 0);
+            let t = f(f64::from(rd_u32(b, 2)) * TIME_RES);
+            match kind {
+                MessageKind::Grant => Message::Grant { id, until: t },
+                MessageKind::Revoke => Message::Revoke { id, at: t },
+                _ => Message::Exit { id, at: t },
+            }
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A minimal frame type for tests.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct TestFrame {
+        id: Id,
+        data: heapless::Vec<u8, 8>,
+        remote: bool,
+    }
+
+    impl Frame for TestFrame {
+        fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
+            Some(Self {
+                id: id.into(),
+                data: heapless::Vec::from_slice(data).ok()?,
+                remote: false,
+            })
+        }
+        fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
+            let _ = dlc;
+            Some(Self {
+                id: id.into(),
+                data: heapless::Vec::new(),
+                remote: true,
+            })
+        }
+        fn is_extended(&self) -> bool {
+            matches!(self.id, Id::Extended(_))
+        }
+        fn is_remote_frame(&self) -> bool {
+            self.remote
+        }
+        fn id(&self) -> Id {
+            self.id
+        }
+        fn dlc(&self) -> usize {
+            self.data.len()
+        }
+        fn data(&self) -> &[u8] {
+            &self.data
+        }
+    }
+
+    fn state() -> VehicleState<f64> {
+        VehicleState {
+            id: 0x0107,
+            x: 1234.56,
+            y: 5.4,
+            theta: -0.1234,
+            v: 15.02,
+            omega: 0.25,
+            lane: 2,
+            alpha: Some(1),
+            beta: None,
+            stamp: 12.34,
+        }
+    }
+
+    #[test]
+    fn round_trip_and_e2e_checks() {
+        let m = Message::State(state());
+        let frames: Frames<TestFrame> = encode(&m, 0x07, 3).unwrap();
+        assert_eq!(frames.len(), 3);
+        let mut r = Reassembler::<4>::new();
+        assert_eq!(r.push::<f64, _>(&frames[0]), Ok(None));
+        assert_eq!(r.push::<f64, _>(&frames[1]), Ok(None));
+        let Ok(Some(Message::State(s))) = r.push::<f64, _>(&frames[2]) else {
+            panic!("a state");
+        };
+        let e = state();
+        assert_eq!(
+            (s.id, s.lane, s.alpha, s.beta),
+            (e.id, e.lane, e.alpha, e.beta)
+        );
+        assert!((s.x - e.x).abs() <= 0.005 && (s.y - e.y).abs() <= 0.005);
+        assert!((s.v - e.v).abs() <= 0.01 && (s.stamp - e.stamp).abs() <= 0.0005);
+        assert!(
+            (s.theta - e.theta).abs() <= HEADING_RES && (s.omega - e.omega).abs() <= YAW_RATE_RES
+        );
+        // The same message again: duplicate (same counter), reassembler unchanged.
+        let before = r.clone().slots;
+        assert_eq!(r.push::<f64, _>(&frames[0]), Ok(None));
+        assert_eq!(r.push::<f64, _>(&frames[1]), Ok(None));
+        assert_eq!(r.push::<f64, _>(&frames[2]), Err(DecodeError::Duplicate));
+        // A newer counter but an older stamp: stale.
+        let mut old = state();
+        old.stamp = 1.0;
+        let frames: Frames<TestFrame> = encode(&Message::State(old), 0x07, 4).unwrap();
+        let _ = r.push::<f64, _>(&frames[0]);
+        let _ = r.push::<f64, _>(&frames[1]);
+        assert_eq!(r.push::<f64, _>(&frames[2]), Err(DecodeError::Stale));
+        assert_eq!(r.slots[0].last_counter, before[0].last_counter);
+        // A flipped bit: CRC.
+        let mut newer = state();
+        newer.stamp = 20.0;
+        let mut frames: Frames<TestFrame> = encode(&Message::State(newer), 0x07, 5).unwrap();
+        frames[1].data[3] ^= 0x10;
+        let _ = r.push::<f64, _>(&frames[0]);
+        let _ = r.push::<f64, _>(&frames[1]);
+        assert_eq!(r.push::<f64, _>(&frames[2]), Err(DecodeError::Crc));
+        // A continuation without its first frame.
+        let mut r2 = Reassembler::<4>::new();
+        assert_eq!(
+            r2.push::<f64, _>(&frames[2]),
+            Err(DecodeError::OutOfSequence)
+        );
+        // Sender address and id disagree.
+        let frames: Frames<TestFrame> = encode(&Message::State(state()), 0x08, 1).unwrap();
+        let _ = r2.push::<f64, _>(&frames[0]);
+        let _ = r2.push::<f64, _>(&frames[1]);
+        assert_eq!(
+            r2.push::<f64, _>(&frames[2]),
+            Err(DecodeError::SenderMismatch)
+        );
+    }
+
+    #[test]
+    fn intersection_messages_round_trip() {
+        let req = Request {
+            id: 9,
+            inlet: TrackWire {
+                heading: 2,
+                lane: 1,
+            },
+            outlet: TrackWire {
+                heading: 3,
+                lane: 1,
+            },
+            arrival: 3.5,
+            s: 97.25,
+            v: 13.9,
+        };
+        let mut r = Reassembler::<8>::new();
+        for (m, sa) in [
+            (Message::Request(req), 9u8),
+            (Message::Grant { id: 9, until: 4.0 }, 0),
+            (Message::Revoke { id: 9, at: 4.5 }, 0),
+            (Message::Exit { id: 9, at: 9.0 }, 9),
+        ] {
+            let frames: Frames<TestFrame> = encode(&m, sa, 0).unwrap();
+            let mut got = None;
+            for f in &frames {
+                got = r.push::<f64, _>(f).unwrap();
+            }
+            match (got.unwrap(), m) {
+                (Message::Request(a), Message::Request(b)) => {
+                    assert_eq!((a.id, a.inlet, a.outlet), (b.id, b.inlet, b.outlet));
+                    assert!((a.s - b.s).abs() < 0.006 && (a.arrival - b.arrival).abs() < 1e-9);
+                }
+                (a, b) => assert_eq!(a, b),
+            }
+        }
+        // Encoding refuses what a field cannot carry.
+        let mut s = state();
+        s.v = f64::NAN;
+        assert_eq!(
+            encode::<f64, TestFrame>(&Message::State(s), 7, 0).unwrap_err(),
+            EncodeError::OutOfRange(Field::Speed)
+        );
+        s = state();
+        s.lane = 15;
+        assert_eq!(
+            encode::<f64, TestFrame>(&Message::State(s), 7, 0).unwrap_err(),
+            EncodeError::OutOfRange(Field::Lane)
+        );
+    }
+
+    #[test]
+    fn foreign_frames_are_refused() {
+        let mut r = Reassembler::<2>::new();
+        let std_id = embedded_can::StandardId::new(0x123).unwrap();
+        let f = TestFrame::new(std_id, &[0; 8]).unwrap();
+        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::NotOurs));
+        let f = TestFrame::new(ExtendedId::new(0x18FEF100).unwrap(), &[0; 8]).unwrap();
+        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::ForeignId));
+        let f = TestFrame::new(
+            ExtendedId::new(frame_id(MessageKind::Grant, 0, 0)).unwrap(),
+            &[0; 5],
+        )
+        .unwrap();
+        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::BadLength));
+        let f = TestFrame::new(
+            ExtendedId::new(frame_id(MessageKind::Grant, 1, 0)).unwrap(),
+            &[0x10; 8],
+        )
+        .unwrap();
+        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::BadFrameIndex));
+        let raw = 6 << 26 | 0xFF << 16 | 0x90 << 8 | 1;
+        let f = TestFrame::new(ExtendedId::new(raw).unwrap(), &[0; 8]).unwrap();
+        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::UnknownKind(9)));
+        assert!(r.slots.is_empty());
+    }
+}

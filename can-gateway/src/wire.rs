@@ -1,0 +1,166 @@
+//! Frame layout, units and resolutions.
+//!
+//! **Identifiers**: 29-bit extended, laid out like SAE J1939 so that J1939 tools parse
+//! them: priority 6 (bits 28–26), data page 0, PDU format 0xFF (broadcast, PDU2), PDU
+//! specific = kind code × 16 + frame index, source address = the sender's node id
+//! (low byte). A message kind and frame index thus form a PGN 0xFF00 + PS.
+//!
+//! **Frames**: 8 data bytes. Byte 0: frame index (high nibble) and the message's alive
+//! counter (low nibble, 0–15, incremented per message and sender and kind). Bytes 1–7:
+//! payload. The last payload byte of a message is its CRC-8 SAE J1850 over the Data ID
+//! (the kind code and the source address), the counter and every other payload byte —
+//! AUTOSAR E2E in the manner of profile 1. Messages longer than 7 bytes span several
+//! frames sent in index order; the receiver reassembles them.
+//!
+//! **Units** (SAE J2735 BSM resolutions where they fit): speed 0.02 m/s (u16), heading
+//! 0.0125° (i16), yaw rate 0.01°/s (i16); positions in road coordinates, x 0.01 m (i32),
+//! y 0.01 m (i16), position along an intersection path 0.01 m (u24); times 1 ms (u32, the
+//! sender's clock); lanes 4 bits, 15 = none. All little-endian.
+
+use planner_core::VehicleState;
+
+/// J1939 priority of every frame.
+pub const PRIORITY: u32 = 6;
+/// J1939 PDU format (broadcast).
+pub const PDU_FORMAT: u32 = 0xFF;
+/// Payload bytes per frame (byte 0 is the header).
+pub const CHUNK: usize = 7;
+/// The most frames a message spans.
+pub const MAX_FRAMES: usize = 3;
+/// "No lane" in a 4-bit lane field.
+pub const NO_LANE: u8 = 15;
+
+/// Speed resolution (m/s per bit), SAE J2735.
+pub const SPEED_RES: f64 = 0.02;
+/// Heading resolution (rad per bit): 0.0125°, SAE J2735.
+pub const HEADING_RES: f64 = 0.0125 * core::f64::consts::PI / 180.0;
+/// Yaw-rate resolution (rad/s per bit): 0.01°/s, SAE J2735.
+pub const YAW_RATE_RES: f64 = 0.01 * core::f64::consts::PI / 180.0;
+/// Position resolution (m per bit).
+pub const POS_RES: f64 = 0.01;
+/// Time resolution (s per bit).
+pub const TIME_RES: f64 = 0.001;
+/// Largest plausible speed a receiver accepts (m/s): well above any road vehicle's.
+pub const SPEED_LIMIT: f64 = 100.0;
+
+/// Message kinds and their codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MessageKind {
+    /// V2V vehicle state (3 frames).
+    State = 1,
+    /// V2I registration / crossing request with inlet, outlet, arrival (2 frames).
+    Request = 2,
+    /// I2V grant with a lease (1 frame).
+    Grant = 3,
+    /// I2V revoke (1 frame).
+    Revoke = 4,
+    /// V2I exit (1 frame).
+    Exit = 5,
+}
+
+impl MessageKind {
+    /// Frames a message of this kind spans.
+    pub fn frames(self) -> usize {
+        match self {
+            MessageKind::State => 3,
+            MessageKind::Request => 2,
+            MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit => 1,
+        }
+    }
+    /// From its code.
+    pub fn from_code(c: u8) -> Option<Self> {
+        Some(match c {
+            1 => MessageKind::State,
+            2 => MessageKind::Request,
+            3 => MessageKind::Grant,
+            4 => MessageKind::Revoke,
+            5 => MessageKind::Exit,
+            _ => return None,
+        })
+    }
+}
+
+/// An intersection track: heading of travel (0 east … 3 south) and lane (0 inner).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TrackWire {
+    /// Heading, 0–3.
+    pub heading: u8,
+    /// Lane, 0–15.
+    pub lane: u8,
+}
+
+/// A registration / crossing request (V2I).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Request<F> {
+    /// The vehicle.
+    pub id: u16,
+    /// Its inlet.
+    pub inlet: TrackWire,
+    /// Its outlet.
+    pub outlet: TrackWire,
+    /// When it entered A_C (sender's clock, s).
+    pub arrival: F,
+    /// Its position along its route's path (m).
+    pub s: F,
+    /// Its speed (m/s).
+    pub v: F,
+}
+
+/// Every message the planners exchange.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Message<F> {
+    /// Vehicle state (V2V).
+    State(VehicleState<F>),
+    /// Registration / crossing request (V2I).
+    Request(Request<F>),
+    /// Permission for `id` until `until` (I2V lease, intersection clock, s).
+    Grant {
+        /// The permitted vehicle.
+        id: u16,
+        /// Lease end (s).
+        until: F,
+    },
+    /// Permission of `id` withdrawn at `at` (s).
+    Revoke {
+        /// The vehicle.
+        id: u16,
+        /// When (s).
+        at: F,
+    },
+    /// `id` left the intersection area at `at` (s).
+    Exit {
+        /// The vehicle.
+        id: u16,
+        /// When (s).
+        at: F,
+    },
+}
+
+impl<F> Message<F> {
+    /// Its kind.
+    pub fn kind(&self) -> MessageKind {
+        match self {
+            Message::State(_) => MessageKind::State,
+            Message::Request(_) => MessageKind::Request,
+            Message::Grant { .. } => MessageKind::Grant,
+            Message::Revoke { .. } => MessageKind::Revoke,
+            Message::Exit { .. } => MessageKind::Exit,
+        }
+    }
+}
+
+/// The 29-bit identifier of frame `index` of a `kind` message from node `sa`.
+pub fn frame_id(kind: MessageKind, index: u8, sa: u8) -> u32 {
+    let ps = (kind as u32) << 4 | u32::from(index & 0x0F);
+    PRIORITY << 26 | PDU_FORMAT << 16 | ps << 8 | u32::from(sa)
+}
+
+/// Splits a 29-bit identifier into (kind code, frame index, source address) if it has
+/// this protocol's priority, data page and PDU format.
+pub fn split_id(raw: u32) -> Option<(u8, u8, u8)> {
+    if raw >> 26 != PRIORITY || (raw >> 16) & 0x3FF != PDU_FORMAT {
+        return None;
+    }
+    let ps = ((raw >> 8) & 0xFF) as u8;
+    Some((ps >> 4, ps & 0x0F, (raw & 0xFF) as u8))
+}

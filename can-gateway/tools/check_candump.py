@@ -1,0 +1,63 @@
+#!/usr/bin/env python3
+"""Decodes a candump -l log written by can-gateway with cantools and the DBC, checks
+every frame's CRC-8 SAE J1850 independently, and compares the decoded physical values
+with the expected ones (JSON lines: {"frame": i, "signals": {name: value}}), within
+half a resolution step. Exit 0 on success, 1 with a message on the first mismatch."""
+import json
+import sys
+
+import cantools
+
+
+def crc8_j1850(data: bytes, crc: int = 0xFF) -> int:
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc
+
+
+def main(dbc_path: str, log_path: str, expected_path: str) -> int:
+    db = cantools.database.load_file(dbc_path, frame_id_mask=0x1FFFFF00)
+    frames = []
+    for line in open(log_path):
+        line = line.strip()
+        if not line:
+            continue
+        _ts, _iface, frame = line.split()
+        can_id, data = frame.split("#")
+        frames.append((int(can_id, 16), bytes.fromhex(data)))
+    expected = [json.loads(l) for l in open(expected_path) if l.strip()]
+    # Reassemble messages per sender, kind and counter to check their CRC.
+    pending = {}
+    for can_id, data in frames:
+        kind, index, sa = (can_id >> 12) & 0x0F, (can_id >> 8) & 0x0F, can_id & 0xFF
+        counter = data[0] & 0x0F
+        n = {1: 3, 2: 2}.get(kind, 1)
+        key = (sa, kind)
+        if index == 0:
+            pending[key] = b""
+        pending[key] = pending.get(key, b"") + data[1:]
+        if index == n - 1:
+            body = pending.pop(key)
+            want = crc8_j1850(bytes([kind, sa, counter]) + body[:-1]) ^ 0xFF
+            if want != body[-1]:
+                print(f"CRC mismatch in message kind {kind} from {sa}: {body[-1]:#04x} != {want:#04x}")
+                return 1
+    checked = 0
+    for exp in expected:
+        can_id, data = frames[exp["frame"]]
+        msg = db.get_message_by_frame_id(can_id)
+        got = msg.decode(data, decode_choices=False)
+        for name, value in exp["signals"].items():
+            sig = msg.get_signal_by_name(name)
+            if abs(got[name] - value) > sig.scale / 2 + 1e-9:
+                print(f"frame {exp['frame']} {msg.name}.{name}: cantools {got[name]} != {value}")
+                return 1
+            checked += 1
+    print(f"cantools decoded {len(frames)} frames; {checked} signals match")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(*sys.argv[1:4]))
