@@ -38,6 +38,11 @@ pub const HEADING_MARGIN_RAD: f64 = 0.01;
 /// Shortest lane-change reference (m): a quintic S-curve over 3.6 m is steeper than
 /// θmax = π/6 below ~13 m; 16 m keeps its heading ≤ 0.4 rad.
 pub const MIN_CHANGE_LENGTH_M: f64 = 16.0;
+/// Age (s) beyond which a vehicle's data counts as stale (SPEC §9): a lane change does
+/// not start while any vehicle behind in the target lane is known only from data this
+/// old. 0.25 s is 25 periods: far beyond the in-process bus (age 0) and a CAN bus with
+/// tens of ms of delay, yet short next to the seconds a lane change takes.
+pub const STALE_AFTER_S: f64 = 0.25;
 /// The longest braking tail the certificate simulates: vmax/(|amin| h) steps is 352 for
 /// Table I; the cap makes the loop bounded for any validated parameters.
 pub const MAX_TAIL_STEPS: usize = 8192;
@@ -311,8 +316,11 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         if !safety::invariant_holds(p, obs.v_prev, gap - F::SAFETY_MARGIN_M) {
             return false;
         }
-        // (17) for every c ∈ C⁻_t.
+        // (17) for every c ∈ C⁻_t; stale data behind blocks the start (SPEC §9).
         for c in obs.others.iter().filter(|c| in_behind_set(x, m, c)) {
+            if !(c.age <= F::from_f64(STALE_AFTER_S)) {
+                return false;
+            }
             let reach = c.age * p.v_max();
             let v = (c.v + c.age * p.a_max()).min(p.v_max());
             let room = x - F::HALF * (c.length + len) - p.d0() - c.x - reach - F::SAFETY_MARGIN_M;

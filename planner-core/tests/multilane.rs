@@ -208,6 +208,21 @@ fn every_vehicle_behind_is_checked() {
     }
 }
 
+/// SPEC §9: a vehicle behind in the target lane known only from stale data blocks the
+/// start, however far back it is.
+#[test]
+fn stale_data_behind_blocks_a_start() {
+    for (age, starts) in [(0.0, true), (0.3, false)] {
+        let mut far = other(2, -200.0, 0.0, 1);
+        far.age = age;
+        let others = [far];
+        let mut pl = LanePlanner::<f64, 20>::new(p(), CostWeights::default(), 0).unwrap();
+        pl.step(&obs(0.0, 1.8, 15.0, &others, 1)).unwrap();
+        let c = pl.step(&obs(0.15, 1.8, 15.0, &others, 1)).unwrap();
+        assert_eq!(c.event == Some(LaneEvent::Started(1)), starts, "age {age}");
+    }
+}
+
 /// The Yield Protocol: a vehicle ahead in ≺ (same x, higher lane) that intends to enter
 /// my lane is my leader; I brake (and stay safe), it does not.
 #[test]
