@@ -63,7 +63,6 @@ struct Car {
     planner: Box<CrossingPlanner<f64, HORIZON, MANAGER_CAP>>,
     arrived_at: Option<f64>,
     left_as_at: Option<f64>,
-    waited_s: f64,
 }
 
 /// A vehicle to place.
@@ -184,7 +183,6 @@ impl CrossingSim {
             )),
             arrived_at: None,
             left_as_at: None,
-            waited_s: 0.0,
         }
     }
 
@@ -295,9 +293,6 @@ impl CrossingSim {
                     planner_core::safety::max_braking_command(&self.params, c.v)
                 }
             };
-            if !permitted && c.arrived_at.is_some() {
-                c.waited_s += h;
-            }
             commands.push(v);
         }
         // 4. Move along the paths; bookkeeping of arrivals and departures.

@@ -5,7 +5,7 @@
 //! Sans-IO and bounded: the manager is fed vehicle reports and the time, and answers
 //! which vehicles hold a permission; it tracks at most `CAP` vehicles.
 
-use crate::intersection::{Layout, CONFLICT_SAMPLE_M, ROUTES};
+use crate::intersection::{Layout, CONFLICT_SAMPLE_M};
 use crate::real::Real;
 use core::cmp::Ordering;
 use heapless::Vec;
@@ -357,11 +357,6 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
         true
     }
-}
-
-/// Routes of the layout, for convenience.
-pub const fn route_count() -> usize {
-    ROUTES
 }
 
 /// The vehicle side of the Intersection-Crossing Protocol: one vehicle's planner along
