@@ -428,93 +428,101 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let free = free_road_gap(&p, N);
         let gap_all = all.map_or(free, |g| g.min(free));
         let gap_safe = safe.map_or(free, |g| g.min(free));
-        let fs = FreeSpace::new(&p, obs.pose, obs.v_prev, obs.omega_prev, band, gap_all);
-        let Ok(fs) = fs else {
-            return Ok(self.fallback(obs, FallbackReason::Lateral, gap_all, event));
-        };
-        let cmd = self
-            .speed
-            .step_gap(obs.v_prev, fs.d_h, obs.target, obs.v_ref)
-            .map_err(LaneInputError::Speed)?;
-        match cmd.status {
-            StepStatus::Solved { .. } => {}
-            StepStatus::Fallback(FallbackReason::InvariantViolated) => {
-                // Still safe toward (15) and inside the band: the (21) set made it fail.
-                let d_safe = fs.d_h_hat.map_or(gap_safe, |d| d.min(gap_safe));
-                let why = if safety::invariant_holds(&p, obs.v_prev, d_safe - F::SAFETY_MARGIN_M) {
-                    FallbackReason::Yield
-                } else {
-                    FallbackReason::InvariantViolated
-                };
-                return Ok(self.fallback(obs, why, fs.d_h, event));
-            }
-            StepStatus::Fallback(why) => return Ok(self.fallback(obs, why, fs.d_h, event)),
-        }
-        let v_plan = match self.speed.plan() {
-            Some(v) => *v,
-            None => return Ok(self.fallback(obs, FallbackReason::Lateral, fs.d_h, event)),
-        };
-        // Lane keeping on the centre line, straight: no steering needed (and a one-lane
-        // road reduces exactly to the single-lane planner).
+        // Lane keeping on the centre line, straight: no steering is needed, the free space
+        // ahead is the whole gap (d̂H = ∞), and a one-lane road reduces exactly to the
+        // single-lane planner; the free-space geometry is skipped.
         let centre = obs.road.lane_centre(self.lane);
         let straight = self.alpha.is_none()
             && obs.pose.theta == F::ZERO
             && obs.omega_prev == F::ZERO
             && obs.pose.y == centre;
-        let mut lateral_iterations = 0;
-        let omega = if straight {
-            [F::ZERO; N]
+        let fs = if straight {
+            None
         } else {
-            let mut y_ref = [F::ZERO; N];
-            let mut th_ref = [F::ZERO; N];
-            let mut lo = [F::ZERO; N];
-            let mut hi = [F::ZERO; N];
-            let mut x = obs.pose.x;
-            for (k, &vk) in v_plan.iter().enumerate() {
-                x += vk * p.h();
-                let (y, th) = match self.reference {
-                    Some(r) => r.at(x),
-                    None => (centre, F::ZERO),
-                };
-                let (l, u) = fs.omega_bounds(vk);
-                if let (Some(a), Some(b), Some(c), Some(d)) = (
-                    y_ref.get_mut(k),
-                    th_ref.get_mut(k),
-                    lo.get_mut(k),
-                    hi.get_mut(k),
-                ) {
-                    *a = y;
-                    *b = th;
-                    *c = l;
-                    *d = u;
-                }
+            match FreeSpace::new(&p, obs.pose, obs.v_prev, obs.omega_prev, band, gap_all) {
+                Ok(fs) => Some(fs),
+                Err(_) => return Ok(self.fallback(obs, FallbackReason::Lateral, gap_all, event)),
             }
-            let nominal = crate::planner::shifted(&self.omega_plan);
-            let margin = F::from_f64(LATERAL_MARGIN_M);
-            let tm = F::from_f64(HEADING_MARGIN_RAD);
-            let input = LateralInput {
-                h: p.h(),
-                y: obs.pose.y,
-                theta: obs.pose.theta,
-                omega_prev: obs.omega_prev,
-                v: &v_plan,
-                omega_nominal: &nominal,
-                y_ref: &y_ref,
-                theta_ref: &th_ref,
-                omega_lo: &lo,
-                omega_hi: &hi,
-                theta_bounds: (p.theta_min() + tm, p.theta_max() - tm),
-                band: (lanes.lo + margin, lanes.hi - margin),
-                half_length: F::HALF * p.length(),
-                half_width: F::HALF * p.width(),
-                weights: self.lateral_weights,
-            };
-            match solve_lateral(&input) {
-                Ok((w, it)) => {
-                    lateral_iterations = it;
-                    clamp_to_omega(&fs, &v_plan, w)
+        };
+        let d_h = fs.map_or(gap_all, |f| f.d_h);
+        let d_h_hat = fs.and_then(|f| f.d_h_hat);
+        let cmd = self
+            .speed
+            .step_gap(obs.v_prev, d_h, obs.target, obs.v_ref)
+            .map_err(LaneInputError::Speed)?;
+        match cmd.status {
+            StepStatus::Solved { .. } => {}
+            StepStatus::Fallback(FallbackReason::InvariantViolated) => {
+                // Still safe toward (15) and inside the band: the (21) set made it fail.
+                let d_safe = d_h_hat.map_or(gap_safe, |d| d.min(gap_safe));
+                let why = if safety::invariant_holds(&p, obs.v_prev, d_safe - F::SAFETY_MARGIN_M) {
+                    FallbackReason::Yield
+                } else {
+                    FallbackReason::InvariantViolated
+                };
+                return Ok(self.fallback(obs, why, d_h, event));
+            }
+            StepStatus::Fallback(why) => return Ok(self.fallback(obs, why, d_h, event)),
+        }
+        let v_plan = match self.speed.plan() {
+            Some(v) => *v,
+            None => return Ok(self.fallback(obs, FallbackReason::Lateral, d_h, event)),
+        };
+        let mut lateral_iterations = 0;
+        let omega = match fs {
+            None => [F::ZERO; N],
+            Some(fs) => {
+                let mut y_ref = [F::ZERO; N];
+                let mut th_ref = [F::ZERO; N];
+                let mut lo = [F::ZERO; N];
+                let mut hi = [F::ZERO; N];
+                let mut x = obs.pose.x;
+                for (k, &vk) in v_plan.iter().enumerate() {
+                    x += vk * p.h();
+                    let (y, th) = match self.reference {
+                        Some(r) => r.at(x),
+                        None => (centre, F::ZERO),
+                    };
+                    let (l, u) = fs.omega_bounds(vk);
+                    if let (Some(a), Some(b), Some(c), Some(d)) = (
+                        y_ref.get_mut(k),
+                        th_ref.get_mut(k),
+                        lo.get_mut(k),
+                        hi.get_mut(k),
+                    ) {
+                        *a = y;
+                        *b = th;
+                        *c = l;
+                        *d = u;
+                    }
                 }
-                Err(_) => straightening_plan(&p, obs.pose.theta, &v_plan),
+                let nominal = crate::planner::shifted(&self.omega_plan);
+                let margin = F::from_f64(LATERAL_MARGIN_M);
+                let tm = F::from_f64(HEADING_MARGIN_RAD);
+                let input = LateralInput {
+                    h: p.h(),
+                    y: obs.pose.y,
+                    theta: obs.pose.theta,
+                    omega_prev: obs.omega_prev,
+                    v: &v_plan,
+                    omega_nominal: &nominal,
+                    y_ref: &y_ref,
+                    theta_ref: &th_ref,
+                    omega_lo: &lo,
+                    omega_hi: &hi,
+                    theta_bounds: (p.theta_min() + tm, p.theta_max() - tm),
+                    band: (lanes.lo + margin, lanes.hi - margin),
+                    half_length: F::HALF * p.length(),
+                    half_width: F::HALF * p.width(),
+                    weights: self.lateral_weights,
+                };
+                match solve_lateral(&input) {
+                    Ok((w, it)) => {
+                        lateral_iterations = it;
+                        clamp_to_omega(&fs, &v_plan, w)
+                    }
+                    Err(_) => straightening_plan(&p, obs.pose.theta, &v_plan),
+                }
             }
         };
         let omega = if verify_lateral(&p, obs.pose, &v_plan, &omega, lanes) {
@@ -524,7 +532,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             if verify_lateral(&p, obs.pose, &v_plan, &alt, lanes) {
                 alt
             } else {
-                return Ok(self.fallback(obs, FallbackReason::Lateral, fs.d_h, event));
+                return Ok(self.fallback(obs, FallbackReason::Lateral, d_h, event));
             }
         };
         self.omega_plan = omega;
@@ -540,7 +548,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             alpha: self.alpha,
             beta: self.beta,
             event,
-            gap: fs.d_h,
+            gap: d_h,
             lateral_iterations,
         })
     }
