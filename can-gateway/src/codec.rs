@@ -452,46 +452,7 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
 mod tests {
     use super::*;
 
-    /// A minimal frame type for tests.
-    #[derive(Debug, Clone, PartialEq)]
-    pub struct TestFrame {
-        id: Id,
-        data: heapless::Vec<u8, 8>,
-        remote: bool,
-    }
-
-    impl Frame for TestFrame {
-        fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
-            Some(Self {
-                id: id.into(),
-                data: heapless::Vec::from_slice(data).ok()?,
-                remote: false,
-            })
-        }
-        fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
-            let _ = dlc;
-            Some(Self {
-                id: id.into(),
-                data: heapless::Vec::new(),
-                remote: true,
-            })
-        }
-        fn is_extended(&self) -> bool {
-            matches!(self.id, Id::Extended(_))
-        }
-        fn is_remote_frame(&self) -> bool {
-            self.remote
-        }
-        fn id(&self) -> Id {
-            self.id
-        }
-        fn dlc(&self) -> usize {
-            self.data.len()
-        }
-        fn data(&self) -> &[u8] {
-            &self.data
-        }
-    }
+    use crate::frame::PlainFrame as TestFrame;
 
     fn state() -> VehicleState<f64> {
         VehicleState {
@@ -546,7 +507,10 @@ mod tests {
         let mut newer = state();
         newer.stamp = 20.0;
         let mut frames: Frames<TestFrame> = encode(&Message::State(newer), 0x07, 5).unwrap();
-        frames[1].data[3] ^= 0x10;
+        let mut d = [0u8; 8];
+        d.copy_from_slice(frames[1].data());
+        d[3] ^= 0x10;
+        frames[1] = TestFrame::new(frames[1].id(), &d).unwrap();
         let _ = r.push::<f64, _>(&frames[0]);
         let _ = r.push::<f64, _>(&frames[1]);
         assert_eq!(r.push::<f64, _>(&frames[2]), Err(DecodeError::Crc));

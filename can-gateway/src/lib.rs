@@ -7,7 +7,9 @@
 //!
 //! - [`wire`]: the frame layout (29-bit J1939-style identifiers), units and resolutions;
 //! - [`crc`]: CRC-8 SAE J1850;
-//! - [`codec`]: encoding messages into frames and reassembling frames into messages.
+//! - [`codec`]: encoding messages into frames and reassembling frames into messages;
+//! - [`frame`]: a plain frame value for in-process buses, logs and tests;
+//! - [`log`]: `candump -l` lines.
 //!
 //! `can-gateway.dbc` (in this crate) describes every frame for standard tools.
 #![no_std]
@@ -28,8 +30,10 @@
 
 pub mod codec;
 pub mod crc;
+pub mod frame;
 pub mod log;
 pub mod wire;
 
 pub use codec::{encode, DecodeError, EncodeError, Frames, Reassembler};
+pub use frame::PlainFrame;
 pub use wire::{Message, MessageKind};

@@ -6,44 +6,12 @@
 use can_gateway::log::candump_line;
 use can_gateway::wire::{Request, TrackWire};
 use can_gateway::{encode, Frames, Message};
-use embedded_can::{Frame, Id};
 use planner_core::VehicleState;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
-#[derive(Debug, Clone)]
-struct F8 {
-    id: Id,
-    data: Vec<u8>,
-}
-
-impl Frame for F8 {
-    fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
-        Some(Self {
-            id: id.into(),
-            data: data.to_vec(),
-        })
-    }
-    fn new_remote(_: impl Into<Id>, _: usize) -> Option<Self> {
-        None
-    }
-    fn is_extended(&self) -> bool {
-        matches!(self.id, Id::Extended(_))
-    }
-    fn is_remote_frame(&self) -> bool {
-        false
-    }
-    fn id(&self) -> Id {
-        self.id
-    }
-    fn dlc(&self) -> usize {
-        self.data.len()
-    }
-    fn data(&self) -> &[u8] {
-        &self.data
-    }
-}
+use can_gateway::PlainFrame as F8;
 
 #[test]
 fn cantools_decodes_the_gateways_candump_log() {

@@ -10,44 +10,7 @@ use embedded_can::{ExtendedId, Frame, Id, StandardId};
 use planner_core::VehicleState;
 use proptest::prelude::*;
 
-#[derive(Debug, Clone, PartialEq)]
-struct F8 {
-    id: Id,
-    data: Vec<u8>,
-    remote: bool,
-}
-
-impl Frame for F8 {
-    fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
-        (data.len() <= 8).then(|| Self {
-            id: id.into(),
-            data: data.to_vec(),
-            remote: false,
-        })
-    }
-    fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
-        (dlc <= 8).then(|| Self {
-            id: id.into(),
-            data: vec![],
-            remote: true,
-        })
-    }
-    fn is_extended(&self) -> bool {
-        matches!(self.id, Id::Extended(_))
-    }
-    fn is_remote_frame(&self) -> bool {
-        self.remote
-    }
-    fn id(&self) -> Id {
-        self.id
-    }
-    fn dlc(&self) -> usize {
-        self.data.len()
-    }
-    fn data(&self) -> &[u8] {
-        &self.data
-    }
-}
+use can_gateway::PlainFrame as F8;
 
 fn any_frame() -> impl Strategy<Value = F8> {
     (
@@ -77,10 +40,10 @@ fn any_frame() -> impl Strategy<Value = F8> {
             } else {
                 Id::Extended(ExtendedId::new(raw & 0x1FFF_FFFF).expect("29 bits"))
             };
-            F8 {
-                id,
-                data,
-                remote: remote && !ours,
+            if remote && !ours {
+                F8::new_remote(id, data.len()).expect("dlc ≤ 8")
+            } else {
+                F8::new(id, &data).expect("≤ 8 bytes")
             }
         })
 }

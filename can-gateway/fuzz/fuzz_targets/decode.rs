@@ -8,44 +8,7 @@ use can_gateway::{Message, Reassembler};
 use embedded_can::{ExtendedId, Frame, Id, StandardId};
 use libfuzzer_sys::fuzz_target;
 
-#[derive(Debug, Clone)]
-struct F8 {
-    id: Id,
-    data: Vec<u8>,
-    remote: bool,
-}
-
-impl Frame for F8 {
-    fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
-        (data.len() <= 8).then(|| Self {
-            id: id.into(),
-            data: data.to_vec(),
-            remote: false,
-        })
-    }
-    fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
-        (dlc <= 8).then(|| Self {
-            id: id.into(),
-            data: vec![],
-            remote: true,
-        })
-    }
-    fn is_extended(&self) -> bool {
-        matches!(self.id, Id::Extended(_))
-    }
-    fn is_remote_frame(&self) -> bool {
-        self.remote
-    }
-    fn id(&self) -> Id {
-        self.id
-    }
-    fn dlc(&self) -> usize {
-        self.data.len()
-    }
-    fn data(&self) -> &[u8] {
-        &self.data
-    }
-}
+use can_gateway::PlainFrame;
 
 fuzz_target!(|bytes: &[u8]| {
     let mut r = Reassembler::<8>::new();
@@ -64,10 +27,10 @@ fuzz_target!(|bytes: &[u8]| {
         } else {
             Id::Standard(StandardId::new((raw & 0x7FF) as u16).unwrap())
         };
-        let frame = F8 {
-            id,
-            data: data.to_vec(),
-            remote: flags & 4 != 0,
+        let frame = if flags & 4 != 0 {
+            PlainFrame::new_remote(id, data.len()).unwrap()
+        } else {
+            PlainFrame::new(id, data).unwrap()
         };
         let before = format!("{r:?}");
         match r.push::<f64, _>(&frame) {
