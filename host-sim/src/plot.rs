@@ -58,27 +58,33 @@ fn register_font() -> Result<(), PlotError> {
         .map_err(|_| PlotError("embedded font rejected".into()))
 }
 
+/// Draws with `$draw(&root)` on a PNG or SVG backend of `$size` chosen by the path's
+/// extension, after registering the embedded font (both backends lay text out with it).
+macro_rules! render {
+    ($path:expr, $size:expr, |$root:ident| $draw:expr) => {{
+        register_font()?;
+        match $path.extension().and_then(|s| s.to_str()) {
+            Some("png") => {
+                let $root = BitMapBackend::new($path, $size).into_drawing_area();
+                $draw?;
+                $root.present().map_err(e)
+            }
+            Some("svg") => {
+                let $root = SVGBackend::new($path, $size).into_drawing_area();
+                $draw?;
+                $root.present().map_err(e)
+            }
+            _ => Err(PlotError(format!(
+                "{}: the plot file must end in .png or .svg",
+                $path.display()
+            ))),
+        }
+    }};
+}
+
 /// Writes the figure to `path` (PNG or SVG by extension).
 pub fn write(data: &PlotData, title: &str, path: &Path) -> Result<(), PlotError> {
-    let size = (1400, 900);
-    // Both backends lay text out with the registered font.
-    register_font()?;
-    match path.extension().and_then(|s| s.to_str()) {
-        Some("png") => {
-            let root = BitMapBackend::new(path, size).into_drawing_area();
-            draw(data, title, &root)?;
-            root.present().map_err(e)
-        }
-        Some("svg") => {
-            let root = SVGBackend::new(path, size).into_drawing_area();
-            draw(data, title, &root)?;
-            root.present().map_err(e)
-        }
-        _ => Err(PlotError(format!(
-            "{}: the plot file must end in .png or .svg",
-            path.display()
-        ))),
-    }
+    render!(path, (1400, 900), |root| draw(data, title, &root))
 }
 
 fn palette(i: usize) -> RGBColor {
@@ -228,24 +234,7 @@ where
 
 /// Fig. 9-style bars: vehicles crossed (mean ± std) and mean crossing time per algorithm.
 pub fn bars(r: &crate::intersection::ThroughputReport, path: &Path) -> Result<(), PlotError> {
-    register_font()?;
-    let size = (1200, 520);
-    match path.extension().and_then(|s| s.to_str()) {
-        Some("png") => {
-            let root = BitMapBackend::new(path, size).into_drawing_area();
-            draw_bars(r, &root)?;
-            root.present().map_err(e)
-        }
-        Some("svg") => {
-            let root = SVGBackend::new(path, size).into_drawing_area();
-            draw_bars(r, &root)?;
-            root.present().map_err(e)
-        }
-        _ => Err(PlotError(format!(
-            "{}: the plot file must end in .png or .svg",
-            path.display()
-        ))),
-    }
+    render!(path, (1200, 520), |root| draw_bars(r, &root))
 }
 
 fn draw_bars<DB: DrawingBackend>(
@@ -349,24 +338,9 @@ pub fn crossing(
     title: &str,
     path: &Path,
 ) -> Result<(), PlotError> {
-    register_font()?;
-    let size = (1500, 860);
-    match path.extension().and_then(|s| s.to_str()) {
-        Some("png") => {
-            let root = BitMapBackend::new(path, size).into_drawing_area();
-            draw_crossing(data, layout, title, &root)?;
-            root.present().map_err(e)
-        }
-        Some("svg") => {
-            let root = SVGBackend::new(path, size).into_drawing_area();
-            draw_crossing(data, layout, title, &root)?;
-            root.present().map_err(e)
-        }
-        _ => Err(PlotError(format!(
-            "{}: the plot file must end in .png or .svg",
-            path.display()
-        ))),
-    }
+    render!(path, (1500, 860), |root| draw_crossing(
+        data, layout, title, &root
+    ))
 }
 
 fn draw_crossing<DB: DrawingBackend>(
