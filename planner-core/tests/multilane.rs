@@ -278,3 +278,51 @@ fn bad_input_is_rejected_and_changes_nothing() {
         lane0
     ));
 }
+
+/// The same lane change planned in f32 (the Cortex-M4F precision) completes on the exact
+/// model without a fallback.
+#[test]
+fn lane_change_in_f32() {
+    let p32 = Params::<f32>::table_i();
+    let mut pl = LanePlanner::<f32, 20>::new(p32, CostWeights::default(), 0).unwrap();
+    let road = Road {
+        lanes: 2,
+        lane_width: 3.6f32,
+        end_x: None,
+    };
+    let (mut q, mut v, mut w) = (
+        Pose {
+            x: 0.0f32,
+            y: 1.8,
+            theta: 0.0,
+        },
+        15.0f32,
+        0.0f32,
+    );
+    for k in 0..1000 {
+        let o = LaneObservation {
+            pose: q,
+            v_prev: v,
+            omega_prev: w,
+            others: &[],
+            road,
+            target_lane: 1,
+            target: 0.0,
+            v_ref: 15.0,
+        };
+        let c = pl.step(&o).unwrap();
+        assert!(
+            matches!(c.status, StepStatus::Solved { .. }),
+            "step {k}: {:?}",
+            c.status
+        );
+        if c.event == Some(LaneEvent::Completed(1)) {
+            assert!((q.y - 5.4).abs() < 0.5);
+            return;
+        }
+        q = step(q, c.v, c.omega, 0.01);
+        v = c.v;
+        w = c.omega;
+    }
+    panic!("no completion in f32");
+}
