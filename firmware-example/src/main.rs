@@ -11,38 +11,13 @@
 #![no_std]
 #![no_main]
 
-use can_gateway::{encode, Frames, Message, PlainFrame, Reassembler};
+mod scenarios;
+
 use core::panic::PanicInfo;
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
-use embedded_can::{nb::Can, ErrorKind};
-use planner_core::{
-    CostWeights, FallbackReason, LaneEvent, LaneObservation, LanePlanner, Observation, Params,
-    Planner, Pose, Road, StepStatus, VehicleState, WorldView,
-};
-
-/// A CAN controller in loopback mode, as drivers offer for self-test: every frame it
-/// transmits arrives in its own receive FIFO (32 frames deep).
-struct LoopbackCan {
-    fifo: heapless::Deque<PlainFrame, 32>,
-}
-
-impl Can for LoopbackCan {
-    type Frame = PlainFrame;
-    type Error = ErrorKind;
-
-    fn transmit(&mut self, frame: &PlainFrame) -> nb::Result<Option<PlainFrame>, ErrorKind> {
-        self.fifo
-            .push_back(*frame)
-            .map_err(|_| nb::Error::WouldBlock)?;
-        Ok(None)
-    }
-
-    fn receive(&mut self) -> nb::Result<PlainFrame, ErrorKind> {
-        self.fifo.pop_front().ok_or(nb::Error::WouldBlock)
-    }
-}
+use scenarios::StepRecord;
 
 #[cfg(not(feature = "n50"))]
 const N: usize = 20;
@@ -101,7 +76,8 @@ fn peak_stack() -> usize {
     top - a
 }
 
-/// Ticks elapsed between two SysTick readings (it counts down, 24 bits).
+/// Ticks elapsed between two SysTick readings (it counts down, 24 bits; the calibration
+/// reads it directly).
 fn elapsed(start: u32, end: u32) -> u32 {
     start.wrapping_sub(end) & 0x00FF_FFFF
 }
@@ -153,99 +129,38 @@ fn main() -> ! {
     let per_tick = calibrate();
     hprintln!("calibration: {} instructions per SysTick tick", per_tick);
 
-    let params = Params::<f32>::table_i();
-    let Ok(mut planner) = Planner::<f32, N>::new(params, CostWeights::default()) else {
+    let mut now = || SYST::get_current().wrapping_neg() & 0x00FF_FFFF;
+    // Every command goes out as a `cmd` line (f32 bits in hex), for CI to compare with the
+    // host mirror step for step; timed steps go to the statistics.
+    let mut timed = 0usize;
+    let mut emit = |r: &StepRecord| {
+        hprintln!(
+            "cmd {} {} {:08x} {:08x}",
+            r.scenario,
+            r.k,
+            r.v.to_bits(),
+            r.omega.to_bits()
+        );
+        if r.timed {
+            record(timed, r.ticks & 0x00FF_FFFF);
+            timed += 1;
+        }
+        if r.scenario == 'A' && r.k.is_multiple_of(100) {
+            hprintln!("t={}ms x={} v={}", r.k * 10, r.position, r.v);
+        }
+    };
+    let Some(a) = scenarios::approach::<N>(&mut now, &mut emit) else {
         exit(false)
     };
-    // (1) A stopped car (id 1) 60 m ahead broadcasts its state every period; we (id 2)
-    // start at 15 m/s and know it only from the frames we receive.
-    let mut can = LoopbackCan {
-        fifo: heapless::Deque::new(),
-    };
-    let mut rx = Reassembler::<4>::new();
-    let mut world = WorldView::<f32, 4>::new(2);
-    let mut lane_buf = heapless::Vec::new();
-    let (mut x, mut v) = (0.0f32, 15.0f32);
-    let (mut solved, mut standstill, mut fallbacks) = (0u32, 0u32, 0u32);
-    let (mut timed, mut frames_in, mut rejected) = (0usize, 0u32, 0u32);
-    for step in 0..STEPS as u32 {
-        let now = step as f32 * params.h();
-        let leader = VehicleState {
-            id: 1,
-            x: 60.0f32,
-            y: 1.8,
-            theta: 0.0,
-            v: 0.0,
-            omega: 0.0,
-            lane: 0,
-            alpha: None,
-            beta: None,
-            stamp: now,
-        };
-        let Ok(out): Result<Frames<PlainFrame>, _> =
-            encode(&Message::State(leader), 1, (step % 16) as u8)
-        else {
-            exit(false)
-        };
-        for f in &out {
-            if can.transmit(f).is_err() {
-                exit(false);
-            }
-        }
-        while let Ok(f) = can.receive() {
-            frames_in += 1;
-            match rx.push::<f32, _>(&f) {
-                Ok(Some(Message::State(s))) => {
-                    if world.update(&s, now).is_err() {
-                        rejected += 1;
-                    }
-                }
-                Ok(_) => {}
-                Err(_) => rejected += 1,
-            }
-        }
-        world.lane_vehicles(0, 4.5, &mut lane_buf);
-        let obs = Observation {
-            x,
-            v_prev: v,
-            vehicles: &lane_buf,
-            stop_line: None,
-            target_x: 0.0,
-            v_ref: params.v_max(),
-        };
-        let t0 = SYST::get_current();
-        let result = planner.step(&obs);
-        let dt = elapsed(t0, SYST::get_current());
-        match result {
-            Ok(cmd) => {
-                match cmd.status {
-                    StepStatus::Solved { .. } => {
-                        solved += 1;
-                        // Time the steps that solve (standstill steps skip the solver).
-                        record(timed, dt);
-                        timed += 1;
-                    }
-                    StepStatus::Fallback(FallbackReason::NoRoom) => standstill += 1,
-                    StepStatus::Fallback(_) => fallbacks += 1,
-                }
-                v = cmd.v;
-            }
-            Err(_) => v = planner_core::safety::max_braking_command(&params, v),
-        }
-        x += v * params.h();
-        if step % 100 == 0 {
-            hprintln!("t={}ms x={} v={}", step * 10, x, v);
-        }
-    }
     hprintln!(
         "done: x={} v={} solved={} standstill={} fallback={}",
-        x,
-        v,
-        solved,
-        standstill,
-        fallbacks
+        a.x,
+        a.v,
+        a.solved,
+        a.standstill,
+        a.fallbacks
     );
-    hprintln!("CAN: {} frames received, {} rejected", frames_in, rejected);
+    hprintln!("CAN: {} frames received, {} rejected", a.frames, a.rejected);
     let (med, max) = stats(timed, per_tick);
     hprintln!(
         "instructions per single-lane step (N={}): median={} worst={} over {} solved steps",
@@ -255,73 +170,41 @@ fn main() -> ! {
         timed
     );
     // Success needs a stop behind the obstacle point x̄ = 60 − 4.5 − 0.5 = 55 m with no
-    // fallback.
-    let approach_ok = fallbacks == 0 && v == 0.0 && x < 55.0 && x > 54.9 && rejected == 0;
+    // fallback, every frame accepted.
+    let approach_ok = a.fallbacks == 0 && a.v == 0.0 && a.x < 55.0 && a.x > 54.9 && a.rejected == 0;
 
-    // (2) A lane change from lane 0 to lane 1 at 15 m/s on an empty two-lane road.
-    let Ok(mut lp) = LanePlanner::<f32, N>::new(params, CostWeights::default(), 0) else {
+    timed = 0;
+    let mut emit = |r: &StepRecord| {
+        hprintln!(
+            "cmd {} {} {:08x} {:08x}",
+            r.scenario,
+            r.k,
+            r.v.to_bits(),
+            r.omega.to_bits()
+        );
+        if r.timed {
+            record(timed, r.ticks & 0x00FF_FFFF);
+            timed += 1;
+        }
+    };
+    let Some(l) = scenarios::lane_change::<N>(&mut now, &mut emit) else {
         exit(false)
     };
-    let road = Road {
-        lanes: 2,
-        lane_width: 3.6,
-        end_x: None,
-    };
-    let (mut q, mut v, mut w) = (
-        Pose {
-            x: 0.0f32,
-            y: 1.8,
-            theta: 0.0,
-        },
-        15.0f32,
-        0.0f32,
-    );
-    let (mut changing, mut completed_at, mut lane_fallbacks) = (0usize, None, 0u32);
-    for step in 0..STEPS {
-        let obs = LaneObservation {
-            pose: q,
-            v_prev: v,
-            omega_prev: w,
-            others: &[],
-            road,
-            target_lane: 1,
-            target: 0.0,
-            v_ref: 15.0,
-        };
-        let t0 = SYST::get_current();
-        let result = lp.step(&obs);
-        let dt = elapsed(t0, SYST::get_current());
-        let Ok(cmd) = result else { exit(false) };
-        if !matches!(cmd.status, StepStatus::Solved { .. }) {
-            lane_fallbacks += 1;
-        }
-        if cmd.alpha.is_some() {
-            record(changing, dt);
-            changing += 1;
-        }
-        if cmd.event == Some(LaneEvent::Completed(1)) {
-            completed_at = Some(step);
-            break;
-        }
-        q = planner_core::unicycle::step(q, cmd.v, cmd.omega, params.h());
-        v = cmd.v;
-        w = cmd.omega;
-    }
-    let (lmed, lmax) = stats(changing, per_tick);
+    let (lmed, lmax) = stats(timed, per_tick);
     hprintln!(
         "lane change: completed at step {:?}, y={} fallback={}",
-        completed_at,
-        q.y,
-        lane_fallbacks
+        l.completed_at,
+        l.y,
+        l.fallbacks
     );
     hprintln!(
         "instructions per lane-change step (N={}): median={} worst={} over {} steps",
         N,
         lmed,
         lmax,
-        changing
+        l.changing
     );
-    let lane_ok = completed_at.is_some() && lane_fallbacks == 0;
+    let lane_ok = l.completed_at.is_some() && l.fallbacks == 0;
 
     // Footprint, from the linker's symbols (vector table and code start at 0).
     let (flash, ram) = unsafe {
