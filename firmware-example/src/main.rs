@@ -131,8 +131,9 @@ fn main() -> ! {
 
     let mut now = || SYST::get_current().wrapping_neg() & 0x00FF_FFFF;
     // Every command goes out as a `cmd` line (f32 bits in hex), for CI to compare with the
-    // host mirror step for step; timed steps go to the statistics.
-    let mut timed = 0usize;
+    // host mirror step for step; timed steps go to the statistics (`timed` counts them and
+    // is reset between the scenarios).
+    let timed = core::cell::Cell::new(0usize);
     let mut emit = |r: &StepRecord| {
         hprintln!(
             "cmd {} {} {:08x} {:08x}",
@@ -142,8 +143,8 @@ fn main() -> ! {
             r.omega.to_bits()
         );
         if r.timed {
-            record(timed, r.ticks & 0x00FF_FFFF);
-            timed += 1;
+            record(timed.get(), r.ticks & 0x00FF_FFFF);
+            timed.set(timed.get() + 1);
         }
         if r.scenario == 'A' && r.k.is_multiple_of(100) {
             hprintln!("t={}ms x={} v={}", r.k * 10, r.position, r.v);
@@ -161,36 +162,23 @@ fn main() -> ! {
         a.fallbacks
     );
     hprintln!("CAN: {} frames received, {} rejected", a.frames, a.rejected);
-    let (med, max) = stats(timed, per_tick);
+    let (med, max) = stats(timed.get(), per_tick);
     hprintln!(
         "instructions per single-lane step (N={}): median={} worst={} over {} solved steps",
         N,
         med,
         max,
-        timed
+        timed.get()
     );
     // Success needs a stop behind the obstacle point x̄ = 60 − 4.5 − 0.5 = 55 m with no
     // fallback, every frame accepted.
     let approach_ok = a.fallbacks == 0 && a.v == 0.0 && a.x < 55.0 && a.x > 54.9 && a.rejected == 0;
 
-    timed = 0;
-    let mut emit = |r: &StepRecord| {
-        hprintln!(
-            "cmd {} {} {:08x} {:08x}",
-            r.scenario,
-            r.k,
-            r.v.to_bits(),
-            r.omega.to_bits()
-        );
-        if r.timed {
-            record(timed, r.ticks & 0x00FF_FFFF);
-            timed += 1;
-        }
-    };
+    timed.set(0);
     let Some(l) = scenarios::lane_change::<N>(&mut now, &mut emit) else {
         exit(false)
     };
-    let (lmed, lmax) = stats(timed, per_tick);
+    let (lmed, lmax) = stats(timed.get(), per_tick);
     hprintln!(
         "lane change: completed at step {:?}, y={} fallback={}",
         l.completed_at,
