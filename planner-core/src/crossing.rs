@@ -185,7 +185,6 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
         let (entry, exit) = (route.path.entry(), route.path.exit());
         let half = F::HALF * r.length;
-        let pose = route.path.pose_at(r.s);
         let idx = self.entries.iter().position(|e| e.id == r.id);
         if r.s - half >= exit {
             // On its outlet track: no longer in C^I_t (25).
@@ -210,6 +209,8 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 }
             }
             None => {
+                // Only an unregistered vehicle needs its pose: is it inside A_C yet?
+                let pose = route.path.pose_at(r.s);
                 if !self.layout.in_comm_region(pose.x, pose.y) {
                     return Ok(());
                 }
