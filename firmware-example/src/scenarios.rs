@@ -3,8 +3,10 @@
 //! firmware_mirror`), so that CI can check that the Cortex-M4F plans exactly what the
 //! host plans in the same precision from the same inputs, step for step.
 //!
-//! `now` reads a free-running tick counter (SysTick on the MCU, nothing on the host);
-//! `emit` sees every step.
+//! Each scenario is a control loop: read the neighbours' CAN frames, run the planner,
+//! hand the command to `emit`. `now` reads a monotonic tick counter (SysTick on the MCU,
+//! nothing on the host); `emit` applies the command and, on the MCU, waits out the rest of
+//! the 10 ms period (embedded-hal `DelayNs`), so the loop runs at h.
 
 use can_gateway::{encode, Frames, Message, PlainFrame, Reassembler};
 use embedded_can::{nb::Can, ErrorKind};
@@ -36,6 +38,10 @@ pub struct StepRecord {
     pub timed: bool,
     /// Position after the step (x for the approach, y for the lane change).
     pub position: f32,
+    /// What the planner reported (`None`: it rejected the input and max braking was applied).
+    pub status: Option<StepStatus<f32>>,
+    /// The lane-change event of this step, if any.
+    pub event: Option<LaneEvent>,
 }
 
 /// What the approach ended with.
@@ -159,6 +165,7 @@ pub fn approach<const N: usize>(
         let result = planner.step(&obs);
         let ticks = now().wrapping_sub(t0);
         let mut solved = false;
+        let status = result.as_ref().ok().map(|c| c.status);
         match result {
             Ok(cmd) => {
                 match cmd.status {
@@ -182,6 +189,8 @@ pub fn approach<const N: usize>(
             ticks,
             timed: solved,
             position: out.x,
+            status,
+            event: None,
         });
     }
     Some(out)
@@ -247,6 +256,8 @@ pub fn lane_change<const N: usize>(
             ticks,
             timed: cmd.alpha.is_some(),
             position: q.y,
+            status: Some(cmd.status),
+            event: cmd.event,
         });
         if cmd.event == Some(LaneEvent::Completed(1)) {
             out.completed_at = Some(step);

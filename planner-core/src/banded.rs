@@ -35,6 +35,7 @@ impl<F: Real, const N: usize> Default for Penta<F, N> {
 /// The factorisation failed: a pivot was not positive (matrix not positive definite to
 /// working precision, or it held NaN).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct NotPositiveDefinite;
 
 impl<F: Real, const N: usize> Penta<F, N> {

@@ -12,6 +12,7 @@ use heapless::Vec;
 
 /// The crossing algorithm.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Algorithm {
     /// All-Way STOP (SPEC's choice): every vehicle stops at its stop line; vehicles are
     /// served in the order they stopped, one vehicle inside A_S at a time.
@@ -79,6 +80,7 @@ pub const STOP_LINE_ZONE_M: f64 = 1.5;
 
 /// What a vehicle reports about itself to the intersection.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CrossingReport<F> {
     /// Vehicle id.
     pub id: u16,
@@ -94,6 +96,7 @@ pub struct CrossingReport<F> {
 
 /// Why a report was not taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ManagerError {
     /// No such route.
     UnknownRoute,
@@ -107,6 +110,7 @@ pub enum ManagerError {
 
 /// A registered vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Entry<F> {
     /// Id.
     pub id: u16,

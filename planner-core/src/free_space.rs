@@ -25,6 +25,7 @@ pub const D_TURN_M: f64 = 10.0;
 
 /// Why the free space could not be built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FreeSpaceError {
     /// The reference point is outside the band (or the band is empty).
     OutsideBand,
@@ -34,6 +35,7 @@ pub enum FreeSpaceError {
 
 /// One arc A_r (r ∈ {L, H}) and what (28)–(30) derive from it.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Arc<F> {
     /// Radius d_r (m).
     pub radius: F,
@@ -50,6 +52,7 @@ pub struct Arc<F> {
 
 /// The free space of Fig. 4 at time t.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FreeSpace<F> {
     /// dL = dS(v_{t−h}).
     pub d_l: F,

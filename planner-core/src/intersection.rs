@@ -30,6 +30,7 @@ pub const CONFLICT_MARGIN_M: f64 = 0.1;
 
 /// A manoeuvre through A_S.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Movement {
     /// Straight on, same lane.
     Straight,
@@ -41,6 +42,7 @@ pub enum Movement {
 
 /// A track: heading of travel d (0 east, 1 north, 2 west, 3 south) and lane (0 inner).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Track {
     /// Heading of travel, 0..4.
     pub heading: u8,
@@ -50,6 +52,7 @@ pub struct Track {
 
 /// A path piece.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Segment<F> {
     /// From `start` along `heading` for `length`.
     Line {
@@ -113,6 +116,7 @@ impl<F: Real> Segment<F> {
 
 /// A vehicle's whole path: inlet track, route through A_S, outlet track.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Path<F> {
     /// The three pieces.
     pub pieces: [Segment<F>; 3],
@@ -151,6 +155,7 @@ impl<F: Real> Path<F> {
 
 /// A route through A_S.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Route<F> {
     /// Inlet track.
     pub inlet: Track,
@@ -164,6 +169,7 @@ pub struct Route<F> {
 
 /// What a layout is built from.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LayoutSpec<F> {
     /// Half-size a of the square A_S (m).
     pub half_size: F,
@@ -195,6 +201,7 @@ impl<F: Real> LayoutSpec<F> {
 
 /// Why a layout is rejected.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LayoutError<F> {
     /// A value is NaN, infinite or not positive.
     NotPositive,

@@ -49,6 +49,7 @@ pub const MAX_TAIL_STEPS: usize = 8192;
 
 /// The lane event of a step, if any.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LaneEvent {
     /// β set: the intention to change to this lane is declared.
     Declared(u8),
@@ -60,6 +61,7 @@ pub enum LaneEvent {
 
 /// What the ego knows at time t on a multi-lane road.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LaneObservation<'a, F> {
     /// Pose at t.
     pub pose: Pose<F>,
@@ -82,6 +84,7 @@ pub struct LaneObservation<'a, F> {
 /// The command for [t, t+h) and the vehicle's lane bookkeeping after this step (what it
 /// broadcasts next).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LaneCommand<F> {
     /// v_t (m/s).
     pub v: F,
@@ -105,6 +108,7 @@ pub struct LaneCommand<F> {
 
 /// Bad multi-lane input: nothing changed; apply [`LanePlanner::braking_command`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LaneInputError {
     /// The speed part is invalid.
     Speed(InputError),

@@ -10,6 +10,7 @@ use core::cmp::Ordering;
 
 /// The road: how many lanes, how wide, and where it ends (dead end x_R, (22)).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Road<F> {
     /// Number of lanes (≥ 1).
     pub lanes: u8,
@@ -62,6 +63,7 @@ impl<F: Real> Road<F> {
 
 /// A lateral band [lo, hi] (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Band<F> {
     /// y̲ (12).
     pub lo: F,
@@ -82,6 +84,7 @@ impl<F: Real> Band<F> {
 
 /// Another vehicle as the ego knows it from its last message.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Other<F> {
     /// Its id (breaks the last tie of the ordering).
     pub id: u16,
@@ -103,6 +106,7 @@ pub struct Other<F> {
 
 /// What the ordering and the sets need to know of a vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Key<F> {
     /// x (m).
     pub x: F,

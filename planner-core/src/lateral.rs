@@ -38,6 +38,7 @@ pub const MAX_ITER: u32 = 50;
 
 /// Why the lateral QP has no answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LateralError {
     /// No convergence within [`MAX_ITER`] (e.g. the linearised band is infeasible).
     NotConverged,
@@ -49,6 +50,7 @@ pub enum LateralError {
 
 /// Weights of the lateral cost, per step of the horizon.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LateralWeights<F> {
     /// (y_{k+1} − y_ref)² (1/m²).
     pub position: F,
@@ -268,6 +270,7 @@ pub fn check_step(i: usize, n: usize) -> usize {
 
 /// Everything the lateral QP is built from.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LateralInput<'a, F, const N: usize> {
     /// h (s).
     pub h: F,

@@ -25,6 +25,7 @@ pub const PIN_WIDTH: f64 = 1e-3;
 
 /// Weights of the quadratic cost J.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CostWeights<F> {
     /// w_x: weight of (x^f − x_N)² (1/m²).
     pub target_position: F,
@@ -47,6 +48,7 @@ impl<F: Real> Default for CostWeights<F> {
 
 /// Why a problem could not be built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ProblemError {
     /// A weight is negative or not finite, or both w_v and w_Δ are 0 (J must be strictly
     /// convex for the optimum to be unique and the Newton systems nonsingular).
@@ -92,6 +94,7 @@ pub struct SingleLaneProblem<F, const N: usize> {
 
 /// Which constraint of (10) a check refers to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConstraintKind {
     /// v_k ≤ hi_k (V^k_t, upper).
     SpeedUpper,
@@ -107,6 +110,7 @@ pub enum ConstraintKind {
 
 /// The largest constraint violation of a plan, in the constraint's own unit.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Violation<F> {
     /// Amount by which the constraint is exceeded (≤ 0 when satisfied).
     pub amount: F,

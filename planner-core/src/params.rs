@@ -5,6 +5,7 @@ use crate::real::Real;
 /// Raw parameter values, as a user writes them. Turn them into [`Params`] with
 /// [`Params::new`], which checks every invariant the safety proofs rely on.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ParamsSpec<F> {
     /// Maximum speed vmax (m/s), > 0.
     pub v_max: F,
@@ -51,6 +52,7 @@ impl<F: Real> ParamsSpec<F> {
 
 /// Which parameter is wrong, and how.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ParamsError {
     /// A value is NaN or infinite.
     NotFinite(ParamName),
@@ -68,6 +70,7 @@ pub enum ParamsError {
 
 /// Names of [`ParamsSpec`] fields, for error reporting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[allow(missing_docs)]
 pub enum ParamName {
     VMax,
@@ -103,6 +106,7 @@ impl core::fmt::Display for ParamsError {
 
 /// Validated parameters. Construct with [`Params::new`] or [`Params::table_i`].
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Params<F> {
     spec: ParamsSpec<F>,
     /// |amin|, cached: it appears in every safety quantity.

@@ -13,6 +13,7 @@ use crate::solver::{IpmSolver, MpcSolver, SolveError};
 
 /// Another vehicle in the ego's lane, as the ego knows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Vehicle<F> {
     /// Centre position x(c) along the lane (m).
     pub x: F,
@@ -22,6 +23,7 @@ pub struct Vehicle<F> {
 
 /// What the ego knows at time t.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Observation<'a, F> {
     /// x_t: ego centre position (m).
     pub x: F,
@@ -39,6 +41,7 @@ pub struct Observation<'a, F> {
 
 /// Why the certified fallback was applied.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FallbackReason<F> {
     /// The invariant x_t < x̄ − dS(v_{t−h}) (with margin) did not hold: (10) may be
     /// infeasible, so the planner brakes as hard as it can.
@@ -63,6 +66,7 @@ pub enum FallbackReason<F> {
 
 /// What the planner did this step.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StepStatus<F> {
     /// The optimal plan was verified and its first input applied.
     Solved {
@@ -75,6 +79,7 @@ pub enum StepStatus<F> {
 
 /// The command to apply over [t, t+h).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Command<F> {
     /// v_t (m/s).
     pub v: F,
@@ -87,6 +92,7 @@ pub struct Command<F> {
 /// Bad input: nothing was planned and the planner's state is unchanged. The caller should
 /// apply [`safety::max_braking_command`] for the step (the safe action whatever happened).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum InputError {
     /// A position, speed, length or target is NaN or infinite.
     NotFinite,
@@ -98,6 +104,7 @@ pub enum InputError {
 
 /// Invalid planner configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
     /// See [`ProblemError::InvalidWeights`].
     InvalidWeights,

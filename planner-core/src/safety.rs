@@ -36,6 +36,7 @@ pub fn d_s<F: Real>(p: &Params<F>, v: F) -> F {
 
 /// The per-step speed bounds of eqs. (3)(4) for the current step.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SpeedBounds<F> {
     /// v̲_t = max{0, v_{t−h} + amin h}, eq. (3).
     pub lower: F,

@@ -34,6 +34,7 @@ const FAMILIES: usize = 5;
 
 /// Solver settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Settings<F> {
     /// Iteration cap (the loop never runs longer).
     pub max_iter: u32,
@@ -81,6 +82,7 @@ impl<F: Real> Default for Settings<F> {
 
 /// Why the solver stopped without a solution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum SolveError {
     /// The iteration cap was reached before the tolerances were met.
     IterationLimit {
@@ -98,6 +100,7 @@ pub enum SolveError {
 
 /// An optimal plan.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Solution<F, const N: usize> {
     /// v_0..v_{N−1}.
     pub v: [F; N],
@@ -109,6 +112,7 @@ pub struct Solution<F, const N: usize> {
 
 /// Progress of one interior-point iteration, for diagnostics ([`IpmSolver::solve_traced`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct IterationInfo<F> {
     /// Iteration number.
     pub iteration: u32,

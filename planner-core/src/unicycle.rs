@@ -9,6 +9,7 @@ use crate::real::Real;
 
 /// Position and heading of a vehicle's reference point (its centre).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Pose<F> {
     /// x along the road (m).
     pub x: F,

@@ -12,6 +12,7 @@ use heapless::Vec;
 /// A vehicle-state message (V2V): what each vehicle broadcasts every period.
 /// Lanes are absolute indices, 0 = rightmost.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct VehicleState<F> {
     /// Sender.
     pub id: u16,
@@ -37,6 +38,7 @@ pub struct VehicleState<F> {
 
 /// Why a message was not taken into the view (the view is unchanged).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum WorldError {
     /// A field is NaN or infinite.
     NotFinite,
@@ -52,6 +54,7 @@ pub enum WorldError {
 
 /// A tracked vehicle: its latest state and when it was received.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Known<F> {
     /// Latest state.
     pub state: VehicleState<F>,
