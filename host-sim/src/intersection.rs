@@ -12,7 +12,7 @@
 //! switching of Sec. VII-B: x^f = end of inlet while not permitted, end of route when
 //! permitted, end of outlet after A_S.
 
-use crate::bus::{Bus, InProcessBus, Message, Received};
+use crate::bus::{Bus, Faults, InProcessBus, Message, Received};
 use crate::monitor::{rectangles_overlap, Limits, Truth};
 use crate::sim::{LENGTH_M, WIDTH_M};
 use planner_core::crossing::{Algorithm, CrossingPlanner, CrossingReport, Manager};
@@ -30,6 +30,9 @@ pub const MANAGER_NODE: u16 = 0;
 /// Lease of a permission (s): renewed every period while held; 0.1 s lets a few
 /// messages go missing before a vehicle that has not yet entered A_S must stop.
 pub const LEASE_S: f64 = 0.1;
+/// How long a vehicle that has left A_C repeats its `Left` message (s): 50 periods, so
+/// that even at 20 % loss every receiver has it (0.2^50) and drops its last position.
+pub const LEFT_REPEAT_S: f64 = 0.5;
 /// Vehicles the manager can track.
 pub const MANAGER_CAP: usize = 64;
 /// Horizon of the intersection planners.
@@ -118,6 +121,8 @@ pub struct CrossingSim {
     /// Closed system: respawn a vehicle when one leaves A_C.
     respawn: Option<Box<ChaCha8Rng>>,
     pending: Vec<(u16, u8)>,
+    /// Vehicles that left, repeating `Left`: (id, when it left).
+    departing: Vec<(u16, f64)>,
     times: Vec<f64>,
     crossed: u64,
     collisions: u64,
@@ -139,6 +144,19 @@ impl CrossingSim {
         placements: &[Placement],
         respawn_seed: Option<u64>,
     ) -> Self {
+        Self::with_faults(layout, algorithm, placements, respawn_seed, Faults::NONE, 0)
+    }
+
+    /// As [`CrossingSim::new`], over a bus injecting `faults` (validated) drawn from
+    /// `fault_seed`.
+    pub fn with_faults(
+        layout: Layout<f64>,
+        algorithm: Algorithm,
+        placements: &[Placement],
+        respawn_seed: Option<u64>,
+        faults: Faults,
+        fault_seed: u64,
+    ) -> Self {
         let params = params(layout.spec.v_limit);
         let mut nodes: Vec<u16> = placements.iter().map(|p| p.id).collect();
         nodes.push(MANAGER_NODE);
@@ -151,11 +169,12 @@ impl CrossingSim {
             params,
             lim,
             cars,
-            bus: InProcessBus::new(&nodes),
+            bus: InProcessBus::with_faults(&nodes, faults, fault_seed, lim.h),
             inbox: Vec::new(),
             t: 0.0,
             respawn: respawn_seed.map(|s| Box::new(crate::instances::rng(s ^ 0x1c))),
             pending: Vec::new(),
+            departing: Vec::new(),
             times: Vec::new(),
             crossed: 0,
             collisions: 0,
@@ -212,7 +231,11 @@ impl CrossingSim {
     pub fn step(&mut self) {
         let t = self.t;
         let h = self.lim.h;
-        // 1. Vehicles report (V2V and V2I in one broadcast).
+        // 1. Vehicles report (V2V and V2I in one broadcast); those gone repeat `Left`.
+        self.departing.retain(|&(_, at)| t < at + LEFT_REPEAT_S);
+        for &(id, at) in &self.departing {
+            let _ = self.bus.send(id, &Message::Left { id, at }, t);
+        }
         for c in &self.cars {
             let r = CrossingReport {
                 id: c.id,
@@ -231,7 +254,7 @@ impl CrossingSim {
                 Message::Crossing(rep, _) => {
                     let _ = self.manager.observe(&rep, t);
                 }
-                Message::Left { id } => self.manager.forget(id),
+                Message::Left { id, .. } => self.manager.forget(id),
                 _ => {}
             }
         }
@@ -264,7 +287,7 @@ impl CrossingSim {
             for r in &self.inbox {
                 match r.msg {
                     Message::Grant { id, until } => c.planner.hear_grant(id, until),
-                    Message::Left { id } => c.planner.hear_left(id),
+                    Message::Left { id, .. } => c.planner.hear_left(id),
                     Message::Crossing(rep, stamp) => {
                         // The view holds MANAGER_CAP vehicles, as many as the manager.
                         let _ = c.planner.hear_report(&rep, stamp);
@@ -327,7 +350,15 @@ impl CrossingSim {
         }
         for &i in leaving.iter().rev() {
             let c = self.cars.remove(i);
-            let _ = self.bus.send(c.id, &Message::Left { id: c.id }, self.t);
+            let _ = self.bus.send(
+                c.id,
+                &Message::Left {
+                    id: c.id,
+                    at: self.t,
+                },
+                self.t,
+            );
+            self.departing.push((c.id, self.t));
             if let Some(rng) = self.respawn.as_mut() {
                 let route = rng.random_range(0..ROUTES as u8);
                 self.pending.push((c.id, route));
@@ -367,6 +398,8 @@ impl CrossingSim {
                         v,
                     },
                 );
+                // Back as a new vehicle: its old `Left` no longer applies.
+                self.departing.retain(|&(d, _)| d != id);
                 self.cars.push(car);
             } else {
                 still.push((id, route));
@@ -536,10 +569,16 @@ pub fn spec8_layout() -> Layout<f64> {
 }
 
 /// Runs a closed system of 8 vehicles for `duration` s under `algorithm` (Fig. 9).
-pub fn throughput_run(algorithm: Algorithm, seed: u64, duration: f64) -> CrossingSummary {
+pub fn throughput_run(
+    algorithm: Algorithm,
+    seed: u64,
+    duration: f64,
+    faults: Faults,
+) -> CrossingSummary {
     let layout = spec8_layout();
     let placements = fig8_placements(&layout, seed);
-    let mut sim = CrossingSim::new(layout, algorithm, &placements, Some(seed));
+    let mut sim =
+        CrossingSim::with_faults(layout, algorithm, &placements, Some(seed), faults, seed);
     let steps = (duration / 0.01).round() as u64;
     for _ in 0..steps {
         sim.step();
@@ -584,12 +623,20 @@ pub struct ThroughputReport {
     pub seeds: u64,
     /// Duration of each run (s).
     pub duration_s: f64,
+    /// Faults the bus injected.
+    pub faults: Faults,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
 }
 
 /// Fig. 9: every algorithm on the same seeds.
-pub fn throughput(seeds: u64, first_seed: u64, duration: f64, threads: usize) -> ThroughputReport {
+pub fn throughput(
+    seeds: u64,
+    first_seed: u64,
+    duration: f64,
+    faults: Faults,
+    threads: usize,
+) -> ThroughputReport {
     let t0 = std::time::Instant::now();
     let jobs: Vec<(Algorithm, u64)> = Algorithm::ALL
         .iter()
@@ -597,7 +644,7 @@ pub fn throughput(seeds: u64, first_seed: u64, duration: f64, threads: usize) ->
         .collect();
     let runs = crate::par::map_indexed(jobs.len(), threads, |i| {
         let (a, s) = jobs[i];
-        (a, throughput_run(a, s, duration))
+        (a, throughput_run(a, s, duration, faults))
     });
     let results = Algorithm::ALL
         .iter()
@@ -640,6 +687,7 @@ pub fn throughput(seeds: u64, first_seed: u64, duration: f64, threads: usize) ->
         results,
         seeds,
         duration_s: duration,
+        faults,
         wall_seconds: t0.elapsed().as_secs_f64(),
     }
 }
@@ -751,6 +799,8 @@ struct RawCrossing {
     intersection: toml::Spanned<LayoutToml>,
     #[serde(rename = "vehicle")]
     vehicles: Vec<toml::Spanned<CrossingVehicleToml>>,
+    #[serde(default)]
+    faults: Option<toml::Spanned<Faults>>,
 }
 
 /// A validated intersection scenario.
@@ -768,6 +818,8 @@ pub struct CrossingScenario {
     pub layout: Layout<f64>,
     /// Vehicles.
     pub placements: Vec<Placement>,
+    /// Faults the bus injects (`[faults]`; none by default).
+    pub faults: Faults,
 }
 
 /// `true` if the TOML text is an intersection scenario (has an `[intersection]` table).
@@ -934,6 +986,19 @@ impl CrossingScenario {
                 }
             }
         }
+        let faults = match &raw.faults {
+            None => Faults::NONE,
+            Some(f) => {
+                f.get_ref()
+                    .validate()
+                    .map_err(|e| crate::scenario::ScenarioError {
+                        file: path.to_path_buf(),
+                        line: Some(crate::scenario::line_of(text, f.span())),
+                        problem: e,
+                    })?;
+                *f.get_ref()
+            }
+        };
         Ok(Self {
             name: raw.name,
             duration_s,
@@ -941,12 +1006,20 @@ impl CrossingScenario {
             algorithm,
             layout,
             placements: placements.into_iter().map(|(p, _)| p).collect(),
+            faults,
         })
     }
 
     /// Runs it; `sample` sees every vehicle's (t, id, x, y, θ, v) each step.
     pub fn run(&self, sample: &mut dyn FnMut(f64, &[PoseSample])) -> CrossingSummary {
-        let mut sim = CrossingSim::new(self.layout.clone(), self.algorithm, &self.placements, None);
+        let mut sim = CrossingSim::with_faults(
+            self.layout.clone(),
+            self.algorithm,
+            &self.placements,
+            None,
+            self.faults,
+            self.seed,
+        );
         let steps = (self.duration_s / 0.01).round() as u64;
         for _ in 0..steps {
             sample(sim.time(), &sim.poses());

@@ -9,6 +9,7 @@
 
 pub mod bench;
 pub mod bus;
+pub mod faulty;
 pub mod instances;
 pub mod intersection;
 pub mod monitor;

@@ -4,6 +4,7 @@
 //! input (arguments, scenario file, output file); 3 a liveness goal was missed.
 
 use clap::{Parser, Subcommand, ValueEnum};
+use host_sim::bus::Faults;
 use host_sim::plot::PlotData;
 use host_sim::scenario::Scenario;
 use host_sim::sim::{run_scenario, SolverChoice};
@@ -293,6 +294,33 @@ enum Experiment {
         /// Draw a Fig. 9-style bar chart to a .png or .svg file.
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
+        #[command(flatten)]
+        faults: FaultArgs,
+    },
+    /// Issue 6: the multi-lane and throughput experiments on a perfect bus and on a
+    /// faulty one (default 20 % loss, 50 ms delay), same seeds, compared.
+    Faults {
+        /// Multi-lane runs (seeds 1..=K).
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// Throughput runs per algorithm (seeds 1..=K).
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..))]
+        throughput_seeds: u64,
+        /// Simulated seconds per throughput run.
+        #[arg(long, default_value_t = 300.0)]
+        duration: f64,
+        /// Probability that a receiver loses a message.
+        #[arg(long, default_value_t = 0.2)]
+        loss: f64,
+        /// Delivery delay (s).
+        #[arg(long, default_value_t = 0.05)]
+        delay: f64,
+        /// Extra delay drawn uniformly from [0, jitter] (s).
+        #[arg(long, default_value_t = 0.0)]
+        jitter: f64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
     },
     /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
     Multilane {
@@ -311,7 +339,46 @@ enum Experiment {
         /// The planners' solver.
         #[arg(long, value_enum, default_value = "ours")]
         solver: SolverArg,
+        #[command(flatten)]
+        faults: FaultArgs,
     },
+}
+
+/// Faults for an experiment's bus (none by default).
+#[derive(clap::Args, Debug, Clone, Copy)]
+struct FaultArgs {
+    /// Probability that a receiver loses a message.
+    #[arg(long, default_value_t = 0.0)]
+    loss: f64,
+    /// Delivery delay (s).
+    #[arg(long, default_value_t = 0.0)]
+    delay: f64,
+    /// Extra delay drawn uniformly from [0, jitter] (s).
+    #[arg(long, default_value_t = 0.0)]
+    jitter: f64,
+    /// Probability that a receiver gets a message twice.
+    #[arg(long, default_value_t = 0.0)]
+    duplicate: f64,
+    /// Probability that a message is held back 20 ms (later ones overtake it).
+    #[arg(long, default_value_t = 0.0)]
+    reorder: f64,
+}
+
+impl FaultArgs {
+    fn faults(&self) -> Result<Faults, String> {
+        let f = Faults {
+            loss: self.loss,
+            delay_s: self.delay,
+            jitter_s: self.jitter,
+            duplicate: self.duplicate,
+            reorder: self.reorder,
+            ..Faults::NONE
+        };
+        f.validate().map(|()| f).map_err(|e| {
+            // Name the flags, not the scenario keys.
+            e.replace("faults.", "--").replace("_s ", " ")
+        })
+    }
 }
 
 /// Prints a result (one JSON object, or its debug form) and picks the exit code.
@@ -495,7 +562,12 @@ fn main() -> ExitCode {
             json,
             plot,
             solver,
+            faults,
         }) => {
+            let faults = match faults.faults() {
+                Ok(f) => f,
+                Err(e) => return bad_input(e),
+            };
             let solver = match solver {
                 SolverArg::Ours => SolverChoice::Ours,
                 SolverArg::Clarabel => SolverChoice::Clarabel,
@@ -505,7 +577,7 @@ fn main() -> ExitCode {
                     return bad_input(format!("--plot {}: must end in .png or .svg", p.display()));
                 }
             }
-            let r = host_sim::multilane::experiment(seeds, seed, solver, 0);
+            let r = host_sim::multilane::experiment(seeds, seed, solver, faults, 0);
             if let Some(path) = plot {
                 let sc = host_sim::multilane::paper_scenario(seed);
                 let name = format!("{} (Fig. 7 style)", sc.name);
@@ -529,13 +601,45 @@ fn main() -> ExitCode {
                 r.completed == r.runs,
             )
         }
+        Command::Experiment(Experiment::Faults {
+            seeds,
+            throughput_seeds,
+            duration,
+            loss,
+            delay,
+            jitter,
+            json,
+        }) => {
+            let args = FaultArgs {
+                loss,
+                delay,
+                jitter,
+                duplicate: 0.0,
+                reorder: 0.0,
+            };
+            let faults = match args.faults() {
+                Ok(f) => f,
+                Err(e) => return bad_input(e),
+            };
+            if !(duration > 0.0 && duration <= 3600.0) {
+                return bad_input(format!("--duration must be in (0, 3600], got {duration}"));
+            }
+            let r = host_sim::faulty::compare(faults, seeds, throughput_seeds, duration, 0);
+            let live = r.multilane_faulty.completed == r.multilane_faulty.runs;
+            finish(&r, json, r.faulty_unsafe_events == 0, live)
+        }
         Command::Experiment(Experiment::Throughput {
             duration,
             seeds,
             seed,
             json,
             plot,
+            faults,
         }) => {
+            let faults = match faults.faults() {
+                Ok(f) => f,
+                Err(e) => return bad_input(e),
+            };
             if !(duration > 0.0 && duration <= 3600.0) {
                 return bad_input(format!("--duration must be in (0, 3600], got {duration}"));
             }
@@ -544,7 +648,7 @@ fn main() -> ExitCode {
                     return bad_input(format!("--plot {}: must end in .png or .svg", p.display()));
                 }
             }
-            let r = host_sim::intersection::throughput(seeds, seed, duration, 0);
+            let r = host_sim::intersection::throughput(seeds, seed, duration, faults, 0);
             if let Some(path) = plot {
                 if let Err(e) = host_sim::plot::bars(&r, &path) {
                     eprintln!("error: {e}");

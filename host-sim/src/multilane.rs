@@ -1,6 +1,7 @@
 //! Multi-lane traffic (Sec. IV–V): the paper's experiment of Fig. 6/7 (SPEC §8), random
 //! traffic for Theorem 2, and the dead-end layout of Theorem 3.
 
+use crate::bus::Faults;
 use crate::monitor::Limits;
 use crate::scenario::{DriverKind, Road, Scenario, VehicleSpec};
 use crate::sim::{
@@ -57,6 +58,7 @@ pub fn paper_scenario(seed: u64) -> Scenario {
             end_x: None,
         },
         vehicles,
+        faults: crate::bus::Faults::NONE,
     }
 }
 
@@ -99,6 +101,7 @@ pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> Scenar
         deadline_s: duration_s,
         road: Road { lanes, end_x: None },
         vehicles,
+        faults: crate::bus::Faults::NONE,
     }
 }
 
@@ -177,6 +180,8 @@ pub struct MultilaneReport {
     pub planner_steps: u64,
     /// Solver.
     pub solver: SolverChoice,
+    /// Faults the bus injected.
+    pub faults: Faults,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
 }
@@ -203,12 +208,14 @@ pub fn experiment(
     seeds: u64,
     first_seed: u64,
     solver: SolverChoice,
+    faults: Faults,
     threads: usize,
 ) -> MultilaneReport {
     let t0 = std::time::Instant::now();
     let results = crate::par::map_indexed(seeds as usize, threads, |i| {
         let seed = first_seed + i as u64;
-        let sc = paper_scenario(seed);
+        let mut sc = paper_scenario(seed);
+        sc.faults = faults;
         let bound = (0..sc.vehicles.len())
             .filter_map(|k| commitment_bound(&sc.vehicles, &sc.road, k, V0))
             .fold(0.0, f64::max);
@@ -224,7 +231,7 @@ pub fn experiment(
         invariant_violations: results.iter().map(|(s, _)| s.invariant_violations).sum(),
         completed: times.len() as u64,
         max_completion_time_s: times.iter().copied().fold(0.0, f64::max),
-        mean_completion_time_s: times.iter().sum::<f64>() / times.len().max(1) as f64,
+        mean_completion_time_s: times.iter().fold(0.0, |a, t| a + t) / times.len().max(1) as f64,
         max_lane_change_distance_m: results
             .iter()
             .map(|(s, _)| s.lane_changes.max_distance_m)
@@ -242,6 +249,7 @@ pub fn experiment(
         yield_steps: results.iter().map(|(s, _)| s.yield_steps).sum(),
         planner_steps: results.iter().map(|(s, _)| s.planner_steps).sum(),
         solver,
+        faults,
         wall_seconds: t0.elapsed().as_secs_f64(),
     }
 }

@@ -77,6 +77,7 @@ pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> Scenario {
             end_x: None,
         },
         vehicles,
+        faults: crate::bus::Faults::NONE,
     }
 }
 

@@ -24,6 +24,7 @@
 //! v_ref = 27.8        # optional: reference speed of a planner, default vmax
 //! ```
 
+use crate::bus::Faults;
 use crate::monitor::Limits;
 use serde::Deserialize;
 use std::fmt;
@@ -137,6 +138,8 @@ struct RawScenario {
     road: Spanned<Road>,
     #[serde(rename = "vehicle")]
     vehicles: Vec<Spanned<VehicleSpec>>,
+    #[serde(default)]
+    faults: Option<Spanned<Faults>>,
 }
 
 /// A validated scenario.
@@ -156,6 +159,8 @@ pub struct Scenario {
     pub road: Road,
     /// Vehicles, in file order.
     pub vehicles: Vec<VehicleSpec>,
+    /// Faults the bus injects (`[faults]`; none by default).
+    pub faults: Faults,
 }
 
 pub(crate) fn line_of(text: &str, span: Range<usize>) -> usize {
@@ -209,6 +214,13 @@ impl Scenario {
                     Some(d.span()),
                     format!("deadline_s must be in (0, duration_s], got {}", d.get_ref()),
                 ))
+            }
+        };
+        let faults = match &raw.faults {
+            None => Faults::NONE,
+            Some(f) => {
+                f.get_ref().validate().map_err(|e| err(Some(f.span()), e))?;
+                *f.get_ref()
             }
         };
         let road_span = raw.road.span();
@@ -389,6 +401,7 @@ impl Scenario {
             deadline_s,
             road,
             vehicles: vehicles.into_iter().map(|(v, _)| v).collect(),
+            faults,
         })
     }
 }

@@ -258,6 +258,8 @@ pub struct RunSummary {
     pub messages_sent: u64,
     /// Messages a world view rejected (stale, invalid).
     pub messages_rejected: u64,
+    /// What the bus's injected faults did.
+    pub bus_faults: crate::bus::FaultStats,
     /// Solver used by the planners.
     pub solver: SolverChoice,
     /// Seed used.
@@ -294,7 +296,13 @@ impl<const N: usize> Simulation<N, InProcessBus> {
     /// A simulation of `scenario` on the in-process bus.
     pub fn new(scenario: Scenario, solver: SolverChoice, seed: Option<u64>) -> Self {
         let ids: Vec<u16> = scenario.vehicles.iter().map(|v| v.id).collect();
-        Self::with_bus(scenario, solver, seed, InProcessBus::new(&ids))
+        let bus = InProcessBus::with_faults(
+            &ids,
+            scenario.faults,
+            seed.unwrap_or(scenario.seed),
+            Limits::table_i().h,
+        );
+        Self::with_bus(scenario, solver, seed, bus)
     }
 }
 
@@ -317,10 +325,12 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                                 ..ClarabelSolver::default()
                             }),
                         };
-                        // Default weights are valid by construction.
-                        let planner =
+                        // Default weights are valid by construction, and the latency bound
+                        // of validated faults is finite.
+                        let mut planner =
                             LanePlanner::with_solver(params, CostWeights::default(), s, spec.lane)
                                 .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
+                        let _ = planner.set_notify_latency(scenario.faults.notify_bound(lim.h));
                         Driver::Planner {
                             planner: Box::new(planner),
                             world: Box::new(WorldView::new(spec.id)),
@@ -408,7 +418,13 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             end_x: self.scenario.road.end_x,
         };
         let mut commands = Vec::with_capacity(self.agents.len());
+        let silent = self.scenario.faults.silent;
         for a in self.agents.iter_mut() {
+            // A vehicle whose transmitter has failed knows it (bus-off) and gives up lane
+            // changes it has not started: the others could not hear its intention.
+            if silent.is_some_and(|s| s.id == a.id && t >= s.from_s) && a.alpha.is_none() {
+                a.target_lane = a.lane;
+            }
             self.inbox.clear();
             self.bus.receive(a.id, t, &mut self.inbox)?;
             let (v_cmd, w_cmd) = match &mut a.driver {
@@ -440,6 +456,16 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                         v_ref: a.v_ref,
                     };
                     self.planner_steps += 1;
+                    if let Some(m) = planner.beta() {
+                        if std::env::var_os("HOST_SIM_DEBUG").is_some() && self.steps_done % 50 == 0
+                        {
+                            eprintln!(
+                                "t={t:.2} id={} wants lane {m}: {:?}",
+                                a.id,
+                                planner.start_check(&obs, m)
+                            );
+                        }
+                    }
                     match planner.step(&obs) {
                         Ok(c) => {
                             a.lane = c.lane;
@@ -616,6 +642,7 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             last_goal_time_s: reached.iter().copied().reduce(f64::max),
             messages_sent: self.agents.len() as u64 * self.steps_done,
             messages_rejected: self.rejected,
+            bus_faults: self.bus.fault_stats(),
             solver: self.solver,
             seed: self.seed,
             wall_seconds,

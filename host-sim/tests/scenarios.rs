@@ -1,6 +1,7 @@
 //! host-sim as a tool: built-in scenarios, determinism, the bus as the only channel,
 //! scenario validation with file:line errors.
 
+use host_sim::bus::Faults;
 use host_sim::bus::{Bus, BusError, InProcessBus, Message, Received};
 use host_sim::scenario::Scenario;
 use host_sim::sim::{run_scenario, Simulation, SolverChoice};
@@ -286,14 +287,14 @@ fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
 /// lane change completes, nothing collides.
 #[test]
 fn multilane_experiment_completes_with_either_solver() {
-    let r = host_sim::multilane::experiment(8, 1, SolverChoice::Ours, 0);
+    let r = host_sim::multilane::experiment(8, 1, SolverChoice::Ours, Faults::NONE, 0);
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
         (0, 0, 0)
     );
     assert_eq!(r.completed, r.runs, "{r:?}");
     assert!(r.max_lane_change_distance_m < r.bound_m, "{r:?}");
-    let c = host_sim::multilane::experiment(1, 1, SolverChoice::Clarabel, 0);
+    let c = host_sim::multilane::experiment(1, 1, SolverChoice::Clarabel, Faults::NONE, 0);
     assert_eq!(
         (c.collisions, c.invariant_violations, c.completed),
         (0, 0, 1),
@@ -363,7 +364,7 @@ fn bad_intersection_scenarios_are_rejected_with_file_line() {
 /// seed; all safe; the pipelined algorithm crosses the most.
 #[test]
 fn throughput_all_algorithms_safe_and_pipelined_fastest() {
-    let r = host_sim::intersection::throughput(1, 1, 120.0, 0);
+    let r = host_sim::intersection::throughput(1, 1, 120.0, Faults::NONE, 0);
     for row in &r.results {
         assert_eq!(
             (

@@ -43,9 +43,47 @@ pub const MIN_CHANGE_LENGTH_M: f64 = 16.0;
 /// old. 0.25 s is 25 periods: far beyond the in-process bus (age 0) and a CAN bus with
 /// tens of ms of delay, yet short next to the seconds a lane change takes.
 pub const STALE_AFTER_S: f64 = 0.25;
+/// Membership in the yield set (21), with ≺ decided on where the other vehicle is now by
+/// its data (x + v·age): on a bus with latency two vehicles side by side each see the
+/// other behind by its data's age, and neither would yield. Exact with age 0.
+fn yields_to<F: Real>(ego: &Key<F>, alpha: Option<u8>, beta: Option<u8>, c: &Other<F>) -> bool {
+    let now = Other {
+        x: c.x + c.v * c.age,
+        ..*c
+    };
+    in_yield_set(ego, alpha, beta, &now)
+}
+
+/// How far a vehicle last seen at speed `v` may have gone in `tau` and how fast it may be
+/// by then (SPEC §9: at most amax faster per second, never above vmax).
+fn unaware_reach<F: Real>(p: &Params<F>, v: F, tau: F) -> (F, F) {
+    let accel = v * tau + F::HALF * p.a_max() * tau * tau;
+    let reach = accel.min(p.v_max() * tau);
+    (reach, (v + tau * p.a_max()).min(p.v_max()))
+}
+
+/// Slack (s) when comparing the time β has been held with the notification bound: the
+/// held time is a sum of periods in floating point; 1 µs is far below one period.
+pub const NOTIFY_SLACK_S: f64 = 1e-6;
 /// The longest braking tail the certificate simulates: vmax/(|amin| h) steps is 352 for
 /// Table I; the cap makes the loop bounded for any validated parameters.
 pub const MAX_TAIL_STEPS: usize = 8192;
+
+/// Why a lane change may not start now ([`LanePlanner::start_check`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StartBlock {
+    /// The heading is not yet straight.
+    Heading,
+    /// (16) fails toward the vehicles ahead in {ℓ, m} (or the road end).
+    Ahead,
+    /// (17) fails toward this vehicle behind in the target lane.
+    Behind(u16),
+    /// This vehicle behind in the target lane is known only from stale data.
+    Stale(u16),
+    /// Lemma 8's free-space condition fails.
+    FreeSpace,
+}
 
 /// The lane event of a step, if any.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -152,6 +190,8 @@ pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     alpha: Option<u8>,
     beta: Option<u8>,
     beta_steps: u32,
+    /// Bound on how long the others take to hear this vehicle's broadcast (≥ h).
+    notify: F,
     omega_plan: [F; N],
     reference: Option<Reference<F>>,
 }
@@ -178,9 +218,29 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             alpha: None,
             beta: None,
             beta_steps: 0,
+            notify: params.h(),
             omega_plan: [F::ZERO; N],
             reference: None,
         })
+    }
+
+    /// Sets a bound on the time until every other vehicle has heard what this one
+    /// broadcasts (delay, jitter and repeated losses on a real bus; SPEC §9). The default,
+    /// h, is the paper's synchronous exchange: what is sent now is known next period.
+    /// With more, the change starts only after β has been out that long, and (17) assumes
+    /// each vehicle behind may go on unaware for the extra time (at vmax, gaining amax).
+    /// Values below h count as h; a non-finite value is refused and changes nothing.
+    pub fn set_notify_latency(&mut self, latency: F) -> Result<(), ConfigError> {
+        if !latency.is_finite() {
+            return Err(ConfigError::InvalidLatency);
+        }
+        self.notify = latency.max(self.params().h());
+        Ok(())
+    }
+
+    /// The notification latency bound in use.
+    pub fn notify_latency(&self) -> F {
+        self.notify
     }
 
     /// The parameters.
@@ -276,6 +336,15 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         best
     }
 
+    /// Extra room a vehicle at speed `v` needs so that, after `tau` of moving unseen, it
+    /// still satisfies the invariant: the distance it may cover plus its stopping
+    /// distance's growth.
+    fn unaware_margin(&self, v: F, tau: F) -> F {
+        let p = self.params();
+        let (reach, v_up) = unaware_reach(p, v, tau);
+        reach + safety::d_s(p, v_up) - safety::d_s(p, v)
+    }
+
     fn key(&self, obs: &LaneObservation<'_, F>) -> Key<F> {
         Key {
             x: obs.pose.x,
@@ -297,39 +366,55 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let lane = self.lane;
         let safe = self.gap_over(obs, |c| in_front_set(x, lane, alpha, c));
         let all = self.gap_over(obs, |c| {
-            in_front_set(x, lane, alpha, c) || in_yield_set(&key, alpha, beta, c)
+            in_front_set(x, lane, alpha, c) || yields_to(&key, alpha, beta, c)
         });
+        // Yielding on a bus with latency: keep the room the declarer's (17) asks of us
+        // (our data up to `notify − h` old, then up to `notify − h` unaware), or it never
+        // starts. Zero on the paper's synchronous bus.
+        let tau = F::from_f64(2.0) * (self.notify - self.params().h());
+        let all = if tau > F::ZERO {
+            let yielding = self.gap_over(obs, |c| yields_to(&key, alpha, beta, c));
+            match (yielding, all) {
+                (Some(y), Some(a)) => Some(a.min(y - self.unaware_margin(obs.v_prev, tau))),
+                _ => all,
+            }
+        } else {
+            all
+        };
         (safe, all)
     }
 
     /// The Lane Change Protocol (16)(17) for a change into `m`, with (17) tested against
     /// every vehicle of C⁻_t (18) (SPEC's choice), each inflated for the age of its data
-    /// (SPEC §9: up to vmax·age further on and amax·age faster), and the free-space
-    /// condition of Lemma 8 for the widened band.
-    fn may_start(&self, obs: &LaneObservation<'_, F>, m: u8) -> bool {
+    /// plus the notification latency beyond one period (SPEC §9: at most amax faster, see
+    /// `unaware_reach`), and the free-space condition of Lemma 8 for the widened band.
+    /// `Ok` when a change into `m` may start now; otherwise the first condition that fails.
+    pub fn start_check(&self, obs: &LaneObservation<'_, F>, m: u8) -> Result<(), StartBlock> {
         let p = self.params();
         let x = obs.pose.x;
         let len = p.length();
         if !(obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD)) {
-            return false;
+            return Err(StartBlock::Heading);
         }
         let (_, all) = self.gaps(obs, Some(m), None);
         let free = free_road_gap(p, N);
         let gap = all.map_or(free, |g| g.min(free));
         // (16): x_t < x̄_t − dS(v_{t−h}) with the planner's margin.
         if !safety::invariant_holds(p, obs.v_prev, gap - F::SAFETY_MARGIN_M) {
-            return false;
+            return Err(StartBlock::Ahead);
         }
-        // (17) for every c ∈ C⁻_t; stale data behind blocks the start (SPEC §9).
+        // (17) for every c ∈ C⁻_t; stale data behind blocks the start (SPEC §9). Each is
+        // inflated for its data's age plus the time it may still not know of the change
+        // beyond the paper's one period.
+        let unaware = self.notify - p.h();
         for c in obs.others.iter().filter(|c| in_behind_set(x, m, c)) {
             if !(c.age <= F::from_f64(STALE_AFTER_S)) {
-                return false;
+                return Err(StartBlock::Stale(c.id));
             }
-            let reach = c.age * p.v_max();
-            let v = (c.v + c.age * p.a_max()).min(p.v_max());
+            let (reach, v) = unaware_reach(p, c.v, c.age + unaware);
             let room = x - F::HALF * (c.length + len) - p.d0() - c.x - reach - F::SAFETY_MARGIN_M;
             if !safety::invariant_holds(p, v, room) {
-                return false;
+                return Err(StartBlock::Behind(c.id));
             }
         }
         // Lemma 8 (i)(ii) in the widened band.
@@ -338,8 +423,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             .band(self.lane, Some(m))
             .shrunk(F::HALF * p.width());
         match FreeSpace::new(p, obs.pose, obs.v_prev, obs.omega_prev, band, gap) {
-            Ok(fs) => fs.d_h > fs.d_l && fs.lemma5_angles(),
-            Err(_) => false,
+            Ok(fs) if fs.d_h > fs.d_l && fs.lemma5_angles() => Ok(()),
+            _ => Err(StartBlock::FreeSpace),
         }
     }
 
@@ -376,9 +461,14 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             self.beta_steps = 0;
             return Some(LaneEvent::Declared(want));
         }
-        // Start only once the intention has been broadcast, so that every vehicle that
-        // could start a conflicting change this step already treats the ego by (21).
-        if self.beta_steps >= 1 && self.may_start(obs, want) {
+        // Start only once the intention has been out for the notification bound (one
+        // broadcast period on the paper's bus), so that every vehicle that could start a
+        // conflicting change this step already treats the ego by (21).
+        let held = F::from_f64(f64::from(self.beta_steps)) * p.h();
+        if self.beta_steps >= 1
+            && held >= self.notify - F::from_f64(NOTIFY_SLACK_S)
+            && self.start_check(obs, want).is_ok()
+        {
             self.alpha = Some(want);
             self.beta = None;
             self.beta_steps = 0;

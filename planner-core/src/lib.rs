@@ -52,7 +52,9 @@ pub mod solver;
 pub mod unicycle;
 pub mod world;
 
-pub use lane_change::{LaneCommand, LaneEvent, LaneInputError, LaneObservation, LanePlanner};
+pub use lane_change::{
+    LaneCommand, LaneEvent, LaneInputError, LaneObservation, LanePlanner, StartBlock,
+};
 pub use lanes::{Other, Road};
 pub use mpc::{ConstraintKind, CostWeights, ProblemError, SingleLaneProblem, Violation};
 pub use params::{Params, ParamsError, ParamsSpec};

@@ -108,6 +108,8 @@ pub enum InputError {
 pub enum ConfigError {
     /// See [`ProblemError::InvalidWeights`].
     InvalidWeights,
+    /// A notification latency that is not a finite number.
+    InvalidLatency,
 }
 
 /// The position x̄_t of the nearest obstacle ahead, extent-adjusted (SPEC §1):

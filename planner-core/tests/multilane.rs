@@ -326,3 +326,45 @@ fn lane_change_in_f32() {
     }
     panic!("no completion in f32");
 }
+
+/// SPEC §9 on a bus with latency L: β is held for L before a start, and (17) assumes the
+/// vehicle behind goes on unaware for L − h more (here it is just far enough back for
+/// the paper's synchronous bus, and too close for L = 0.2 s). A non-finite latency is
+/// refused and changes nothing.
+#[test]
+fn notification_latency_delays_the_start_and_widens_seventeen() {
+    let p = p();
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+    assert_eq!(pl.notify_latency(), p.h());
+    assert!(pl.set_notify_latency(f64::NAN).is_err());
+    assert_eq!(pl.notify_latency(), p.h());
+    // Empty road: the start comes exactly 0.2 s (20 periods) after the declaration.
+    pl.set_notify_latency(0.2).unwrap();
+    let first = pl.step(&obs(0.0, 1.8, 15.0, &[], 1)).unwrap();
+    assert_eq!(first.event, Some(LaneEvent::Declared(1)));
+    let mut started_at = None;
+    for k in 1..40 {
+        let c = pl.step(&obs(0.15 * k as f64, 1.8, 15.0, &[], 1)).unwrap();
+        if c.event == Some(LaneEvent::Started(1)) {
+            started_at = Some(k);
+            break;
+        }
+    }
+    assert_eq!(started_at, Some(20));
+    // A vehicle behind at 15 m/s with 1 m more than (17) needs on the synchronous bus.
+    let room = d_s(&p, 15.0) + 1.0;
+    let behind = other(2, -(room + 4.5 + p.d0() + 0.001), 15.0, 1);
+    for (latency, starts) in [(p.h(), true), (0.2, false)] {
+        let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+        pl.set_notify_latency(latency).unwrap();
+        let mut started = false;
+        for k in 0..25 {
+            // Both move at 15 m/s: the gap stays.
+            let mut b = behind;
+            b.x += 0.15 * k as f64;
+            let c = pl.step(&obs(0.15 * k as f64, 1.8, 15.0, &[b], 1)).unwrap();
+            started |= c.event == Some(LaneEvent::Started(1));
+        }
+        assert_eq!(started, starts, "latency {latency}");
+    }
+}

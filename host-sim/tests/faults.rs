@@ -1,0 +1,192 @@
+//! Issue 6, item 6: faults injected on the bus (loss, delay, jitter, duplication,
+//! reordering, a silent vehicle) — what the bus does, and that the planners stay safe.
+
+use host_sim::bus::{Bus, Faults, InProcessBus, Message, Received, Silent};
+use host_sim::intersection::CrossingScenario;
+use host_sim::scenario::Scenario;
+use host_sim::sim::{run_scenario, SolverChoice};
+use planner_core::VehicleState;
+use std::path::{Path, PathBuf};
+
+fn builtin(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios")
+        .join(name)
+}
+
+fn state(id: u16, stamp: f64) -> Message {
+    Message::State(VehicleState {
+        id,
+        x: stamp,
+        y: 1.8,
+        theta: 0.0,
+        v: 10.0,
+        omega: 0.0,
+        lane: 0,
+        alpha: None,
+        beta: None,
+        stamp,
+    })
+}
+
+/// Sends a state from node 1 every 10 ms for `steps` steps and collects what node 2 gets.
+fn pump(faults: Faults, steps: usize) -> (Vec<Received>, Vec<f64>, InProcessBus) {
+    let mut bus = InProcessBus::with_faults(&[1, 2], faults, 7, 0.01);
+    let mut got = Vec::new();
+    let mut sent_at = Vec::new();
+    for k in 0..steps {
+        let t = k as f64 * 0.01;
+        bus.send(1, &state(1, t), t).expect("attached");
+        sent_at.push(t);
+        bus.receive(2, t, &mut got).expect("attached");
+    }
+    bus.receive(2, 1e9, &mut got).expect("attached");
+    (got, sent_at, bus)
+}
+
+#[test]
+fn a_perfect_bus_delivers_everything_at_once_in_order() {
+    let (got, sent, bus) = pump(Faults::NONE, 500);
+    assert_eq!(got.len(), sent.len());
+    for (r, t) in got.iter().zip(&sent) {
+        assert_eq!(r.at, *t);
+        assert_eq!(r.msg.subject(), (1, *t));
+    }
+    assert_eq!(bus.fault_stats(), Default::default());
+}
+
+#[test]
+fn loss_and_delay_are_as_configured() {
+    let f = Faults {
+        loss: 0.2,
+        delay_s: 0.05,
+        jitter_s: 0.01,
+        ..Faults::NONE
+    };
+    let (got, _, bus) = pump(f, 5000);
+    let lost = bus.fault_stats().lost as f64 / 5000.0;
+    assert!((0.17..0.23).contains(&lost), "loss rate {lost}");
+    // Every delivery comes 50–60 ms after its stamp (receive times are when the receiver
+    // polled, on the 10 ms grid, so up to one more period).
+    for r in &got {
+        let (_, stamp) = r.msg.subject();
+        let age = r.at - stamp;
+        assert!(age >= 0.05 - 1e-12, "delivered early: {age}");
+    }
+    // Receivers never see a stamp go backwards (jitter reorders; the older one is dropped).
+    for w in got.windows(2) {
+        assert!(w[1].msg.subject().1 > w[0].msg.subject().1);
+    }
+}
+
+#[test]
+fn duplicates_and_overtaken_messages_are_dropped_by_receivers() {
+    let f = Faults {
+        duplicate: 0.3,
+        reorder: 0.3,
+        ..Faults::NONE
+    };
+    let (got, _, bus) = pump(f, 2000);
+    let st = bus.fault_stats();
+    assert!(st.duplicated > 400 && st.reordered > 400, "{st:?}");
+    assert!(st.dropped_old >= st.duplicated, "{st:?}");
+    let mut stamps: Vec<f64> = got.iter().map(|r| r.msg.subject().1).collect();
+    let n = stamps.len();
+    stamps.dedup();
+    assert_eq!(stamps.len(), n, "a duplicate was delivered");
+    assert!(stamps.windows(2).all(|w| w[1] > w[0]), "out of order");
+}
+
+#[test]
+fn a_silent_vehicle_sends_nothing_from_its_time_on() {
+    let f = Faults {
+        silent: Some(Silent { id: 1, from_s: 1.0 }),
+        ..Faults::NONE
+    };
+    let (got, _, bus) = pump(f, 300);
+    assert_eq!(got.len(), 100);
+    assert!(got.iter().all(|r| r.msg.subject().1 < 1.0));
+    assert_eq!(bus.fault_stats().silenced, 200);
+}
+
+#[test]
+fn bad_faults_in_a_scenario_are_rejected_with_file_and_line() {
+    let base = std::fs::read_to_string(builtin("multilane-faults.toml")).expect("read");
+    for (bad, what) in [
+        ("loss = 0.2", "loss = 1.0"),
+        ("delay_s = 0.05", "delay_s = -0.05"),
+        ("duplicate = 0.05", "duplicate = nan"),
+        ("reorder = 0.05", "reorder_probability = 0.05"),
+    ] {
+        let text = base.replace(bad, what);
+        let e = Scenario::parse(&text, Path::new("f.toml")).expect_err(what);
+        assert!(e.line.is_some(), "{e}");
+        assert!(e.to_string().starts_with("f.toml:"), "{e}");
+    }
+}
+
+#[test]
+fn multilane_scenario_over_a_faulty_bus_is_safe() {
+    let sc = Scenario::load(&builtin("multilane-faults.toml")).unwrap_or_else(|e| panic!("{e}"));
+    assert!(sc.faults.loss > 0.0 && sc.faults.silent.is_some());
+    let s = run_scenario(sc, SolverChoice::Ours, None, &mut |_| {}, &mut |_, _| {})
+        .expect("in-process bus");
+    assert_eq!(
+        (
+            s.collisions,
+            s.invariant_violations,
+            s.limit_violations,
+            s.off_road
+        ),
+        (0, 0, 0, 0),
+        "{s:?}"
+    );
+    let f = s.bus_faults;
+    assert!(
+        f.lost > 0 && f.silenced > 0 && f.duplicated > 0 && f.reordered > 0,
+        "{f:?}"
+    );
+    // Changes still happen before and after the silence.
+    assert!(s.lane_changes.changes >= 4, "{:?}", s.lane_changes);
+}
+
+#[test]
+fn multilane_experiment_with_loss_and_delay_is_safe_and_completes() {
+    let f = Faults {
+        loss: 0.2,
+        delay_s: 0.05,
+        ..Faults::NONE
+    };
+    let r = host_sim::multilane::experiment(12, 1, SolverChoice::Ours, f, 0);
+    assert_eq!(
+        (r.collisions, r.invariant_violations, r.limit_violations),
+        (0, 0, 0),
+        "{r:?}"
+    );
+    assert!(r.completed >= 11, "{r:?}");
+}
+
+#[test]
+fn intersection_with_loss_and_delay_is_safe_and_everyone_crosses() {
+    let path = builtin("intersection.toml");
+    let text = std::fs::read_to_string(&path).expect("read");
+    for alg in ["concurrent", "fifo", "concurrent_fair", "pipelined"] {
+        let t = text.replace(
+            "algorithm = \"concurrent\"",
+            &format!("algorithm = \"{alg}\""),
+        ) + "\n[faults]\nloss = 0.2\ndelay_s = 0.05\njitter_s = 0.01\nduplicate = 0.05\nreorder = 0.05\n";
+        let sc = CrossingScenario::parse(&t, &path).unwrap_or_else(|e| panic!("{e}"));
+        let s = sc.run(&mut |_, _| {});
+        assert_eq!(
+            (
+                s.collisions,
+                s.invariant_violations,
+                s.limit_violations,
+                s.unpermitted_entries
+            ),
+            (0, 0, 0, 0),
+            "{alg}: {s:?}"
+        );
+        assert_eq!((s.crossed, s.in_system), (8, 0), "{alg}: {s:?}");
+    }
+}
