@@ -262,15 +262,6 @@ impl InProcessBus {
         }
     }
 
-    /// Attaches one more node (a vehicle entering the scene).
-    pub fn attach(&mut self, node: u16) {
-        if !self.nodes.contains(&node) {
-            self.nodes.push(node);
-            self.queues.push(Vec::new());
-            self.newest.push(HashMap::new());
-        }
-    }
-
     fn index(&self, node: u16) -> Result<usize, BusError> {
         self.nodes
             .iter()
