@@ -54,6 +54,14 @@ fn yields_to<F: Real>(ego: &Key<F>, alpha: Option<u8>, beta: Option<u8>, c: &Oth
     in_yield_set(ego, alpha, beta, &now)
 }
 
+/// The smaller of two optional gaps (`None`: no obstacle).
+fn min_gap<F: Real>(a: Option<F>, b: Option<F>) -> Option<F> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
 /// How far a vehicle last seen at speed `v` may have gone in `tau` and how fast it may be
 /// by then (SPEC §9: at most amax faster per second, never above vmax).
 fn unaware_reach<F: Real>(p: &Params<F>, v: F, tau: F) -> (F, F) {
@@ -324,16 +332,26 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         select: impl Fn(&Other<F>) -> bool,
     ) -> Option<F> {
         let p = self.params();
-        let len = p.length();
-        let mut best = obs
+        let end = obs
             .road
             .end_x
-            .map(|xr| xr - F::HALF * len - p.d0() - obs.pose.x);
-        for c in obs.others.iter().filter(|c| select(c)) {
-            let g = c.x - F::HALF * (c.length + len) - p.d0() - obs.pose.x;
-            best = Some(best.map_or(g, |b| b.min(g)));
-        }
-        best
+            .map(|xr| xr - F::HALF * p.length() - p.d0() - obs.pose.x);
+        min_gap(end, self.vehicle_gap(obs, select))
+    }
+
+    /// x̄_t − x_t over the vehicles selected by `select` alone, extent-adjusted.
+    fn vehicle_gap(
+        &self,
+        obs: &LaneObservation<'_, F>,
+        select: impl Fn(&Other<F>) -> bool,
+    ) -> Option<F> {
+        let p = self.params();
+        let len = p.length();
+        obs.others
+            .iter()
+            .filter(|c| select(c))
+            .map(|c| c.x - F::HALF * (c.length + len) - p.d0() - obs.pose.x)
+            .reduce(|a, b| a.min(b))
     }
 
     /// Extra room a vehicle at speed `v` needs so that, after `tau` of moving unseen, it
@@ -365,22 +383,20 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let x = obs.pose.x;
         let lane = self.lane;
         let safe = self.gap_over(obs, |c| in_front_set(x, lane, alpha, c));
-        let all = self.gap_over(obs, |c| {
-            in_front_set(x, lane, alpha, c) || yields_to(&key, alpha, beta, c)
-        });
-        // Yielding on a bus with latency: keep the room the declarer's (17) asks of us
-        // (our data up to `notify − h` old, then up to `notify − h` unaware), or it never
-        // starts. Zero on the paper's synchronous bus.
+        // (21) adds the vehicles I yield to. On a bus with latency I keep the room the
+        // declarer's (17) asks of me (my data up to `notify − h` old, then up to
+        // `notify − h` unaware), or it never starts; no extra room on the paper's bus.
         let tau = F::from_f64(2.0) * (self.notify - self.params().h());
-        let all = if tau > F::ZERO {
-            let yielding = self.gap_over(obs, |c| yields_to(&key, alpha, beta, c));
-            match (yielding, all) {
-                (Some(y), Some(a)) => Some(a.min(y - self.unaware_margin(obs.v_prev, tau))),
-                _ => all,
-            }
-        } else {
-            all
-        };
+        let yielding = self
+            .vehicle_gap(obs, |c| yields_to(&key, alpha, beta, c))
+            .map(|g| {
+                if tau > F::ZERO {
+                    g - self.unaware_margin(obs.v_prev, tau)
+                } else {
+                    g
+                }
+            });
+        let all = min_gap(safe, yielding);
         (safe, all)
     }
 
