@@ -457,7 +457,8 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
                     };
                     self.planner_steps += 1;
                     if let Some(m) = planner.beta() {
-                        if std::env::var_os("HOST_SIM_DEBUG").is_some() && self.steps_done % 50 == 0
+                        // The cheap test first: the environment is read every 50th step only.
+                        if self.steps_done % 50 == 0 && std::env::var_os("HOST_SIM_DEBUG").is_some()
                         {
                             eprintln!(
                                 "t={t:.2} id={} wants lane {m}: {:?}",
