@@ -2,17 +2,13 @@
 //! reordering, a silent vehicle) — what the bus does, and that the planners stay safe.
 
 use host_sim::bus::{Bus, Faults, InProcessBus, Message, Received, Silent};
-use host_sim::intersection::CrossingScenario;
 use host_sim::scenario::Scenario;
 use host_sim::sim::{run_scenario, SolverChoice};
 use planner_core::VehicleState;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn builtin(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenarios")
-        .join(name)
-}
+mod common;
+use common::builtin;
 
 fn state(id: u16, stamp: f64) -> Message {
     Message::State(VehicleState {
@@ -168,25 +164,9 @@ fn multilane_experiment_with_loss_and_delay_is_safe_and_completes() {
 
 #[test]
 fn intersection_with_loss_and_delay_is_safe_and_everyone_crosses() {
-    let path = builtin("intersection.toml");
-    let text = std::fs::read_to_string(&path).expect("read");
+    let faults =
+        "\n[faults]\nloss = 0.2\ndelay_s = 0.05\njitter_s = 0.01\nduplicate = 0.05\nreorder = 0.05\n";
     for alg in ["concurrent", "fifo", "concurrent_fair", "pipelined"] {
-        let t = text.replace(
-            "algorithm = \"concurrent\"",
-            &format!("algorithm = \"{alg}\""),
-        ) + "\n[faults]\nloss = 0.2\ndelay_s = 0.05\njitter_s = 0.01\nduplicate = 0.05\nreorder = 0.05\n";
-        let sc = CrossingScenario::parse(&t, &path).unwrap_or_else(|e| panic!("{e}"));
-        let s = sc.run(&mut |_, _| {});
-        assert_eq!(
-            (
-                s.collisions,
-                s.invariant_violations,
-                s.limit_violations,
-                s.unpermitted_entries
-            ),
-            (0, 0, 0, 0),
-            "{alg}: {s:?}"
-        );
-        assert_eq!((s.crossed, s.in_system), (8, 0), "{alg}: {s:?}");
+        common::intersection_all_cross(alg, faults);
     }
 }

@@ -5,13 +5,10 @@ use host_sim::bus::Faults;
 use host_sim::bus::{Bus, BusError, InProcessBus, Message, Received};
 use host_sim::scenario::Scenario;
 use host_sim::sim::{run_scenario, Simulation, SolverChoice};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn builtin(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenarios")
-        .join(name)
-}
+mod common;
+use common::builtin;
 
 fn run(path: &Path, seed: Option<u64>) -> (host_sim::sim::RunSummary, u64) {
     let sc = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
@@ -306,28 +303,8 @@ fn multilane_experiment_completes_with_either_solver() {
 /// cross, none collide, nobody enters A_S without a permission.
 #[test]
 fn intersection_scenario_all_cross_under_every_algorithm() {
-    use host_sim::intersection::CrossingScenario;
-    let path = builtin("intersection.toml");
-    let text = std::fs::read_to_string(&path).expect("read");
     for alg in ["concurrent", "fifo", "stop", "concurrent_fair", "pipelined"] {
-        let t = text.replace(
-            "algorithm = \"concurrent\"",
-            &format!("algorithm = \"{alg}\""),
-        );
-        let sc = CrossingScenario::parse(&t, &path).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(sc.placements.len(), 8);
-        let s = sc.run(&mut |_, _| {});
-        assert_eq!(
-            (
-                s.collisions,
-                s.invariant_violations,
-                s.limit_violations,
-                s.unpermitted_entries
-            ),
-            (0, 0, 0, 0),
-            "{alg}: {s:?}"
-        );
-        assert_eq!((s.crossed, s.in_system), (8, 0), "{alg}: {s:?}");
+        common::intersection_all_cross(alg, "");
     }
 }
 
