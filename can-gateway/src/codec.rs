@@ -6,8 +6,8 @@
 
 use crate::crc;
 use crate::wire::{
-    frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, HEADING_RES, MAX_FRAMES,
-    NO_LANE, POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES, YAW_RATE_RES,
+    frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, CLOCK_ADDRESS,
+    HEADING_RES, MAX_FRAMES, NO_LANE, POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES, YAW_RATE_RES,
 };
 use embedded_can::{ExtendedId, Frame, Id};
 use heapless::Vec;
@@ -37,6 +37,8 @@ pub enum Field {
     PathPosition,
     /// A track's heading.
     TrackHeading,
+    /// A flag byte other than 0 or 1.
+    Flag,
 }
 
 /// Why a message could not be encoded.
@@ -175,6 +177,10 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
         | Message::Exit { id, at: t } => {
             w.put(&id.to_le_bytes());
             w.put(&time(*t)?.to_le_bytes());
+        }
+        Message::Sync { period, last } => {
+            w.put(&period.to_le_bytes());
+            w.put(&[u8::from(*last)]);
         }
     }
     let n = w.at;
@@ -352,12 +358,18 @@ impl<const CAP: usize> Reassembler<CAP> {
                 Message::Exit { id, .. } => id & 0xFF == u16::from(sa),
                 // Grants and revokes come from the intersection about another vehicle.
                 Message::Grant { .. } | Message::Revoke { .. } => true,
+                Message::Sync { .. } => sa == CLOCK_ADDRESS,
             };
             if !sender_ok {
                 return Err(DecodeError::SenderMismatch);
             }
-            if kind == MessageKind::State {
-                let stamp = rd_u32(body, 16);
+            // States must be newer than the last (by stamp), ticks later (by period).
+            let ordinal = match kind {
+                MessageKind::State => Some(rd_u32(body, 16)),
+                MessageKind::Sync => Some(rd_u32(body, 0)),
+                _ => None,
+            };
+            if let Some(stamp) = ordinal {
                 if slot.last_stamp.is_some_and(|l| stamp <= l) {
                     return Err(DecodeError::Stale);
                 }
@@ -443,6 +455,17 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
                 MessageKind::Grant => Message::Grant { id, until: t },
                 MessageKind::Revoke => Message::Revoke { id, at: t },
                 _ => Message::Exit { id, at: t },
+            }
+        }
+        MessageKind::Sync => {
+            let last = match byte(4) {
+                0 => false,
+                1 => true,
+                _ => return Err(DecodeError::OutOfRange(Field::Flag)),
+            };
+            Message::Sync {
+                period: rd_u32(b, 0),
+                last,
             }
         }
     })
@@ -578,6 +601,39 @@ mod tests {
         assert_eq!(
             encode::<f64, TestFrame>(&Message::State(s), 7, 0).unwrap_err(),
             EncodeError::OutOfRange(Field::Lane)
+        );
+    }
+
+    #[test]
+    fn sync_ticks_come_from_the_clock_in_order() {
+        let mut r = Reassembler::<4>::new();
+        let tick = |period, last, sa, counter| -> Frames<TestFrame> {
+            encode::<f64, _>(&Message::Sync { period, last }, sa, counter).unwrap()
+        };
+        let f = tick(7, false, CLOCK_ADDRESS, 1);
+        assert_eq!(f.len(), 1);
+        assert_eq!(
+            r.push::<f64, _>(&f[0]),
+            Ok(Some(Message::Sync {
+                period: 7,
+                last: false
+            }))
+        );
+        // A tick not newer than the last, or from another node, is refused.
+        assert_eq!(
+            r.push::<f64, _>(&tick(7, false, CLOCK_ADDRESS, 2)[0]),
+            Err(DecodeError::Stale)
+        );
+        assert_eq!(
+            r.push::<f64, _>(&tick(8, false, 0x12, 2)[0]),
+            Err(DecodeError::SenderMismatch)
+        );
+        assert_eq!(
+            r.push::<f64, _>(&tick(8, true, CLOCK_ADDRESS, 2)[0]),
+            Ok(Some(Message::Sync {
+                period: 8,
+                last: true
+            }))
         );
     }
 

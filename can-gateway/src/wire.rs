@@ -16,6 +16,10 @@
 //! 0.0125° (i16), yaw rate 0.01°/s (i16); positions in road coordinates, x 0.01 m (i32),
 //! y 0.01 m (i16), position along an intersection path 0.01 m (u24); times 1 ms (u32, the
 //! sender's clock); lanes 4 bits, 15 = none. All little-endian.
+//!
+//! **Time master**: a simulated fleet runs in lock-step on one tick per period,
+//! [`Message::Sync`] from [`CLOCK_ADDRESS`] (period number u32, end flag u8), protected
+//! like every other message.
 
 use planner_core::VehicleState;
 
@@ -27,6 +31,11 @@ pub const PDU_FORMAT: u32 = 0xFF;
 pub const CHUNK: usize = 7;
 /// The most frames a message spans.
 pub const MAX_FRAMES: usize = 3;
+/// Source address of a fleet's time master (sends [`Message::Sync`]); vehicles use
+/// addresses below it.
+pub const CLOCK_ADDRESS: u8 = 0xF0;
+/// Source address of an intersection manager.
+pub const MANAGER_ADDRESS: u8 = 0xF1;
 /// "No lane" in a 4-bit lane field.
 pub const NO_LANE: u8 = 15;
 
@@ -56,6 +65,8 @@ pub enum MessageKind {
     Revoke = 4,
     /// V2I exit (1 frame).
     Exit = 5,
+    /// Time master's period tick, CANopen-SYNC-style (1 frame).
+    Sync = 6,
 }
 
 impl MessageKind {
@@ -64,7 +75,7 @@ impl MessageKind {
         match self {
             MessageKind::State => 3,
             MessageKind::Request => 2,
-            MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit => 1,
+            MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit | MessageKind::Sync => 1,
         }
     }
     /// From its code.
@@ -75,6 +86,7 @@ impl MessageKind {
             3 => MessageKind::Grant,
             4 => MessageKind::Revoke,
             5 => MessageKind::Exit,
+            6 => MessageKind::Sync,
             _ => return None,
         })
     }
@@ -134,6 +146,14 @@ pub enum Message<F> {
         /// When (s).
         at: F,
     },
+    /// The time master's tick: period `period` begins (a simulated fleet's clock, sent by
+    /// [`CLOCK_ADDRESS`]; nodes act on it as CANopen nodes act on SYNC).
+    Sync {
+        /// Period number, increasing by one per tick.
+        period: u32,
+        /// The run ends: nodes stop after this tick.
+        last: bool,
+    },
 }
 
 impl<F> Message<F> {
@@ -145,6 +165,7 @@ impl<F> Message<F> {
             Message::Grant { .. } => MessageKind::Grant,
             Message::Revoke { .. } => MessageKind::Revoke,
             Message::Exit { .. } => MessageKind::Exit,
+            Message::Sync { .. } => MessageKind::Sync,
         }
     }
 }

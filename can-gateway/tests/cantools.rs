@@ -4,7 +4,7 @@
 //! every message CRC on its own.
 
 use can_gateway::log::candump_line;
-use can_gateway::wire::{Request, TrackWire};
+use can_gateway::wire::{Request, TrackWire, CLOCK_ADDRESS};
 use can_gateway::{encode, Frames, Message};
 use planner_core::VehicleState;
 use std::fmt::Write as _;
@@ -138,6 +138,17 @@ fn cantools_decodes_the_gateways_candump_log() {
             &mut expected,
         );
     }
+    let sync = Message::<f64>::Sync {
+        period: 1234,
+        last: true,
+    };
+    let frames: Frames<F8> = encode(&sync, CLOCK_ADDRESS, 2).expect("encodes");
+    push(
+        &frames,
+        vec![vec![("Period", 1234.0), ("Last", 1.0)]],
+        &mut log,
+        &mut expected,
+    );
     let log_path = tmp.join("gateway.log");
     let exp_path = tmp.join("expected.jsonl");
     std::fs::write(&log_path, log).expect("write log");
