@@ -46,12 +46,44 @@ pub const STALE_AFTER_S: f64 = 0.25;
 /// Membership in the yield set (21), with ≺ decided on where the other vehicle is now by
 /// its data (x + v·age): on a bus with latency two vehicles side by side each see the
 /// other behind by its data's age, and neither would yield. Exact with age 0.
-fn yields_to<F: Real>(ego: &Key<F>, alpha: Option<u8>, beta: Option<u8>, c: &Other<F>) -> bool {
+/// Positions are rounded to the bus's step (`step`), as the ego's own key is.
+fn yields_to<F: Real>(
+    ego: &Key<F>,
+    alpha: Option<u8>,
+    beta: Option<u8>,
+    c: &Other<F>,
+    step: F,
+) -> bool {
     let now = Other {
-        x: c.x + c.v * c.age,
+        x: round_to(c.x + c.v * c.age, step),
         ..*c
     };
     in_yield_set(ego, alpha, beta, &now)
+}
+
+/// Steps to which the bus rounds broadcast values (0: exact).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Resolution<F> {
+    position: F,
+    speed: F,
+}
+
+impl<F: Real> Resolution<F> {
+    const EXACT: Self = Self {
+        position: F::ZERO,
+        speed: F::ZERO,
+    };
+}
+
+/// `x` rounded to a multiple of `step` (half away from zero, as can-gateway encodes),
+/// computed in f64 like the decoder so that a decoded value rounds to itself; `x` when
+/// `step` is 0.
+fn round_to<F: Real>(x: F, step: F) -> F {
+    if !(step > F::ZERO) {
+        return x;
+    }
+    let s = step.to_f64();
+    F::from_f64(libm::round(x.to_f64() / s) * s)
 }
 
 /// The smaller of two optional gaps (`None`: no obstacle).
@@ -200,6 +232,8 @@ pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     beta_steps: u32,
     /// Bound on how long the others take to hear this vehicle's broadcast (≥ h).
     notify: F,
+    /// Steps to which the bus rounds positions and speeds (0: exact).
+    resolution: Resolution<F>,
     omega_plan: [F; N],
     reference: Option<Reference<F>>,
 }
@@ -227,6 +261,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             beta: None,
             beta_steps: 0,
             notify: params.h(),
+            resolution: Resolution::EXACT,
             omega_plan: [F::ZERO; N],
             reference: None,
         })
@@ -249,6 +284,23 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// The notification latency bound in use.
     pub fn notify_latency(&self) -> F {
         self.notify
+    }
+
+    /// Sets the steps to which the bus rounds the positions and speeds every vehicle
+    /// broadcasts (to nearest; e.g. can-gateway's 0.01 m and 0.02 m/s). Two things follow:
+    /// ≺ is decided on rounded values, this vehicle's own included, so that every vehicle
+    /// computes the same order from what it hears (with exact own values, two vehicles
+    /// side by side could each see the other behind, and neither yields); and the safety
+    /// checks take every other vehicle half a position step longer at each end and, as a
+    /// vehicle behind in (17), half a speed step faster. Zero (the default) is exact.
+    /// Values that are negative, not finite or ≥ 1 are refused and change nothing.
+    pub fn set_bus_resolution(&mut self, position: F, speed: F) -> Result<(), ConfigError> {
+        let ok = |r: F| r.is_finite() && r >= F::ZERO && r < F::ONE;
+        if !(ok(position) && ok(speed)) {
+            return Err(ConfigError::InvalidResolution);
+        }
+        self.resolution = Resolution { position, speed };
+        Ok(())
     }
 
     /// The parameters.
@@ -346,7 +398,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         select: impl Fn(&Other<F>) -> bool,
     ) -> Option<F> {
         let p = self.params();
-        let len = p.length();
+        // Half a position step at each end: the true rear of a vehicle heard at c.x.
+        let len = p.length() + self.resolution.position;
         obs.others
             .iter()
             .filter(|c| select(c))
@@ -363,10 +416,12 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         reach + safety::d_s(p, v_up) - safety::d_s(p, v)
     }
 
+    /// This vehicle in ≺, as the others hear it (rounded to the bus's steps).
     fn key(&self, obs: &LaneObservation<'_, F>) -> Key<F> {
+        let r = self.resolution;
         Key {
-            x: obs.pose.x,
-            v: obs.v_prev,
+            x: round_to(obs.pose.x, r.position),
+            v: round_to(obs.v_prev, r.speed),
             lane: self.lane,
             id: u16::MAX,
         }
@@ -388,7 +443,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         // `notify − h` unaware), or it never starts; no extra room on the paper's bus.
         let tau = F::from_f64(2.0) * (self.notify - self.params().h());
         let yielding = self
-            .vehicle_gap(obs, |c| yields_to(&key, alpha, beta, c))
+            .vehicle_gap(obs, |c| {
+                yields_to(&key, alpha, beta, c, self.resolution.position)
+            })
             .map(|g| {
                 if tau > F::ZERO {
                     g - self.unaware_margin(obs.v_prev, tau)
@@ -427,8 +484,15 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             if !(c.age <= F::from_f64(STALE_AFTER_S)) {
                 return Err(StartBlock::Stale(c.id));
             }
-            let (reach, v) = unaware_reach(p, c.v, c.age + unaware);
-            let room = x - F::HALF * (c.length + len) - p.d0() - c.x - reach - F::SAFETY_MARGIN_M;
+            // Half a step on the bus's rounding: the true front and speed at their worst.
+            let r = self.resolution;
+            let (reach, v) = unaware_reach(p, c.v + F::HALF * r.speed, c.age + unaware);
+            let room = x
+                - F::HALF * (c.length + len + r.position)
+                - p.d0()
+                - c.x
+                - reach
+                - F::SAFETY_MARGIN_M;
             if !safety::invariant_holds(p, v, room) {
                 return Err(StartBlock::Behind(c.id));
             }

@@ -110,6 +110,8 @@ pub enum ConfigError {
     InvalidWeights,
     /// A notification latency that is not a finite number.
     InvalidLatency,
+    /// A bus resolution that is negative, not finite, or 1 or more.
+    InvalidResolution,
 }
 
 /// The position x̄_t of the nearest obstacle ahead, extent-adjusted (SPEC §1):

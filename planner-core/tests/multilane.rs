@@ -368,3 +368,69 @@ fn notification_latency_delays_the_start_and_widens_seventeen() {
         assert_eq!(started, starts, "latency {latency}");
     }
 }
+
+/// Two vehicles side by side, each wanting the other's lane, known to each other only as
+/// a CAN bus rounds them (x to 0.01 m). A is at 10.004 (heard at 10.00), B at 10.002
+/// (heard at 10.00): with exact own positions each sees the other behind, neither yields,
+/// and (17) keeps both from starting for as long as they stay abreast. With the bus
+/// resolution set, both decide ≺ on rounded values, agree that A ≺ B (same x and speed,
+/// lower lane), and exactly A yields.
+#[test]
+fn bus_resolution_makes_side_by_side_vehicles_agree_on_the_order() {
+    let p = p();
+    let mut b_heard = other(2, 10.00, 15.0, 1);
+    b_heard.beta = Some(0);
+    let mut a_heard = other(1, 10.00, 15.0, 0);
+    a_heard.beta = Some(1);
+    let yields = |lane: u8, x: f64, heard: Other<f64>, target: u8, resolution: bool| {
+        let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), lane).unwrap();
+        if resolution {
+            pl.set_bus_resolution(0.01, 0.02).unwrap();
+        }
+        let y = (f64::from(lane) + 0.5) * 3.6;
+        let c = pl.step(&obs(x, y, 15.0, &[heard], target)).unwrap();
+        c.status == StepStatus::Fallback(FallbackReason::Yield)
+    };
+    // Exact own values: neither yields (the deadlock).
+    assert!(!yields(0, 10.004, b_heard, 1, false));
+    assert!(!yields(1, 10.002, a_heard, 0, false));
+    // Rounded: A yields to B, B does not yield to A.
+    assert!(yields(0, 10.004, b_heard, 1, true));
+    assert!(!yields(1, 10.002, a_heard, 0, true));
+    // Bad resolutions are refused and change nothing.
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+    for (pos, speed) in [
+        (f64::NAN, 0.02),
+        (0.01, -0.02),
+        (1.0, 0.02),
+        (0.01, f64::INFINITY),
+    ] {
+        assert!(pl.set_bus_resolution(pos, speed).is_err());
+    }
+    let c = pl.step(&obs(10.004, 1.8, 15.0, &[b_heard], 1)).unwrap();
+    assert_ne!(c.status, StepStatus::Fallback(FallbackReason::Yield));
+}
+
+/// The resolution's safety side: a vehicle behind heard at the edge of (17) blocks the
+/// start once half a step of position and speed is allowed for, not before.
+#[test]
+fn bus_resolution_widens_seventeen_by_half_a_step() {
+    let p = p();
+    let room = d_s(&p, 15.0);
+    // Just enough room on exact data: 2 mm over (17) with the planner's margin.
+    let behind = other(2, -(room + 4.5 + p.d0() + 0.002), 15.0, 1);
+    for (resolution, starts) in [(false, true), (true, false)] {
+        let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+        if resolution {
+            pl.set_bus_resolution(0.01, 0.02).unwrap();
+        }
+        let mut started = false;
+        for k in 0..5 {
+            let mut b = behind;
+            b.x += 0.15 * k as f64;
+            let c = pl.step(&obs(0.15 * k as f64, 1.8, 15.0, &[b], 1)).unwrap();
+            started |= c.event == Some(LaneEvent::Started(1));
+        }
+        assert_eq!(started, starts, "resolution {resolution}");
+    }
+}
