@@ -69,12 +69,15 @@ pub struct Received {
 pub enum BusError {
     /// The node is not attached to this bus.
     UnknownNode(u16),
+    /// The transport failed (a CAN socket, an encoding).
+    Transport(String),
 }
 
 impl fmt::Display for BusError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::UnknownNode(n) => write!(f, "node {n} is not on this bus"),
+            Self::Transport(e) => write!(f, "{e}"),
         }
     }
 }

@@ -9,7 +9,9 @@
 
 pub mod bench;
 pub mod bus;
+pub mod can;
 pub mod faulty;
+pub mod fleet;
 pub mod instances;
 pub mod intersection;
 pub mod monitor;

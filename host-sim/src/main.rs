@@ -5,6 +5,7 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use host_sim::bus::Faults;
+use host_sim::fleet::{self, Medium};
 use host_sim::plot::PlotData;
 use host_sim::scenario::Scenario;
 use host_sim::sim::{run_scenario, SolverChoice};
@@ -16,13 +17,14 @@ use std::process::ExitCode;
 const EXIT_UNSAFE: u8 = 1;
 const EXIT_BAD_INPUT: u8 = 2;
 const EXIT_NOT_LIVE: u8 = 3;
+const EXIT_BUS: u8 = 4;
 
 #[derive(Parser)]
 #[command(
     name = "host-sim",
     version,
     about = "Runs planner-core instances on the host: simulations over a bus, benchmarks",
-    after_help = "Exit codes: 0 ok, 1 collision or violation, 2 bad input, 3 liveness goal missed."
+    after_help = "Exit codes: 0 ok, 1 collision or violation, 2 bad input, 3 liveness goal missed, 4 CAN bus failure (--bus)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -58,6 +60,15 @@ enum Command {
         /// The planners' solver.
         #[arg(long, value_enum, default_value = "ours")]
         solver: SolverArg,
+        /// The bus: `in-process` (messages, one task), `can-hub` (CAN frames on an
+        /// in-process hub, a task per vehicle), or a SocketCAN interface such as `vcan0`
+        /// (a task and a socket per vehicle).
+        #[arg(
+            long,
+            default_value = "in-process",
+            value_name = "in-process|can-hub|IFACE"
+        )]
+        bus: String,
     },
     /// Many vehicles (parallel single-lane platoons) at h = 0.01 on all cores.
     Scale {
@@ -141,6 +152,26 @@ fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
     }
 }
 
+/// `--bus`: `None` for the in-process message bus, else the CAN medium of a fleet.
+fn parse_bus(bus: &str) -> Result<Option<Medium>, String> {
+    match bus {
+        "in-process" => Ok(None),
+        "can-hub" => Ok(Some(Medium::Hub)),
+        // Linux interface names: 1 to 15 bytes (IFNAMSIZ − 1), no '/', no white space.
+        iface
+            if (1..=15).contains(&iface.len())
+                && iface
+                    .bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b"-_.".contains(&b)) =>
+        {
+            Ok(Some(Medium::SocketCan(iface.to_string())))
+        }
+        other => Err(format!(
+            "--bus {other:?}: expected in-process, can-hub or a network interface name (1–15 of a-z A-Z 0-9 - _ .)"
+        )),
+    }
+}
+
 fn bad_input(msg: impl std::fmt::Display) -> ExitCode {
     eprintln!("error: {msg}");
     ExitCode::from(EXIT_BAD_INPUT)
@@ -154,8 +185,13 @@ fn run(
     trace: Option<PathBuf>,
     plot: Option<PathBuf>,
     solver: SolverArg,
+    bus: &str,
 ) -> ExitCode {
     // Every input is checked before anything runs.
+    let medium = match parse_bus(bus) {
+        Ok(m) => m,
+        Err(e) => return bad_input(e),
+    };
     if let Some(p) = &plot {
         if !matches!(p.extension().and_then(|e| e.to_str()), Some("png" | "svg")) {
             return bad_input(format!("--plot {}: must end in .png or .svg", p.display()));
@@ -166,12 +202,39 @@ fn run(
         Err(e) => return bad_input(format!("{}: cannot read: {e}", file.display())),
     };
     if host_sim::intersection::is_crossing_scenario(&text) {
+        if medium.is_some() {
+            return bad_input(format!(
+                "{}: intersection scenarios run on the in-process bus only (crossing reports \
+                 have no CAN mapping yet)",
+                file.display()
+            ));
+        }
         return run_crossing(&file, &text, json, plot, trace.is_some());
     }
     let scenario = match Scenario::parse(&text, &file) {
         Ok(s) => s,
         Err(e) => return bad_input(e),
     };
+    if let Some(m) = &medium {
+        if !scenario.faults.is_none() {
+            return bad_input(format!(
+                "{}: [faults] are injected by the in-process bus; `--bus {m}` carries frames as they are",
+                file.display()
+            ));
+        }
+        if let Some(v) = scenario
+            .vehicles
+            .iter()
+            .find(|v| v.id >= u16::from(can_gateway::wire::CLOCK_ADDRESS))
+        {
+            return bad_input(format!(
+                "{}: vehicle id {} is not a CAN source address (ids 0..={} on CAN)",
+                file.display(),
+                v.id,
+                can_gateway::wire::CLOCK_ADDRESS - 1
+            ));
+        }
+    }
     let mut writer = match &trace {
         Some(p) => match std::fs::File::create(p).and_then(|f| TraceWriter::new(BufWriter::new(f)))
         {
@@ -201,31 +264,35 @@ fn run(
         SolverArg::Ours => SolverChoice::Ours,
         SolverArg::Clarabel => SolverChoice::Clarabel,
     };
-    let result = run_scenario(
-        scenario,
-        solver,
-        seed,
-        &mut |row| {
-            if let Some(w) = writer.as_mut() {
-                w.row(row);
-            }
-            if want_plot {
-                plot_data.add(row);
+    let mut on_row = |row: &host_sim::sim::TraceRow| {
+        if let Some(w) = writer.as_mut() {
+            w.row(row);
+        }
+        if want_plot {
+            plot_data.add(row);
+        }
+    };
+    let mut on_progress = |done: u64, total: u64| {
+        if let Some(b) = &bar {
+            b.set_position(done * 1000 / total.max(1));
+        }
+    };
+    let (summary, fleet) = match &medium {
+        None => match run_scenario(scenario, solver, seed, &mut on_row, &mut on_progress) {
+            Ok(s) => (s, None),
+            Err(e) => return bad_input(format!("bus: {e}")),
+        },
+        Some(m) => match fleet::run(scenario, solver, seed, m, &mut on_row, &mut on_progress) {
+            Ok(f) => (f.run.clone(), Some(f)),
+            Err(e) => {
+                eprintln!("error: --bus {m}: {e}");
+                return ExitCode::from(EXIT_BUS);
             }
         },
-        &mut |done, total| {
-            if let Some(b) = &bar {
-                b.set_position(done * 1000 / total.max(1));
-            }
-        },
-    );
+    };
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    let summary = match result {
-        Ok(s) => s,
-        Err(e) => return bad_input(format!("bus: {e}")),
-    };
     if let Some(w) = writer {
         if let Err(e) = w.finish() {
             return bad_input(format!("--trace: {e}"));
@@ -237,10 +304,30 @@ fn run(
         }
     }
     if json {
-        if let Err(code) = print_json(&summary) {
+        let printed = match &fleet {
+            Some(f) => print_json(f),
+            None => print_json(&summary),
+        };
+        if let Err(code) = printed {
             return code;
         }
     } else {
+        if let Some(f) = &fleet {
+            println!(
+                "{}: {} tasks, {} SYNC periods; frames sent {}, received {}, rejected {}; \
+                 state latency p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs ({} messages)",
+                f.medium,
+                f.tasks,
+                f.periods,
+                f.can.frames_sent,
+                f.can.frames_received,
+                f.can.rejected_total(),
+                f.state_latency.p50_us,
+                f.state_latency.p99_us,
+                f.state_latency.max_us,
+                f.state_latency.count
+            );
+        }
         println!(
             "{}: {} vehicles, {:.2} s simulated in {:.2} s; collisions {}, invariant violations {}, \
              limit violations {}, road-end overruns {}, min gap {:.3} m, fallback steps {}, waiting steps {}, goals {}/{}{}",
@@ -492,7 +579,8 @@ fn main() -> ExitCode {
             trace,
             plot,
             solver,
-        } => run(file, seed, json, trace, plot, solver),
+            bus,
+        } => run(file, seed, json, trace, plot, solver, &bus),
         Command::Scale {
             vehicles,
             duration,

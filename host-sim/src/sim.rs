@@ -12,8 +12,9 @@ use crate::reference::ClarabelSolver;
 use crate::scenario::{DriverKind, Phase, Scenario, MAX_VEHICLES};
 use planner_core::lane_change::LaneEvent;
 use planner_core::{
-    CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, MpcSolver, Other, Params,
-    Pose, Road, SingleLaneProblem, Solution, SolveError, StepStatus, VehicleState, WorldView,
+    ConfigError, CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, MpcSolver,
+    Other, Params, Pose, Road, SingleLaneProblem, Solution, SolveError, StepStatus, VehicleState,
+    WorldView,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -124,7 +125,7 @@ pub struct TraceRow {
     pub mode: Mode,
 }
 
-enum Driver<const N: usize> {
+pub(crate) enum Driver<const N: usize> {
     Planner {
         planner: Box<LanePlanner<f64, N, AnySolver<N>>>,
         world: Box<WorldView<f64, WORLD_CAP>>,
@@ -138,7 +139,7 @@ enum Driver<const N: usize> {
     },
 }
 
-struct Agent<const N: usize> {
+pub(crate) struct Agent<const N: usize> {
     id: u16,
     x: f64,
     y: f64,
@@ -164,7 +165,7 @@ struct Agent<const N: usize> {
 }
 
 impl<const N: usize> Agent<N> {
-    fn state(&self, t: f64) -> VehicleState<f64> {
+    pub(crate) fn state(&self, t: f64) -> VehicleState<f64> {
         VehicleState {
             id: self.id,
             x: self.x,
@@ -179,7 +180,7 @@ impl<const N: usize> Agent<N> {
         }
     }
 
-    fn truth(&self) -> Truth {
+    pub(crate) fn truth(&self) -> Truth {
         Truth {
             x: self.x,
             y: self.y,
@@ -192,6 +193,41 @@ impl<const N: usize> Agent<N> {
             v_before: self.v_before,
         }
     }
+}
+
+/// Per-step counters, summed over vehicles (and over tasks, in a fleet).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Counters {
+    pub fallback_steps: u64,
+    pub waiting_steps: u64,
+    pub yield_steps: u64,
+    pub lateral_iterations: u64,
+    pub planner_steps: u64,
+    pub solved_steps: u64,
+    pub solver_iterations: u64,
+    pub rejected: u64,
+}
+
+impl Counters {
+    pub(crate) fn add(&mut self, o: &Counters) {
+        self.fallback_steps += o.fallback_steps;
+        self.waiting_steps += o.waiting_steps;
+        self.yield_steps += o.yield_steps;
+        self.lateral_iterations += o.lateral_iterations;
+        self.planner_steps += o.planner_steps;
+        self.solved_steps += o.solved_steps;
+        self.solver_iterations += o.solver_iterations;
+        self.rejected += o.rejected;
+    }
+}
+
+/// What one vehicle's decision at time t needs besides its own state and inbox.
+pub(crate) struct StepCtx {
+    pub t: f64,
+    pub steps_done: u64,
+    pub road: Road<f64>,
+    pub lim: Limits,
+    pub silent: Option<crate::bus::Silent>,
 }
 
 /// Lane changes of a run.
@@ -280,14 +316,7 @@ pub struct Simulation<const N: usize, B: Bus = InProcessBus> {
     total_steps: u64,
     inbox: Vec<Received>,
     truths: Vec<Truth>,
-    fallback_steps: u64,
-    waiting_steps: u64,
-    yield_steps: u64,
-    lateral_iterations: u64,
-    planner_steps: u64,
-    solved_steps: u64,
-    solver_iterations: u64,
-    rejected: u64,
+    counters: Counters,
     solver: SolverChoice,
     seed: u64,
 }
@@ -309,67 +338,9 @@ impl<const N: usize> Simulation<N, InProcessBus> {
 impl<const N: usize, B: Bus> Simulation<N, B> {
     /// A simulation of `scenario` over `bus` (every vehicle id must be attached).
     pub fn with_bus(scenario: Scenario, solver: SolverChoice, seed: Option<u64>, bus: B) -> Self {
-        let params = Params::<f64>::table_i();
         let lim = Limits::table_i();
         let seed = seed.unwrap_or(scenario.seed);
-        let agents = scenario
-            .vehicles
-            .iter()
-            .map(|spec| {
-                let driver = match spec.driver {
-                    DriverKind::Planner => {
-                        let s = match solver {
-                            SolverChoice::Ours => AnySolver::Ours(IpmSolver::default()),
-                            SolverChoice::Clarabel => AnySolver::Clarabel(ClarabelSolver {
-                                accept_almost_solved: true,
-                                ..ClarabelSolver::default()
-                            }),
-                        };
-                        // Default weights are valid by construction, and the latency bound
-                        // of validated faults is finite.
-                        let mut planner =
-                            LanePlanner::with_solver(params, CostWeights::default(), s, spec.lane)
-                                .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
-                        let _ = planner.set_notify_latency(scenario.faults.notify_bound(lim.h));
-                        Driver::Planner {
-                            planner: Box::new(planner),
-                            world: Box::new(WorldView::new(spec.id)),
-                            others: Box::new(heapless::Vec::new()),
-                        }
-                    }
-                    DriverKind::Script => Driver::Script(spec.script.clone()),
-                    DriverKind::Random => Driver::Random {
-                        rng: Box::new(ChaCha8Rng::seed_from_u64(
-                            seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(spec.id),
-                        )),
-                        accel: 0.0,
-                        until: 0.0,
-                    },
-                };
-                Agent {
-                    id: spec.id,
-                    x: spec.x,
-                    y: (f64::from(spec.lane) + 0.5) * LANE_WIDTH_M,
-                    theta: 0.0,
-                    v: spec.v,
-                    v_before: spec.v,
-                    omega: 0.0,
-                    lane: spec.lane,
-                    alpha: None,
-                    beta: None,
-                    target_lane: spec.target_lane.unwrap_or(spec.lane),
-                    goal_x: spec.goal_x,
-                    reached_at: spec.goal_x.filter(|g| spec.x >= *g).map(|_| 0.0),
-                    v_ref: spec.v_ref.unwrap_or(lim.v_max),
-                    driver,
-                    mode: Mode::Cruise,
-                    declared_x: None,
-                    changes: Vec::new(),
-                    in_target_at: (spec.target_lane.unwrap_or(spec.lane) == spec.lane)
-                        .then_some(0.0),
-                }
-            })
-            .collect();
+        let agents = build_agents(&scenario, solver, seed, scenario.faults.notify_bound(lim.h));
         let total_steps = (scenario.duration_s / lim.h).round() as u64;
         Self {
             scenario,
@@ -382,17 +353,19 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             total_steps,
             inbox: Vec::new(),
             truths: Vec::new(),
-            fallback_steps: 0,
-            waiting_steps: 0,
-            yield_steps: 0,
-            lateral_iterations: 0,
-            planner_steps: 0,
-            solved_steps: 0,
-            solver_iterations: 0,
-            rejected: 0,
+            counters: Counters::default(),
             solver,
             seed,
         }
+    }
+
+    /// Tells the planners the steps to which the bus rounds positions and speeds (a CAN
+    /// bus: [`crate::can::RESOLUTION`]); see `LanePlanner::set_bus_resolution`.
+    pub fn set_bus_resolution(&mut self, (position, speed): (f64, f64)) -> Result<(), ConfigError> {
+        for a in &mut self.agents {
+            a.set_bus_resolution(position, speed)?;
+        }
+        Ok(())
     }
 
     /// Steps in the whole run.
@@ -412,170 +385,28 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
         for a in &self.agents {
             self.bus.send(a.id, &Message::State(a.state(t)), t)?;
         }
-        let road = Road {
-            lanes: self.scenario.road.lanes,
-            lane_width: LANE_WIDTH_M,
-            end_x: self.scenario.road.end_x,
+        let ctx = StepCtx {
+            t,
+            steps_done: self.steps_done,
+            road: road_of(&self.scenario),
+            lim: self.lim,
+            silent: self.scenario.faults.silent,
         };
         let mut commands = Vec::with_capacity(self.agents.len());
-        let silent = self.scenario.faults.silent;
         for a in self.agents.iter_mut() {
-            // A vehicle whose transmitter has failed knows it (bus-off) and gives up lane
-            // changes it has not started: the others could not hear its intention.
-            if silent.is_some_and(|s| s.id == a.id && t >= s.from_s) && a.alpha.is_none() {
-                a.target_lane = a.lane;
-            }
             self.inbox.clear();
             self.bus.receive(a.id, t, &mut self.inbox)?;
-            let (v_cmd, w_cmd) = match &mut a.driver {
-                Driver::Planner {
-                    planner,
-                    world,
-                    others,
-                } => {
-                    for r in &self.inbox {
-                        if let Message::State(s) = r.msg {
-                            if world.update(&s, r.at).is_err() {
-                                self.rejected += 1;
-                            }
-                        }
-                    }
-                    world.others(t, LENGTH_M, others);
-                    let obs = LaneObservation {
-                        pose: Pose {
-                            x: a.x,
-                            y: a.y,
-                            theta: a.theta,
-                        },
-                        v_prev: a.v,
-                        omega_prev: a.omega,
-                        others,
-                        road,
-                        target_lane: a.target_lane,
-                        target: a.goal_x.map_or(0.0, |g| g - a.x),
-                        v_ref: a.v_ref,
-                    };
-                    self.planner_steps += 1;
-                    if let Some(m) = planner.beta() {
-                        // The cheap test first: the environment is read every 50th step only.
-                        if self.steps_done % 50 == 0 && std::env::var_os("HOST_SIM_DEBUG").is_some()
-                        {
-                            eprintln!(
-                                "t={t:.2} id={} wants lane {m}: {:?}",
-                                a.id,
-                                planner.start_check(&obs, m)
-                            );
-                        }
-                    }
-                    match planner.step(&obs) {
-                        Ok(c) => {
-                            a.lane = c.lane;
-                            a.alpha = c.alpha;
-                            a.beta = c.beta;
-                            match c.event {
-                                Some(LaneEvent::Declared(_)) => {
-                                    a.declared_x.get_or_insert(a.x);
-                                }
-                                Some(LaneEvent::Completed(_)) => {
-                                    let from = a.declared_x.take().unwrap_or(a.x);
-                                    a.changes.push((a.x - from, t));
-                                }
-                                Some(LaneEvent::Started(_)) | None => {}
-                            }
-                            if c.lane == a.target_lane && c.alpha.is_none() {
-                                a.in_target_at.get_or_insert(t);
-                            }
-                            self.lateral_iterations += u64::from(c.lateral_iterations);
-                            a.mode = match c.status {
-                                StepStatus::Solved { iterations } => {
-                                    self.solved_steps += 1;
-                                    self.solver_iterations += u64::from(iterations);
-                                    if c.alpha.is_some() {
-                                        Mode::LaneChange
-                                    } else {
-                                        Mode::Cruise
-                                    }
-                                }
-                                StepStatus::Fallback(FallbackReason::NoRoom) => {
-                                    self.waiting_steps += 1;
-                                    Mode::Waiting
-                                }
-                                StepStatus::Fallback(FallbackReason::Yield) => {
-                                    self.yield_steps += 1;
-                                    Mode::Yield
-                                }
-                                StepStatus::Fallback(why) => {
-                                    if std::env::var_os("HOST_SIM_DEBUG").is_some() {
-                                        eprintln!("t={t:.2} id={} fallback {why:?}", a.id);
-                                    }
-                                    self.fallback_steps += 1;
-                                    Mode::Fallback
-                                }
-                            };
-                            (c.v, c.omega)
-                        }
-                        Err(_) => {
-                            self.fallback_steps += 1;
-                            a.mode = Mode::Fallback;
-                            planner.braking_command(a.theta, a.v)
-                        }
-                    }
-                }
-                Driver::Script(phases) => {
-                    let accel = phases
-                        .iter()
-                        .find(|p| t < p.until_s)
-                        .map_or(0.0, |p| p.accel);
-                    a.mode = Mode::Cruise;
-                    (admissible(&self.lim, a.v, accel), 0.0)
-                }
-                Driver::Random { rng, accel, until } => {
-                    if t >= *until {
-                        *accel = rng.random_range(-self.lim.brake..self.lim.a_max);
-                        *until = t + rng.random_range(0.2..2.0);
-                    }
-                    a.mode = Mode::Cruise;
-                    (admissible(&self.lim, a.v, *accel), 0.0)
-                }
-            };
-            if a.reached_at.is_some() && a.mode == Mode::Cruise {
-                a.mode = Mode::Done;
-            }
-            commands.push((v_cmd, w_cmd));
-            trace(&TraceRow {
-                t,
-                id: a.id,
-                x: a.x,
-                y: a.y,
-                theta: a.theta,
-                v: v_cmd,
-                omega: w_cmd,
-                lane: a.lane,
-                target_lane: a.target_lane,
-                mode: a.mode,
-            });
+            let (cmd, row) = a.decide(&ctx, &self.inbox, &mut self.counters);
+            commands.push(cmd);
+            trace(&row);
         }
-        // The exact unicycle (1), integrated here independently of planner-core.
         for (a, (v, w)) in self.agents.iter_mut().zip(commands) {
-            a.v_before = a.v;
-            a.v = v;
-            a.omega = w;
-            if w.abs() > 1e-12 {
-                let th1 = a.theta + w * h;
-                a.x += v / w * (th1.sin() - a.theta.sin());
-                a.y -= v / w * (th1.cos() - a.theta.cos());
-                a.theta = th1;
-            } else {
-                a.x += v * h * a.theta.cos();
-                a.y += v * h * a.theta.sin();
-            }
+            a.advance(v, w, h);
         }
         self.steps_done += 1;
         self.t = self.steps_done as f64 * h;
         for a in self.agents.iter_mut() {
-            if a.reached_at.is_none() && a.goal_x.is_some_and(|g| a.x >= g) {
-                a.reached_at = Some(self.t);
-            }
+            a.check_goal(self.t);
         }
         self.truths.clear();
         self.truths.extend(self.agents.iter().map(Agent::truth));
@@ -590,64 +421,368 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
 
     /// Lane-change statistics so far.
     pub fn lane_changes(&self) -> LaneChangeStats {
-        let wanted: Vec<&Agent<N>> = self
-            .agents
-            .iter()
-            .filter(|a| matches!(a.driver, Driver::Planner { .. }))
-            .collect();
-        let done: Vec<f64> = wanted.iter().filter_map(|a| a.in_target_at).collect();
-        LaneChangeStats {
-            vehicles: wanted.len(),
-            in_target_lane: done.len(),
-            changes: wanted.iter().map(|a| a.changes.len()).sum(),
-            all_done_at_s: (done.len() == wanted.len())
-                .then(|| done.iter().copied().fold(0.0, f64::max)),
-            max_distance_m: wanted
-                .iter()
-                .flat_map(|a| a.changes.iter().map(|c| c.0))
-                .fold(0.0, f64::max),
-        }
+        lane_changes(&self.agents)
     }
 
     /// The summary so far.
     pub fn summary(&self, wall_seconds: f64) -> RunSummary {
-        let deadline = self.scenario.deadline_s;
-        let with_goal: Vec<&Agent<N>> = self.agents.iter().filter(|a| a.goal_x.is_some()).collect();
-        let reached: Vec<f64> = with_goal
-            .iter()
-            .filter_map(|a| a.reached_at)
-            .filter(|&t| t <= deadline + 1e-9)
-            .collect();
-        let lane_changes = self.lane_changes();
-        RunSummary {
-            scenario: self.scenario.name.clone(),
-            vehicles: self.agents.len(),
-            sim_seconds: self.t,
-            collisions: self.findings.collisions,
-            invariant_violations: self.findings.invariant_violations,
-            limit_violations: self.findings.limit_violations,
-            road_end_overruns: self.findings.road_end_overruns,
-            off_road: self.findings.off_road,
-            min_gap_m: self.findings.min_gap_m,
-            fallback_steps: self.fallback_steps,
-            waiting_steps: self.waiting_steps,
-            yield_steps: self.yield_steps,
-            lane_changes,
-            lateral_iterations_total: self.lateral_iterations,
-            planner_steps: self.planner_steps,
-            solver_iterations_mean: self.solver_iterations as f64 / self.solved_steps.max(1) as f64,
-            completed: reached.len() == with_goal.len()
-                && lane_changes.in_target_lane == lane_changes.vehicles,
-            goals: with_goal.len(),
-            goals_reached: reached.len(),
-            last_goal_time_s: reached.iter().copied().reduce(f64::max),
-            messages_sent: self.agents.len() as u64 * self.steps_done,
-            messages_rejected: self.rejected,
-            bus_faults: self.bus.fault_stats(),
-            solver: self.solver,
-            seed: self.seed,
-            wall_seconds,
+        summarize(
+            &self.scenario,
+            &self.agents,
+            &Outcome {
+                findings: &self.findings,
+                counters: &self.counters,
+                t: self.t,
+                steps_done: self.steps_done,
+                bus_faults: self.bus.fault_stats(),
+                solver: self.solver,
+                seed: self.seed,
+                wall_seconds,
+            },
+        )
+    }
+}
+
+/// The road of a scenario, as the planners see it.
+pub(crate) fn road_of(scenario: &Scenario) -> Road<f64> {
+    Road {
+        lanes: scenario.road.lanes,
+        lane_width: LANE_WIDTH_M,
+        end_x: scenario.road.end_x,
+    }
+}
+
+/// The vehicles of `scenario` at t = 0, each with its driver; planners wait `notify` (s)
+/// after declaring an intention (SPEC §9; h on a perfect bus).
+pub(crate) fn build_agents<const N: usize>(
+    scenario: &Scenario,
+    solver: SolverChoice,
+    seed: u64,
+    notify: f64,
+) -> Vec<Agent<N>> {
+    let params = Params::<f64>::table_i();
+    let lim = Limits::table_i();
+    scenario
+        .vehicles
+        .iter()
+        .map(|spec| {
+            let driver = match spec.driver {
+                DriverKind::Planner => {
+                    let s = match solver {
+                        SolverChoice::Ours => AnySolver::Ours(IpmSolver::default()),
+                        SolverChoice::Clarabel => AnySolver::Clarabel(ClarabelSolver {
+                            accept_almost_solved: true,
+                            ..ClarabelSolver::default()
+                        }),
+                    };
+                    // Default weights are valid by construction, and the latency bound
+                    // of validated faults is finite.
+                    let mut planner =
+                        LanePlanner::with_solver(params, CostWeights::default(), s, spec.lane)
+                            .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
+                    let _ = planner.set_notify_latency(notify);
+                    Driver::Planner {
+                        planner: Box::new(planner),
+                        world: Box::new(WorldView::new(spec.id)),
+                        others: Box::new(heapless::Vec::new()),
+                    }
+                }
+                DriverKind::Script => Driver::Script(spec.script.clone()),
+                DriverKind::Random => Driver::Random {
+                    rng: Box::new(ChaCha8Rng::seed_from_u64(
+                        seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(spec.id),
+                    )),
+                    accel: 0.0,
+                    until: 0.0,
+                },
+            };
+            Agent {
+                id: spec.id,
+                x: spec.x,
+                y: (f64::from(spec.lane) + 0.5) * LANE_WIDTH_M,
+                theta: 0.0,
+                v: spec.v,
+                v_before: spec.v,
+                omega: 0.0,
+                lane: spec.lane,
+                alpha: None,
+                beta: None,
+                target_lane: spec.target_lane.unwrap_or(spec.lane),
+                goal_x: spec.goal_x,
+                reached_at: spec.goal_x.filter(|g| spec.x >= *g).map(|_| 0.0),
+                v_ref: spec.v_ref.unwrap_or(lim.v_max),
+                driver,
+                mode: Mode::Cruise,
+                declared_x: None,
+                changes: Vec::new(),
+                in_target_at: (spec.target_lane.unwrap_or(spec.lane) == spec.lane).then_some(0.0),
+            }
+        })
+        .collect()
+}
+
+impl<const N: usize> Agent<N> {
+    /// The vehicle's id.
+    pub(crate) fn id(&self) -> u16 {
+        self.id
+    }
+
+    /// Sets its planner's bus resolution (nothing for a scripted driver).
+    pub(crate) fn set_bus_resolution(
+        &mut self,
+        position: f64,
+        speed: f64,
+    ) -> Result<(), ConfigError> {
+        match &mut self.driver {
+            Driver::Planner { planner, .. } => planner.set_bus_resolution(position, speed),
+            Driver::Script(_) | Driver::Random { .. } => Ok(()),
         }
+    }
+
+    /// Decides the command for [t, t+h) from what the bus delivered (`inbox`), and the
+    /// trace row of this step.
+    pub(crate) fn decide(
+        &mut self,
+        ctx: &StepCtx,
+        inbox: &[Received],
+        counters: &mut Counters,
+    ) -> ((f64, f64), TraceRow) {
+        let t = ctx.t;
+        let lim = &ctx.lim;
+        let a = self;
+        // A vehicle whose transmitter has failed knows it (bus-off) and gives up lane
+        // changes it has not started: the others could not hear its intention.
+        if ctx.silent.is_some_and(|s| s.id == a.id && t >= s.from_s) && a.alpha.is_none() {
+            a.target_lane = a.lane;
+        }
+        let (v_cmd, w_cmd) = match &mut a.driver {
+            Driver::Planner {
+                planner,
+                world,
+                others,
+            } => {
+                for r in inbox {
+                    if let Message::State(s) = r.msg {
+                        if world.update(&s, r.at).is_err() {
+                            counters.rejected += 1;
+                        }
+                    }
+                }
+                world.others(t, LENGTH_M, others);
+                let obs = LaneObservation {
+                    pose: Pose {
+                        x: a.x,
+                        y: a.y,
+                        theta: a.theta,
+                    },
+                    v_prev: a.v,
+                    omega_prev: a.omega,
+                    others,
+                    road: ctx.road,
+                    target_lane: a.target_lane,
+                    target: a.goal_x.map_or(0.0, |g| g - a.x),
+                    v_ref: a.v_ref,
+                };
+                counters.planner_steps += 1;
+                if let Some(m) = planner.beta() {
+                    // The cheap test first: the environment is read every 50th step only.
+                    if ctx.steps_done % 50 == 0 && std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                        eprintln!(
+                            "t={t:.2} id={} wants lane {m}: {:?}",
+                            a.id,
+                            planner.start_check(&obs, m)
+                        );
+                    }
+                }
+                match planner.step(&obs) {
+                    Ok(c) => {
+                        a.lane = c.lane;
+                        a.alpha = c.alpha;
+                        a.beta = c.beta;
+                        match c.event {
+                            Some(LaneEvent::Declared(_)) => {
+                                a.declared_x.get_or_insert(a.x);
+                            }
+                            Some(LaneEvent::Completed(_)) => {
+                                let from = a.declared_x.take().unwrap_or(a.x);
+                                a.changes.push((a.x - from, t));
+                            }
+                            Some(LaneEvent::Started(_)) | None => {}
+                        }
+                        if c.lane == a.target_lane && c.alpha.is_none() {
+                            a.in_target_at.get_or_insert(t);
+                        }
+                        counters.lateral_iterations += u64::from(c.lateral_iterations);
+                        a.mode = match c.status {
+                            StepStatus::Solved { iterations } => {
+                                counters.solved_steps += 1;
+                                counters.solver_iterations += u64::from(iterations);
+                                if c.alpha.is_some() {
+                                    Mode::LaneChange
+                                } else {
+                                    Mode::Cruise
+                                }
+                            }
+                            StepStatus::Fallback(FallbackReason::NoRoom) => {
+                                counters.waiting_steps += 1;
+                                Mode::Waiting
+                            }
+                            StepStatus::Fallback(FallbackReason::Yield) => {
+                                counters.yield_steps += 1;
+                                Mode::Yield
+                            }
+                            StepStatus::Fallback(why) => {
+                                if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                                    eprintln!("t={t:.2} id={} fallback {why:?}", a.id);
+                                }
+                                counters.fallback_steps += 1;
+                                Mode::Fallback
+                            }
+                        };
+                        (c.v, c.omega)
+                    }
+                    Err(_) => {
+                        counters.fallback_steps += 1;
+                        a.mode = Mode::Fallback;
+                        planner.braking_command(a.theta, a.v)
+                    }
+                }
+            }
+            Driver::Script(phases) => {
+                let accel = phases
+                    .iter()
+                    .find(|p| t < p.until_s)
+                    .map_or(0.0, |p| p.accel);
+                a.mode = Mode::Cruise;
+                (admissible(lim, a.v, accel), 0.0)
+            }
+            Driver::Random { rng, accel, until } => {
+                if t >= *until {
+                    *accel = rng.random_range(-lim.brake..lim.a_max);
+                    *until = t + rng.random_range(0.2..2.0);
+                }
+                a.mode = Mode::Cruise;
+                (admissible(lim, a.v, *accel), 0.0)
+            }
+        };
+        if a.reached_at.is_some() && a.mode == Mode::Cruise {
+            a.mode = Mode::Done;
+        }
+        let row = TraceRow {
+            t,
+            id: a.id,
+            x: a.x,
+            y: a.y,
+            theta: a.theta,
+            v: v_cmd,
+            omega: w_cmd,
+            lane: a.lane,
+            target_lane: a.target_lane,
+            mode: a.mode,
+        };
+        ((v_cmd, w_cmd), row)
+    }
+
+    /// Applies (v, ω) for one period h: the exact unicycle (1), integrated here
+    /// independently of planner-core.
+    pub(crate) fn advance(&mut self, v: f64, w: f64, h: f64) {
+        self.v_before = self.v;
+        self.v = v;
+        self.omega = w;
+        if w.abs() > 1e-12 {
+            let th1 = self.theta + w * h;
+            self.x += v / w * (th1.sin() - self.theta.sin());
+            self.y -= v / w * (th1.cos() - self.theta.cos());
+            self.theta = th1;
+        } else {
+            self.x += v * h * self.theta.cos();
+            self.y += v * h * self.theta.sin();
+        }
+    }
+
+    /// Records reaching the goal by `t`.
+    pub(crate) fn check_goal(&mut self, t: f64) {
+        if self.reached_at.is_none() && self.goal_x.is_some_and(|g| self.x >= g) {
+            self.reached_at = Some(t);
+        }
+    }
+}
+
+/// Lane-change statistics of `agents`.
+pub(crate) fn lane_changes<const N: usize>(agents: &[Agent<N>]) -> LaneChangeStats {
+    let wanted: Vec<&Agent<N>> = agents
+        .iter()
+        .filter(|a| matches!(a.driver, Driver::Planner { .. }))
+        .collect();
+    let done: Vec<f64> = wanted.iter().filter_map(|a| a.in_target_at).collect();
+    LaneChangeStats {
+        vehicles: wanted.len(),
+        in_target_lane: done.len(),
+        changes: wanted.iter().map(|a| a.changes.len()).sum(),
+        all_done_at_s: (done.len() == wanted.len())
+            .then(|| done.iter().copied().fold(0.0, f64::max)),
+        max_distance_m: wanted
+            .iter()
+            .flat_map(|a| a.changes.iter().map(|c| c.0))
+            .fold(0.0, f64::max),
+    }
+}
+
+/// What a run produced besides its vehicles.
+pub(crate) struct Outcome<'a> {
+    pub findings: &'a Findings,
+    pub counters: &'a Counters,
+    pub t: f64,
+    pub steps_done: u64,
+    pub bus_faults: crate::bus::FaultStats,
+    pub solver: SolverChoice,
+    pub seed: u64,
+    pub wall_seconds: f64,
+}
+
+/// The summary of a run of `scenario` that ended with `agents`.
+pub(crate) fn summarize<const N: usize>(
+    scenario: &Scenario,
+    agents: &[Agent<N>],
+    o: &Outcome<'_>,
+) -> RunSummary {
+    let deadline = scenario.deadline_s;
+    let with_goal: Vec<&Agent<N>> = agents.iter().filter(|a| a.goal_x.is_some()).collect();
+    let reached: Vec<f64> = with_goal
+        .iter()
+        .filter_map(|a| a.reached_at)
+        .filter(|&t| t <= deadline + 1e-9)
+        .collect();
+    let lane_changes = lane_changes(agents);
+    let c = o.counters;
+    RunSummary {
+        scenario: scenario.name.clone(),
+        vehicles: agents.len(),
+        sim_seconds: o.t,
+        collisions: o.findings.collisions,
+        invariant_violations: o.findings.invariant_violations,
+        limit_violations: o.findings.limit_violations,
+        road_end_overruns: o.findings.road_end_overruns,
+        off_road: o.findings.off_road,
+        min_gap_m: o.findings.min_gap_m,
+        fallback_steps: c.fallback_steps,
+        waiting_steps: c.waiting_steps,
+        yield_steps: c.yield_steps,
+        lane_changes,
+        lateral_iterations_total: c.lateral_iterations,
+        planner_steps: c.planner_steps,
+        solver_iterations_mean: c.solver_iterations as f64 / c.solved_steps.max(1) as f64,
+        completed: reached.len() == with_goal.len()
+            && lane_changes.in_target_lane == lane_changes.vehicles,
+        goals: with_goal.len(),
+        goals_reached: reached.len(),
+        last_goal_time_s: reached.iter().copied().reduce(f64::max),
+        messages_sent: agents.len() as u64 * o.steps_done,
+        messages_rejected: c.rejected,
+        bus_faults: o.bus_faults,
+        solver: o.solver,
+        seed: o.seed,
+        wall_seconds: o.wall_seconds,
     }
 }
 

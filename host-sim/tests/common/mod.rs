@@ -1,4 +1,6 @@
 //! Helpers shared by host-sim's test files.
+// Each test file uses part of these helpers.
+#![allow(dead_code)]
 
 use host_sim::intersection::CrossingScenario;
 use std::path::{Path, PathBuf};

@@ -1,0 +1,469 @@
+//! The planners' messages as real CAN frames: can-gateway's codec over a [`CanPort`] —
+//! SocketCAN on Linux (`socketcan` 4, e.g. `vcan0`) or an in-process frame [`Hub`] —
+//! with kernel (or hub) receive time stamps.
+//!
+//! - [`CanNode`]: one node's attachment (its port, alive counters, reassembler, counts);
+//! - [`CanBus`]: the message-level [`Bus`] over one node per vehicle, so that the
+//!   single-threaded simulator runs unchanged over CAN;
+//! - the fleet runner ([`crate::fleet`]) gives every vehicle its own task and node.
+//!
+//! Mapping of the simulator's messages onto can-gateway's: `State` ↔ `State`,
+//! `Left { id, at }` ↔ `Exit { id, at }`, `Grant { id, until }` ↔ `Grant`. Crossing
+//! reports need the layout's route table on both sides to become a `Request` (inlet,
+//! outlet, arrival): not mapped yet, refused with [`CanError::Unmapped`].
+
+use crate::bus::{Bus, BusError, Message, Received};
+use can_gateway::codec::{DecodeError, EncodeError};
+use can_gateway::wire::{self, CLOCK_ADDRESS};
+use can_gateway::{encode, Frames, PlainFrame, Reassembler};
+use serde::Serialize;
+use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions};
+use std::collections::{BTreeMap, VecDeque};
+use std::fmt;
+use std::io;
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+/// The steps to which can-gateway rounds what vehicles broadcast (position 0.01 m, speed
+/// 0.02 m/s): the planners' bus resolution over CAN.
+pub const RESOLUTION: (f64, f64) = (wire::POS_RES, wire::SPEED_RES);
+
+/// (sender, kind) pairs a node's reassembler tracks: every vehicle a scenario may hold
+/// (128) × the kinds a vehicle sends, plus the clock and the manager.
+pub const REASSEMBLY_SLOTS: usize = 512;
+
+/// Bounded retries of a transmission the kernel refuses for lack of buffer (ENOBUFS on a
+/// busy interface): 100 × 1 ms, then the error is reported.
+const TX_RETRIES: u32 = 100;
+
+/// One node's attachment to a CAN medium.
+pub trait CanPort: Send {
+    /// Transmits one frame.
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()>;
+    /// The next received frame and its receive time stamp, waiting up to `timeout`
+    /// (zero: only a frame already there); `None` when none came in time.
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>>;
+}
+
+/// A raw SocketCAN socket bound to one interface, with `SO_TIMESTAMPNS` receive stamps
+/// (the kernel's time of arrival at the socket).
+pub struct SocketCanPort {
+    sock: CanSocket,
+    /// The read timeout last set (avoids a system call per read).
+    timeout: Option<Duration>,
+}
+
+impl SocketCanPort {
+    /// Opens a socket on `iface` (e.g. `vcan0`) with receive time stamps.
+    pub fn open(iface: &str) -> io::Result<Self> {
+        let sock = CanSocket::open(iface)?;
+        sock.set_recv_timestamp(true)?;
+        Ok(Self {
+            sock,
+            timeout: None,
+        })
+    }
+
+    /// A socket that only transmits: it accepts no frames, so its receive queue cannot
+    /// fill up with traffic nobody reads.
+    pub fn open_transmit_only(iface: &str) -> io::Result<Self> {
+        let port = Self::open(iface)?;
+        port.sock.set_filter_drop_all()?;
+        Ok(port)
+    }
+}
+
+impl fmt::Debug for SocketCanPort {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("SocketCanPort").finish_non_exhaustive()
+    }
+}
+
+impl CanPort for SocketCanPort {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        let f = CanFrame::new(frame.id(), frame.data()).ok_or_else(|| {
+            io::Error::new(io::ErrorKind::InvalidInput, "frame not representable")
+        })?;
+        let mut tries = 0;
+        loop {
+            match self.sock.write_frame(&f) {
+                Ok(()) => return Ok(()),
+                Err(e) if e.raw_os_error() == Some(libc_enobufs()) && tries < TX_RETRIES => {
+                    tries += 1;
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    }
+
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        // SO_RCVTIMEO of zero means "block forever"; a microsecond is the shortest wait.
+        let t = timeout.max(Duration::from_micros(1));
+        if self.timeout != Some(t) {
+            self.sock.set_read_timeout(t)?;
+            self.timeout = Some(t);
+        }
+        match self.sock.read_frame_with_timestamp() {
+            Ok((frame, at)) => {
+                let plain = match frame {
+                    CanFrame::Remote(r) => PlainFrame::new_remote(r.id(), r.dlc()),
+                    other => PlainFrame::new(other.id(), other.data()),
+                };
+                Ok(plain.map(|p| (p, at)))
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) =>
+            {
+                Ok(None)
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// ENOBUFS on Linux.
+const fn libc_enobufs() -> i32 {
+    105
+}
+
+type Queues = Vec<VecDeque<(PlainFrame, SystemTime)>>;
+
+/// An in-process broadcast medium for CAN frames: every frame a port transmits is queued,
+/// with the time it was sent, at every other port (CAN's broadcast, no own echo).
+#[derive(Debug, Clone, Default)]
+pub struct Hub {
+    inner: Arc<(Mutex<Queues>, Condvar)>,
+}
+
+impl Hub {
+    /// An empty hub.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// A new port on the hub.
+    pub fn port(&self) -> HubPort {
+        let index = match self.inner.0.lock() {
+            Ok(mut q) => {
+                q.push(VecDeque::new());
+                q.len() - 1
+            }
+            // A poisoned hub delivers nothing; its ports report the error on use.
+            Err(_) => usize::MAX,
+        };
+        HubPort {
+            hub: self.inner.clone(),
+            index,
+        }
+    }
+}
+
+/// A port on a [`Hub`].
+#[derive(Debug)]
+pub struct HubPort {
+    hub: Arc<(Mutex<Queues>, Condvar)>,
+    index: usize,
+}
+
+fn poisoned<T>(_: T) -> io::Error {
+    io::Error::other("in-process CAN hub poisoned by a panicked task")
+}
+
+impl CanPort for HubPort {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        let (lock, cv) = &*self.hub;
+        let mut queues = lock.lock().map_err(poisoned)?;
+        let now = SystemTime::now();
+        for (i, q) in queues.iter_mut().enumerate() {
+            if i != self.index {
+                q.push_back((*frame, now));
+            }
+        }
+        cv.notify_all();
+        Ok(())
+    }
+
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        let (lock, cv) = &*self.hub;
+        let deadline = Instant::now() + timeout;
+        let mut queues = lock.lock().map_err(poisoned)?;
+        loop {
+            let q = queues
+                .get_mut(self.index)
+                .ok_or_else(|| io::Error::other("port not on its hub"))?;
+            if let Some(f) = q.pop_front() {
+                return Ok(Some(f));
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            queues = cv.wait_timeout(queues, left).map_err(poisoned)?.0;
+        }
+    }
+}
+
+/// Why a message could not go over CAN.
+#[derive(Debug)]
+pub enum CanError {
+    /// The port failed (socket error).
+    Io(io::Error),
+    /// A value does not fit its field (can-gateway's encoder refused it).
+    Encode(EncodeError),
+    /// A vehicle id is not a CAN source address below the clock's (0–0xEF).
+    BadAddress(u16),
+    /// The message kind has no CAN mapping yet.
+    Unmapped(&'static str),
+}
+
+impl fmt::Display for CanError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Io(e) => write!(f, "CAN port: {e}"),
+            Self::Encode(e) => write!(f, "CAN encoding: {e:?}"),
+            Self::BadAddress(id) => write!(
+                f,
+                "vehicle id {id} is not a CAN source address (ids 0..={} on CAN)",
+                CLOCK_ADDRESS - 1
+            ),
+            Self::Unmapped(what) => write!(f, "{what} cannot go over CAN yet"),
+        }
+    }
+}
+
+impl std::error::Error for CanError {}
+
+impl From<io::Error> for CanError {
+    fn from(e: io::Error) -> Self {
+        Self::Io(e)
+    }
+}
+
+impl From<CanError> for BusError {
+    fn from(e: CanError) -> Self {
+        BusError::Transport(e.to_string())
+    }
+}
+
+/// What a node's CAN traffic amounted to.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct CanStats {
+    /// Frames transmitted.
+    pub frames_sent: u64,
+    /// Frames received.
+    pub frames_received: u64,
+    /// Whole, verified messages received.
+    pub messages_received: u64,
+    /// Frames rejected by the reassembler, by reason (`Crc`, `Duplicate`, `Stale`, …).
+    pub rejected: BTreeMap<String, u64>,
+}
+
+impl CanStats {
+    /// Adds `o`'s counts.
+    pub fn add(&mut self, o: &CanStats) {
+        self.frames_sent += o.frames_sent;
+        self.frames_received += o.frames_received;
+        self.messages_received += o.messages_received;
+        for (k, v) in &o.rejected {
+            *self.rejected.entry(k.clone()).or_default() += v;
+        }
+    }
+
+    /// Frames rejected for any reason.
+    pub fn rejected_total(&self) -> u64 {
+        self.rejected.values().sum()
+    }
+}
+
+/// What one read from a port gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Polled {
+    /// No frame came in time.
+    Nothing,
+    /// A frame that completed no message (a part, or rejected: counted in the stats).
+    Frame,
+    /// A frame that completed a verified message, with the frame's receive time stamp.
+    Message(wire::Message<f64>, SystemTime),
+}
+
+/// One node on a CAN medium: the sender address, a port, an alive counter per message
+/// kind, and a reassembler for what others send.
+pub struct CanNode<P> {
+    sa: u8,
+    port: P,
+    counters: [u8; 8],
+    reassembler: Box<Reassembler<REASSEMBLY_SLOTS>>,
+    stats: CanStats,
+}
+
+impl<P> fmt::Debug for CanNode<P> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("CanNode")
+            .field("sa", &self.sa)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<P: CanPort> CanNode<P> {
+    /// Node `sa` on `port`.
+    pub fn new(sa: u8, port: P) -> Self {
+        Self {
+            sa,
+            port,
+            counters: [0; 8],
+            reassembler: Box::default(),
+            stats: CanStats::default(),
+        }
+    }
+
+    /// The node of vehicle `id` (its CAN source address is its id).
+    pub fn vehicle(id: u16, port: P) -> Result<Self, CanError> {
+        match u8::try_from(id) {
+            Ok(sa) if sa < CLOCK_ADDRESS => Ok(Self::new(sa, port)),
+            _ => Err(CanError::BadAddress(id)),
+        }
+    }
+
+    /// What the node's traffic amounted to.
+    pub fn stats(&self) -> &CanStats {
+        &self.stats
+    }
+
+    /// Encodes and transmits `msg` (one alive counter per kind, mod 16).
+    pub fn send_wire(&mut self, msg: &wire::Message<f64>) -> Result<(), CanError> {
+        let k = msg.kind() as usize;
+        let counter = self.counters.get(k).copied().unwrap_or(0);
+        let frames: Frames<PlainFrame> = encode(msg, self.sa, counter).map_err(CanError::Encode)?;
+        for f in &frames {
+            self.port.transmit(f)?;
+            self.stats.frames_sent += 1;
+        }
+        if let Some(c) = self.counters.get_mut(k) {
+            *c = (counter + 1) & 0x0F;
+        }
+        Ok(())
+    }
+
+    /// Transmits one of the simulator's messages.
+    pub fn send(&mut self, msg: &Message) -> Result<(), CanError> {
+        self.send_wire(&to_wire(msg)?)
+    }
+
+    /// Reads at most one frame, waiting up to `timeout`, and feeds it to the reassembler.
+    pub fn poll(&mut self, timeout: Duration) -> Result<Polled, CanError> {
+        let Some((frame, at)) = self.port.receive(timeout)? else {
+            return Ok(Polled::Nothing);
+        };
+        self.stats.frames_received += 1;
+        match self.reassembler.push::<f64, _>(&frame) {
+            Ok(Some(m)) => {
+                self.stats.messages_received += 1;
+                Ok(Polled::Message(m, at))
+            }
+            Ok(None) => Ok(Polled::Frame),
+            Err(e) => {
+                *self.stats.rejected.entry(reason(e)).or_default() += 1;
+                Ok(Polled::Frame)
+            }
+        }
+    }
+}
+
+fn reason(e: DecodeError) -> String {
+    match e {
+        DecodeError::OutOfRange(f) => format!("OutOfRange({f:?})"),
+        DecodeError::UnknownKind(_) => "UnknownKind".into(),
+        other => format!("{other:?}"),
+    }
+}
+
+/// The simulator's message as can-gateway's.
+pub fn to_wire(msg: &Message) -> Result<wire::Message<f64>, CanError> {
+    Ok(match *msg {
+        Message::State(s) => wire::Message::State(s),
+        Message::Left { id, at } => wire::Message::Exit { id, at },
+        Message::Grant { id, until } => wire::Message::Grant { id, until },
+        Message::Crossing(..) => return Err(CanError::Unmapped("a crossing report")),
+    })
+}
+
+/// can-gateway's message as the simulator's, if it is one the vehicles act on.
+pub fn from_wire(msg: &wire::Message<f64>) -> Option<Message> {
+    match *msg {
+        wire::Message::State(s) => Some(Message::State(s)),
+        wire::Message::Exit { id, at } => Some(Message::Left { id, at }),
+        wire::Message::Grant { id, until } => Some(Message::Grant { id, until }),
+        wire::Message::Request(_) | wire::Message::Revoke { .. } | wire::Message::Sync { .. } => {
+            None
+        }
+    }
+}
+
+/// Frames one drain of a node reads at most (a bound on the loop; a period carries
+/// three frames per vehicle).
+const DRAIN_LIMIT: usize = 4 * 3 * crate::scenario::MAX_VEHICLES;
+
+/// The message-level [`Bus`] over CAN: one [`CanNode`] per vehicle, each on its own port
+/// (its own SocketCAN socket, or hub port). A message is delivered when its frames have
+/// reached the receiver's socket; the receive time given to the planner is the period's
+/// time (the simulator is in lock-step), the kernel's stamps measure the latency.
+#[derive(Debug)]
+pub struct CanBus<P> {
+    nodes: Vec<(u16, CanNode<P>)>,
+}
+
+impl<P: CanPort> CanBus<P> {
+    /// A bus with a node for each of `ids`, on the port `open` gives it.
+    pub fn new(ids: &[u16], mut open: impl FnMut(u16) -> io::Result<P>) -> Result<Self, CanError> {
+        let mut nodes = Vec::with_capacity(ids.len());
+        for &id in ids {
+            let port = open(id)?;
+            nodes.push((id, CanNode::vehicle(id, port)?));
+        }
+        Ok(Self { nodes })
+    }
+
+    /// Every node's traffic, summed.
+    pub fn stats(&self) -> CanStats {
+        let mut s = CanStats::default();
+        for (_, n) in &self.nodes {
+            s.add(n.stats());
+        }
+        s
+    }
+
+    fn node(&mut self, id: u16) -> Result<&mut CanNode<P>, BusError> {
+        self.nodes
+            .iter_mut()
+            .find(|(i, _)| *i == id)
+            .map(|(_, n)| n)
+            .ok_or(BusError::UnknownNode(id))
+    }
+}
+
+impl<P: CanPort> Bus for CanBus<P> {
+    fn send(&mut self, from: u16, msg: &Message, _now: f64) -> Result<(), BusError> {
+        Ok(self.node(from)?.send(msg)?)
+    }
+
+    fn receive(&mut self, node: u16, now: f64, out: &mut Vec<Received>) -> Result<(), BusError> {
+        let n = self.node(node)?;
+        for _ in 0..DRAIN_LIMIT {
+            match n.poll(Duration::ZERO)? {
+                Polled::Nothing => break,
+                Polled::Frame => {}
+                Polled::Message(m, _) => {
+                    if let Some(msg) = from_wire(&m) {
+                        out.push(Received { msg, at: now });
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,305 @@
+//! The fleet on CAN frames (issue 6, items 3–4) without a kernel: every vehicle in its
+//! own task on the in-process frame hub, with the same code that runs on SocketCAN
+//! (the real vcan test is `host-sim/vcan/run-in-qemu.sh`, run by CI).
+
+mod common;
+
+use can_gateway::PlainFrame;
+use common::builtin;
+use embedded_can::{Frame, Id, StandardId};
+use host_sim::bus::Bus;
+use host_sim::can::{CanBus, CanPort, Hub, HubPort, RESOLUTION};
+use host_sim::fleet::{self, FleetError, FleetSummary, Medium};
+use host_sim::scenario::Scenario;
+use host_sim::sim::{RunSummary, Simulation, SolverChoice};
+use std::collections::VecDeque;
+use std::io;
+use std::process::Command;
+use std::time::{Duration, SystemTime};
+
+fn scenario(name: &str) -> Scenario {
+    let path = builtin(name);
+    let text = std::fs::read_to_string(&path).expect("read");
+    Scenario::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn safe_and_complete(s: &RunSummary) {
+    assert_eq!(
+        (
+            s.collisions,
+            s.invariant_violations,
+            s.limit_violations,
+            s.road_end_overruns,
+            s.off_road
+        ),
+        (0, 0, 0, 0, 0),
+        "{s:?}"
+    );
+    assert!(s.completed, "{s:?}");
+}
+
+fn on_hub(name: &str) -> FleetSummary {
+    fleet::run(
+        scenario(name),
+        SolverChoice::Ours,
+        None,
+        &Medium::Hub,
+        &mut |_| {},
+        &mut |_, _| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The multi-lane scenario as a fleet: a task per vehicle, every state through the codec;
+/// safe, every lane change done, every frame accepted, one SYNC per period.
+#[test]
+fn multilane_fleet_on_can_frames() {
+    let f = on_hub("multilane.toml");
+    safe_and_complete(&f.run);
+    let v = f.run.vehicles as u64;
+    assert_eq!(f.tasks, f.run.vehicles);
+    assert_eq!(f.periods, 1501);
+    assert!(f.can.rejected.is_empty(), "{:?}", f.can.rejected);
+    // Three frames per state, one state per vehicle and period.
+    assert_eq!(f.can.frames_sent, 3 * v * f.periods);
+    // Everyone hears every other vehicle's frames and every SYNC.
+    assert_eq!(f.can.frames_received, v * ((v - 1) * 3 + 1) * f.periods);
+    assert_eq!(f.state_latency.count, v * (v - 1) * (f.periods - 1));
+    assert_eq!(f.run.lane_changes.changes, 8);
+    // As on the in-process bus, to within a period (the planners see rounded states).
+    let exact = host_sim::sim::run_scenario(
+        scenario("multilane.toml"),
+        SolverChoice::Ours,
+        None,
+        &mut |_| {},
+        &mut |_, _| {},
+    )
+    .expect("runs");
+    let (a, b) = (
+        exact.lane_changes.all_done_at_s.expect("done"),
+        f.run.lane_changes.all_done_at_s.expect("done"),
+    );
+    assert!((a - b).abs() <= 0.05, "in-process {a} s, on CAN {b} s");
+}
+
+/// The single-threaded simulator over the same CAN transport ([`CanBus`] behind the
+/// `Bus` trait): the same run, to the bit, as the fleet of tasks.
+#[test]
+fn can_bus_behind_the_bus_trait_equals_the_fleet() {
+    let sc = scenario("dead-end.toml");
+    let ids: Vec<u16> = sc.vehicles.iter().map(|v| v.id).collect();
+    let hub = Hub::new();
+    let bus = CanBus::new(&ids, |_| Ok(hub.port())).expect("ports");
+    let mut sim = Simulation::<20, _>::with_bus(sc, SolverChoice::Ours, None, bus);
+    sim.set_bus_resolution(RESOLUTION).expect("valid");
+    let mut rows = Vec::new();
+    while !sim.finished() {
+        sim.step(&mut |r| rows.push(*r)).expect("step");
+    }
+    let s = sim.summary(0.0);
+    safe_and_complete(&s);
+    let mut fleet_rows = Vec::new();
+    let f = fleet::run(
+        scenario("dead-end.toml"),
+        SolverChoice::Ours,
+        None,
+        &Medium::Hub,
+        &mut |r| fleet_rows.push(*r),
+        &mut |_, _| {},
+    )
+    .expect("runs");
+    assert_eq!(rows, fleet_rows);
+    assert_eq!(s.min_gap_m, f.run.min_gap_m);
+}
+
+/// A port that, after every 50th frame it receives, also hands up a copy of that frame
+/// and a standard-identifier frame: duplicates and foreign traffic on the bus.
+struct Noisy {
+    inner: HubPort,
+    n: u64,
+    extra: VecDeque<(PlainFrame, SystemTime)>,
+}
+
+impl CanPort for Noisy {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        self.inner.transmit(frame)
+    }
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        if let Some(f) = self.extra.pop_front() {
+            return Ok(Some(f));
+        }
+        let got = self.inner.receive(timeout)?;
+        if let Some((f, at)) = got {
+            self.n += 1;
+            if self.n % 50 == 0 {
+                let foreign = PlainFrame::new(
+                    Id::Standard(StandardId::new(0x123).expect("11 bits")),
+                    &[1, 2, 3],
+                )
+                .expect("frame");
+                self.extra.push_back((f, at));
+                self.extra.push_back((foreign, at));
+            }
+        }
+        Ok(got)
+    }
+}
+
+/// Duplicated and foreign frames are rejected with their reason and change nothing: the
+/// run is the same as on a clean bus.
+#[test]
+fn duplicates_and_foreign_frames_change_nothing() {
+    let clean = on_hub("multilane.toml");
+    let hub = Hub::new();
+    let noisy = fleet::run_with_ports(
+        scenario("multilane.toml"),
+        SolverChoice::Ours,
+        None,
+        "noisy hub",
+        |_| {
+            Ok(Noisy {
+                inner: hub.port(),
+                n: 0,
+                extra: VecDeque::new(),
+            })
+        },
+        &mut |_| {},
+        &mut |_, _| {},
+    )
+    .expect("runs");
+    let r = &noisy.can.rejected;
+    assert!(r.get("NotOurs").copied().unwrap_or(0) > 0, "{r:?}");
+    let dup = ["Duplicate", "OutOfSequence", "Stale"]
+        .iter()
+        .map(|k| r.get(*k).copied().unwrap_or(0))
+        .sum::<u64>();
+    assert!(dup > 0, "{r:?}");
+    safe_and_complete(&noisy.run);
+    assert_eq!(noisy.run.min_gap_m, clean.run.min_gap_m);
+    assert_eq!(
+        noisy.run.lane_changes.all_done_at_s,
+        clean.run.lane_changes.all_done_at_s
+    );
+}
+
+/// A port whose transmitter fails after `left` frames.
+struct Failing {
+    inner: HubPort,
+    left: u32,
+}
+
+impl CanPort for Failing {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        if self.left == 0 {
+            return Err(io::Error::other("bus-off"));
+        }
+        self.left -= 1;
+        self.inner.transmit(frame)
+    }
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        self.inner.receive(timeout)
+    }
+}
+
+/// A vehicle whose transmitter fails ends the run at once with a typed error naming it
+/// (every other task stops at the master's last SYNC; nothing waits for a timeout).
+#[test]
+fn a_failing_node_ends_the_run_with_its_error() {
+    let hub = Hub::new();
+    let t0 = std::time::Instant::now();
+    let r = fleet::run_with_ports(
+        scenario("multilane.toml"),
+        SolverChoice::Ours,
+        None,
+        "failing hub",
+        |id| {
+            Ok(Failing {
+                inner: hub.port(),
+                left: if id == Some(4) { 30 } else { u32::MAX },
+            })
+        },
+        &mut |_| {},
+        &mut |_, _| {},
+    );
+    match r {
+        Err(FleetError::Vehicle { id: 4, error }) => assert!(error.contains("bus-off"), "{error}"),
+        other => panic!("expected vehicle 4 to fail, got {other:?}"),
+    }
+    assert!(t0.elapsed() < fleet::TIMEOUT / 2);
+}
+
+/// Bus errors of the `Bus` trait: an unknown node, a message with no CAN mapping.
+#[test]
+fn can_bus_refuses_what_it_cannot_carry() {
+    let hub = Hub::new();
+    let mut bus = CanBus::new(&[1, 2], |_| Ok(hub.port())).expect("ports");
+    let report = planner_core::crossing::CrossingReport {
+        id: 1,
+        route: 0,
+        s: 1.0,
+        v: 1.0,
+        length: 4.5,
+    };
+    let msg = host_sim::bus::Message::Crossing(report, 0.0);
+    assert!(bus.send(1, &msg, 0.0).is_err());
+    let left = host_sim::bus::Message::Left { id: 1, at: 0.5 };
+    assert!(bus.send(3, &left, 0.0).is_err());
+    bus.send(1, &left, 0.0).expect("sent");
+    let mut out = Vec::new();
+    bus.receive(2, 0.5, &mut out).expect("received");
+    assert_eq!(out.len(), 1);
+    assert_eq!(out[0].msg, left);
+    // Ids that are not CAN source addresses are refused.
+    assert!(CanBus::new(&[0xF0], |_| Ok(hub.port())).is_err());
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_host-sim"))
+}
+
+/// The CLI: `--bus can-hub` prints the fleet's JSON; bad `--bus` values, scenarios the
+/// CAN bus cannot run, and an interface that cannot be opened are refused with a
+/// message and their exit codes (2 bad input, 4 bus failure).
+#[test]
+fn cli_bus_option() {
+    let out = bin()
+        .arg("run")
+        .arg(builtin("road-end.toml"))
+        .args(["--bus", "can-hub", "--json"])
+        .output()
+        .expect("runs");
+    assert!(out.status.success(), "{out:?}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(v["medium"], "can-hub");
+    assert_eq!(v["collisions"], 0);
+    assert!(v["can"]["frames_sent"].as_u64().expect("count") > 0);
+    for (args, code, says) in [
+        (vec!["--bus", "no such iface"], 2, "network interface name"),
+        (vec!["--bus", ""], 2, "network interface name"),
+        (vec!["--bus", "vcan-none9"], 4, "vcan-none9"),
+    ] {
+        let out = bin()
+            .arg("run")
+            .arg(builtin("road-end.toml"))
+            .args(&args)
+            .output()
+            .expect("runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    for (file, says) in [
+        ("intersection.toml", "in-process bus only"),
+        ("multilane-faults.toml", "[faults]"),
+    ] {
+        let out = bin()
+            .arg("run")
+            .arg(builtin(file))
+            .args(["--bus", "can-hub"])
+            .output()
+            .expect("runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{file}: {err}");
+        assert!(err.contains(says), "{file}: {err}");
+    }
+}
