@@ -1,0 +1,156 @@
+#!/usr/bin/env python3
+"""Checks a fleet run on real vcan (run-in-qemu.sh): the host-sim summary (no collision,
+no violation, every frame accepted, one task per vehicle), and the `candump -l` log of
+vcan0 decoded with cantools and the DBC — every frame decodes, every message's CRC-8 and
+alive counter are right, one SYNC per period in order, and every vehicle state on the
+bus equals the vehicle's trace within half a resolution step.
+
+Usage: check_vcan_run.py DBC SUMMARY.json CANDUMP.log TRACE.csv VM_STATUS
+Exit 0 when every check holds; 1 with the first failure."""
+import csv
+import json
+import math
+import os
+import sys
+from collections import Counter, defaultdict
+
+import cantools
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "can-gateway", "tools"))
+from check_candump import crc8_j1850  # noqa: E402
+
+FRAMES = {1: 3, 2: 2}  # kind code -> frames per message (others: 1)
+KIND = {1: "State", 2: "Request", 3: "Grant", 4: "Revoke", 5: "Exit", 6: "Sync"}
+H = 0.01  # the period (Table I)
+
+
+def fail(msg):
+    print(f"FAIL: {msg}")
+    sys.exit(1)
+
+
+def main(dbc_path, summary_path, log_path, trace_path, vm_status):
+    s = json.load(open(summary_path))
+    unsafe = {k: s[k] for k in ("collisions", "invariant_violations", "limit_violations",
+                                "road_end_overruns", "off_road")}
+    print(f"summary: {s['medium']}, {s['tasks']} tasks, {s['periods']} SYNC periods, "
+          f"{s['sim_seconds']:.2f} s simulated in {s['wall_seconds']:.1f} s; {unsafe}; "
+          f"lane changes {s['lane_changes']['changes']}, completed {s['completed']}; "
+          f"state latency p50 {s['state_latency']['p50_us']:.0f} µs, "
+          f"p99 {s['state_latency']['p99_us']:.0f} µs, max {s['state_latency']['max_us']:.0f} µs")
+    if any(unsafe.values()):
+        fail(f"unsafe run: {unsafe}")
+    if s["medium"] != "socketcan:vcan0":
+        fail(f"medium {s['medium']}")
+    if s["tasks"] != s["vehicles"]:
+        fail(f"{s['tasks']} tasks for {s['vehicles']} vehicles")
+    if s["can"]["rejected"]:
+        fail(f"frames rejected: {s['can']['rejected']}")
+    if not s["completed"]:
+        fail("liveness goals not met")
+    if vm_status != "0":
+        fail(f"host-sim exited {vm_status} in the VM")
+
+    db = cantools.database.load_file(dbc_path, frame_id_mask=0x1FFFFF00)
+    frames = []
+    for n, line in enumerate(open(log_path), 1):
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            ts, iface, frame = line.split()
+            can_id, data = frame.split("#")
+            frames.append((float(ts.strip("()")), int(can_id, 16), bytes.fromhex(data)))
+        except ValueError:
+            fail(f"{log_path}:{n}: not a candump -l line: {line!r}")
+        if iface != "vcan0":
+            fail(f"{log_path}:{n}: interface {iface}")
+    names = Counter()
+    pending = {}
+    last_counter = {}
+    states = {}  # (id, stamp ms) -> signals of the three frames
+    syncs = []
+    for ts, can_id, data in frames:
+        msg = db.get_message_by_frame_id(can_id)
+        sig = msg.decode(data, decode_choices=False)
+        names[msg.name] += 1
+        kind, index, sa = (can_id >> 12) & 0x0F, (can_id >> 8) & 0x0F, can_id & 0xFF
+        n = FRAMES.get(kind, 1)
+        key = (sa, kind)
+        if index == 0:
+            pending[key] = (b"", {})
+        body, signals = pending.get(key, (None, None))
+        if body is None:
+            fail(f"frame {index} of a {KIND[kind]} from {sa} without its first frame")
+        body += data[1:]
+        signals.update(sig)
+        pending[key] = (body, signals)
+        if index < n - 1:
+            continue
+        del pending[key]
+        counter = data[0] & 0x0F
+        want = crc8_j1850(bytes([kind, sa, counter]) + body[:-1]) ^ 0xFF
+        if want != body[-1]:
+            fail(f"CRC of a {KIND[kind]} from {sa}: {body[-1]:#04x} != {want:#04x}")
+        prev = last_counter.get(key)
+        if prev is not None and counter != (prev + 1) % 16:
+            fail(f"alive counter of {KIND[kind]} from {sa} jumped {prev} -> {counter}: a lost message")
+        last_counter[key] = counter
+        if kind == 1:
+            if signals["VehicleId"] != sa:
+                fail(f"state of {signals['VehicleId']} sent by {sa}")
+            states[(sa, round(signals["Timestamp"] * 1000))] = signals
+        elif kind == 6:
+            syncs.append((signals["Period"], signals["Last"]))
+    if pending:
+        fail(f"incomplete messages at the end of the log: {sorted(pending)}")
+    periods = s["periods"]
+    if [p for p, _ in syncs] != list(range(periods)):
+        fail(f"SYNC periods not 0..{periods - 1} in order")
+    if [l for _, l in syncs] != [0] * (periods - 1) + [1]:
+        fail("the last flag is not on the last SYNC alone")
+    if len(states) != s["vehicles"] * periods:
+        fail(f"{len(states)} state messages, expected {s['vehicles']} x {periods}")
+
+    rows = {}
+    for r in csv.DictReader(open(trace_path)):
+        rows[(int(r["id"]), round(float(r["t"]) * 1000))] = r
+    checked = 0
+    worst = Counter()
+    for (vid, ms), sig in sorted(states.items()):
+        row = rows.get((vid, ms))
+        if row is None:
+            continue  # the state after the last decision has no trace row
+        prev = rows.get((vid, ms - round(H * 1000)))
+        # Half a step of the bus, plus the trace's own rounding to 6 decimals (5e-7 in
+        # its unit: m, rad, m/s) and 1e-9 for floating point.
+        pairs = [
+            ("X", sig["X"], float(row["x"]), 0.005 + 5e-7),
+            ("Y", sig["Y"], float(row["y"]), 0.005 + 5e-7),
+            ("Heading", sig["Heading"], math.degrees(float(row["theta"])),
+             0.00625 + math.degrees(5e-7)),
+        ]
+        if prev is not None:  # the state's speed is the one applied over the last period
+            pairs.append(("Speed", sig["Speed"], float(prev["v"]), 0.01 + 5e-7))
+        for name, got, want, tol in pairs:
+            err = abs(got - want)
+            worst[name] = max(worst[name], err)
+            if err > tol + 1e-9:
+                fail(f"vehicle {vid} at {ms} ms: {name} on the bus {got} vs trace {want}")
+        checked += 1
+    if checked < len(states) - s["vehicles"]:
+        fail(f"only {checked} of {len(states)} states found in the trace")
+    span = frames[-1][0] - frames[0][0] if frames else 0.0
+    print(f"cantools decoded {len(frames)} frames over {span:.1f} s of vcan0 "
+          f"({', '.join(f'{k} {v}' for k, v in sorted(names.items()))}); "
+          f"every CRC and alive counter right; {len(syncs)} SYNC in order; "
+          f"{checked} vehicle states equal the trace within half a step "
+          f"(largest errors: {', '.join(f'{k} {v:.4g}' for k, v in sorted(worst.items()))})")
+    return 0
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 6:
+        print(__doc__)
+        sys.exit(2)
+    sys.exit(main(*sys.argv[1:6]))
