@@ -45,6 +45,15 @@ pub trait CanPort: Send {
     fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>>;
 }
 
+impl<P: CanPort + ?Sized> CanPort for Box<P> {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        (**self).transmit(frame)
+    }
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        (**self).receive(timeout)
+    }
+}
+
 /// A raw SocketCAN socket bound to one interface, with `SO_TIMESTAMPNS` receive stamps
 /// (the kernel's time of arrival at the socket).
 pub struct SocketCanPort {

@@ -18,7 +18,7 @@
 //! kernel's receive time stamps measure the latency from publication to reception.
 
 use crate::bus::{Message, Received};
-use crate::can::{CanError, CanNode, CanPort, CanStats, Hub, HubPort, Polled, SocketCanPort};
+use crate::can::{CanError, CanNode, CanPort, CanStats, Hub, Polled, SocketCanPort};
 use crate::monitor::{Findings, Limits, Truth};
 use crate::scenario::Scenario;
 use crate::sim::{
@@ -175,6 +175,9 @@ enum Report {
     },
 }
 
+/// Opens the port of a vehicle (`Some(id)`) or of the time master (`None`).
+type OpenPort = dyn FnMut(Option<u16>) -> io::Result<Box<dyn CanPort>>;
+
 /// What a task hands back at the end.
 type TaskResult<const N: usize> = (Agent<N>, Counters, CanStats);
 
@@ -188,37 +191,32 @@ pub fn run(
     trace: &mut dyn FnMut(&TraceRow),
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<FleetSummary, FleetError> {
-    match medium {
+    // One port type for both media: a frame's dynamic call is nothing next to a plan.
+    let open: Box<OpenPort> = match medium {
         Medium::SocketCan(iface) => {
             let iface = iface.clone();
-            let open = move |id: Option<u16>| match id {
-                Some(_) => SocketCanPort::open(&iface),
-                None => SocketCanPort::open_transmit_only(&iface),
-            };
-            run_with_ports(
-                scenario,
-                solver,
-                seed,
-                &medium.to_string(),
-                open,
-                trace,
-                progress,
-            )
+            Box::new(move |id| {
+                let port = match id {
+                    Some(_) => SocketCanPort::open(&iface)?,
+                    None => SocketCanPort::open_transmit_only(&iface)?,
+                };
+                Ok(Box::new(port) as Box<dyn CanPort>)
+            })
         }
         Medium::Hub => {
             let hub = Hub::new();
-            let open = move |_: Option<u16>| -> io::Result<HubPort> { Ok(hub.port()) };
-            run_with_ports(
-                scenario,
-                solver,
-                seed,
-                &medium.to_string(),
-                open,
-                trace,
-                progress,
-            )
+            Box::new(move |_| Ok(Box::new(hub.port()) as Box<dyn CanPort>))
         }
-    }
+    };
+    run_with_ports(
+        scenario,
+        solver,
+        seed,
+        &medium.to_string(),
+        open,
+        trace,
+        progress,
+    )
 }
 
 /// [`run`] on ports from `open`: `open(Some(id))` for vehicle `id`'s node, `open(None)`

@@ -260,17 +260,7 @@ fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
         &mut |_, _| {},
     )
     .expect("in-process bus cannot fail");
-    assert_eq!(
-        (
-            s.collisions,
-            s.invariant_violations,
-            s.limit_violations,
-            s.road_end_overruns,
-            s.off_road
-        ),
-        (0, 0, 0, 0, 0),
-        "{s:?}"
-    );
+    common::assert_safe(&s);
     assert_eq!(s.lane_changes.in_target_lane, s.vehicles, "{s:?}");
     assert!(s.completed);
     for r in last.values() {

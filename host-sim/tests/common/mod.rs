@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 use host_sim::intersection::CrossingScenario;
+use host_sim::sim::RunSummary;
 use std::path::{Path, PathBuf};
 
 /// A scenario file shipped in `scenarios/`.
@@ -36,4 +37,19 @@ pub fn intersection_all_cross(alg: &str, extra: &str) {
         "{alg}: {s:?}"
     );
     assert_eq!((s.crossed, s.in_system), (8, 0), "{alg}: {s:?}");
+}
+
+/// No collision, invariant, limit, road-end or off-road finding in a run.
+pub fn assert_safe(s: &RunSummary) {
+    assert_eq!(
+        (
+            s.collisions,
+            s.invariant_violations,
+            s.limit_violations,
+            s.road_end_overruns,
+            s.off_road
+        ),
+        (0, 0, 0, 0, 0),
+        "{s:?}"
+    );
 }
