@@ -97,7 +97,7 @@ impl CanPort for SocketCanPort {
         loop {
             match self.sock.write_frame(&f) {
                 Ok(()) => return Ok(()),
-                Err(e) if e.raw_os_error() == Some(libc_enobufs()) && tries < TX_RETRIES => {
+                Err(e) if e.raw_os_error() == Some(ENOBUFS) && tries < TX_RETRIES => {
                     tries += 1;
                     std::thread::sleep(Duration::from_millis(1));
                 }
@@ -134,10 +134,8 @@ impl CanPort for SocketCanPort {
     }
 }
 
-/// ENOBUFS on Linux.
-const fn libc_enobufs() -> i32 {
-    105
-}
+/// Linux's ENOBUFS (no `ErrorKind` of std names it).
+const ENOBUFS: i32 = 105;
 
 type Queues = Vec<VecDeque<(PlainFrame, SystemTime)>>;
 
@@ -288,6 +286,14 @@ impl CanStats {
     }
 }
 
+/// Vehicle `id`'s CAN source address: the id itself, below the clock's and manager's.
+pub fn vehicle_address(id: u16) -> Result<u8, CanError> {
+    match u8::try_from(id) {
+        Ok(sa) if sa < CLOCK_ADDRESS => Ok(sa),
+        _ => Err(CanError::BadAddress(id)),
+    }
+}
+
 /// What one read from a port gave.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Polled {
@@ -332,10 +338,7 @@ impl<P: CanPort> CanNode<P> {
 
     /// The node of vehicle `id` (its CAN source address is its id).
     pub fn vehicle(id: u16, port: P) -> Result<Self, CanError> {
-        match u8::try_from(id) {
-            Ok(sa) if sa < CLOCK_ADDRESS => Ok(Self::new(sa, port)),
-            _ => Err(CanError::BadAddress(id)),
-        }
+        Ok(Self::new(vehicle_address(id)?, port))
     }
 
     /// What the node's traffic amounted to.
@@ -361,6 +364,19 @@ impl<P: CanPort> CanNode<P> {
     /// Transmits one of the simulator's messages.
     pub fn send(&mut self, msg: &Message) -> Result<(), CanError> {
         self.send_wire(&to_wire(msg)?)
+    }
+
+    /// Reads every frame already queued (at most [`DRAIN_LIMIT`]), handing each verified
+    /// message to `each`.
+    pub fn drain(&mut self, mut each: impl FnMut(wire::Message<f64>)) -> Result<(), CanError> {
+        for _ in 0..DRAIN_LIMIT {
+            match self.poll(Duration::ZERO)? {
+                Polled::Nothing => break,
+                Polled::Frame => {}
+                Polled::Message(m, _) => each(m),
+            }
+        }
+        Ok(())
     }
 
     /// Reads at most one frame, waiting up to `timeout`, and feeds it to the reassembler.
@@ -415,7 +431,7 @@ pub fn from_wire(msg: &wire::Message<f64>) -> Option<Message> {
 
 /// Frames one drain of a node reads at most (a bound on the loop; a period carries
 /// three frames per vehicle).
-const DRAIN_LIMIT: usize = 4 * 3 * crate::scenario::MAX_VEHICLES;
+pub const DRAIN_LIMIT: usize = 4 * 3 * crate::scenario::MAX_VEHICLES;
 
 /// The message-level [`Bus`] over CAN: one [`CanNode`] per vehicle, each on its own port
 /// (its own SocketCAN socket, or hub port). A message is delivered when its frames have
@@ -461,18 +477,11 @@ impl<P: CanPort> Bus for CanBus<P> {
     }
 
     fn receive(&mut self, node: u16, now: f64, out: &mut Vec<Received>) -> Result<(), BusError> {
-        let n = self.node(node)?;
-        for _ in 0..DRAIN_LIMIT {
-            match n.poll(Duration::ZERO)? {
-                Polled::Nothing => break,
-                Polled::Frame => {}
-                Polled::Message(m, _) => {
-                    if let Some(msg) = from_wire(&m) {
-                        out.push(Received { msg, at: now });
-                    }
-                }
+        self.node(node)?.drain(|m| {
+            if let Some(msg) = from_wire(&m) {
+                out.push(Received { msg, at: now });
             }
-        }
+        })?;
         Ok(())
     }
 }

@@ -22,8 +22,8 @@ use crate::can::{CanError, CanNode, CanPort, CanStats, Hub, Polled, SocketCanPor
 use crate::monitor::{Findings, Limits, Truth};
 use crate::scenario::Scenario;
 use crate::sim::{
-    build_agents, road_of, summarize, Agent, Counters, Outcome, RunSummary, SolverChoice, StepCtx,
-    TraceRow,
+    build_agents, road_of, set_bus_resolution, summarize, Agent, Counters, Outcome, RunSummary,
+    SolverChoice, StepCtx, TraceRow,
 };
 use can_gateway::wire::{self, CLOCK_ADDRESS};
 use serde::Serialize;
@@ -252,14 +252,8 @@ fn run_n<const N: usize, P: CanPort + 'static>(
     let seed = seed.unwrap_or(scenario.seed);
     // Lock-step: every state of period k is heard in period k, as on the perfect bus.
     let mut agents = build_agents::<N>(&scenario, solver, seed, h);
-    let (position, speed) = crate::can::RESOLUTION;
-    for a in &mut agents {
-        a.set_bus_resolution(position, speed)
-            .map_err(|e| FleetError::Vehicle {
-                id: a.id(),
-                error: format!("{e:?}"),
-            })?;
-    }
+    set_bus_resolution(&mut agents, crate::can::RESOLUTION)
+        .map_err(|e| FleetError::Harness(format!("bus resolution: {e:?}")))?;
     // Every socket is open before anyone transmits, so that no node misses a frame.
     let mut clock = CanNode::new(CLOCK_ADDRESS, open(None).map_err(CanError::Io)?);
     let mut nodes = Vec::with_capacity(agents.len());
@@ -360,8 +354,9 @@ fn run_n<const N: usize, P: CanPort + 'static>(
                 findings.check(&lim, &t, scenario_ref.road.end_x, scenario_ref.road.lanes);
             }
             progress(k, total);
-            // The master's own port hears the fleet on a hub; nothing reads it.
-            drain(&mut clock);
+            // The master's own port hears the fleet on a hub; nothing else reads it (a
+            // failed read only leaves frames queued there).
+            let _ = clock.drain(|_| {});
             last_sync_tx = Some(SystemTime::now());
             let tick = wire::Message::Sync {
                 period: k as u32,
@@ -432,18 +427,6 @@ fn micros(from: SystemTime, to: SystemTime) -> f64 {
         .map_or(0.0, |d| d.as_secs_f64() * 1e6)
 }
 
-/// Reads whatever is queued at the master's port (bounded).
-fn drain<P: CanPort>(clock: &mut CanNode<P>) {
-    for _ in 0..4 * 3 * crate::scenario::MAX_VEHICLES {
-        if !matches!(
-            clock.poll(Duration::ZERO),
-            Ok(Polled::Frame | Polled::Message(..))
-        ) {
-            break;
-        }
-    }
-}
-
 /// Tells every task to stop (a last SYNC after `period`).
 fn end<P: CanPort>(clock: &mut CanNode<P>, period: u32) -> Result<(), CanError> {
     clock.send_wire(&wire::Message::Sync {
@@ -477,6 +460,13 @@ fn vehicle_task<const N: usize, P: CanPort>(
     let mut row = None;
     let mut heard = Vec::new();
     let mut sync_rx = None;
+    // Each vehicle's place in the scenario, for taking a period's messages in that order.
+    let order: HashMap<u16, usize> = scenario
+        .vehicles
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (v.id, i))
+        .collect();
     for k in 0..=total {
         // Publish the state at kh, then report it (truth for the monitor).
         let t = k as f64 * h;
@@ -532,14 +522,7 @@ fn vehicle_task<const N: usize, P: CanPort>(
         // Take the period's messages in scenario order, as the in-process bus delivers
         // them, whatever order the tasks' frames interleaved in: the run is then
         // independent of thread timing.
-        inbox.sort_by_key(|r| {
-            let (subject, _) = r.msg.subject();
-            scenario
-                .vehicles
-                .iter()
-                .position(|v| v.id == subject)
-                .unwrap_or(usize::MAX)
-        });
+        inbox.sort_by_key(|r| order.get(&r.msg.subject().0).copied().unwrap_or(usize::MAX));
         let ctx = StepCtx {
             t,
             steps_done: k,

@@ -222,17 +222,10 @@ fn run(
                 file.display()
             ));
         }
-        if let Some(v) = scenario
-            .vehicles
-            .iter()
-            .find(|v| v.id >= u16::from(can_gateway::wire::CLOCK_ADDRESS))
-        {
-            return bad_input(format!(
-                "{}: vehicle id {} is not a CAN source address (ids 0..={} on CAN)",
-                file.display(),
-                v.id,
-                can_gateway::wire::CLOCK_ADDRESS - 1
-            ));
+        for v in &scenario.vehicles {
+            if let Err(e) = host_sim::can::vehicle_address(v.id) {
+                return bad_input(format!("{}: {e}", file.display()));
+            }
         }
     }
     let mut writer = match &trace {

@@ -361,11 +361,8 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
 
     /// Tells the planners the steps to which the bus rounds positions and speeds (a CAN
     /// bus: [`crate::can::RESOLUTION`]); see `LanePlanner::set_bus_resolution`.
-    pub fn set_bus_resolution(&mut self, (position, speed): (f64, f64)) -> Result<(), ConfigError> {
-        for a in &mut self.agents {
-            a.set_bus_resolution(position, speed)?;
-        }
-        Ok(())
+    pub fn set_bus_resolution(&mut self, resolution: (f64, f64)) -> Result<(), ConfigError> {
+        set_bus_resolution(&mut self.agents, resolution)
     }
 
     /// Steps in the whole run.
@@ -441,6 +438,17 @@ impl<const N: usize, B: Bus> Simulation<N, B> {
             },
         )
     }
+}
+
+/// Sets every planner's bus resolution (position m, speed m/s); scripted drivers have none.
+pub(crate) fn set_bus_resolution<const N: usize>(
+    agents: &mut [Agent<N>],
+    (position, speed): (f64, f64),
+) -> Result<(), ConfigError> {
+    for a in agents {
+        a.set_bus_resolution(position, speed)?;
+    }
+    Ok(())
 }
 
 /// The road of a scenario, as the planners see it.
