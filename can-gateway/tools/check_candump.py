@@ -17,6 +17,36 @@ def crc8_j1850(data: bytes, crc: int = 0xFF) -> int:
     return crc
 
 
+FRAMES_PER_KIND = {1: 3, 2: 2}  # kind code -> frames per message (others: 1)
+
+
+def reassemble(frames):
+    """Reassembles (can_id, data) frames per sender and kind. Returns the whole messages
+    as (sa, kind, counter, body, parts) — parts: the frames' indexes — and the (sa, kind)
+    of messages left incomplete. Raises ValueError on a continuation without its first
+    frame or a CRC mismatch."""
+    pending = {}
+    messages = []
+    for i, (can_id, data) in enumerate(frames):
+        kind, index, sa = (can_id >> 12) & 0x0F, (can_id >> 8) & 0x0F, can_id & 0xFF
+        key = (sa, kind)
+        if index == 0:
+            pending[key] = (b"", [])
+        if key not in pending:
+            raise ValueError(f"frame {index} of kind {kind} from {sa} without its first frame")
+        body, parts = pending[key]
+        pending[key] = (body + data[1:], parts + [i])
+        if index == FRAMES_PER_KIND.get(kind, 1) - 1:
+            body, parts = pending.pop(key)
+            counter = data[0] & 0x0F
+            want = crc8_j1850(bytes([kind, sa, counter]) + body[:-1]) ^ 0xFF
+            if want != body[-1]:
+                raise ValueError(
+                    f"CRC mismatch in message kind {kind} from {sa}: {body[-1]:#04x} != {want:#04x}")
+            messages.append((sa, kind, counter, body, parts))
+    return messages, sorted(pending)
+
+
 def main(dbc_path: str, log_path: str, expected_path: str) -> int:
     db = cantools.database.load_file(dbc_path, frame_id_mask=0x1FFFFF00)
     frames = []
@@ -29,21 +59,11 @@ def main(dbc_path: str, log_path: str, expected_path: str) -> int:
         frames.append((int(can_id, 16), bytes.fromhex(data)))
     expected = [json.loads(l) for l in open(expected_path) if l.strip()]
     # Reassemble messages per sender, kind and counter to check their CRC.
-    pending = {}
-    for can_id, data in frames:
-        kind, index, sa = (can_id >> 12) & 0x0F, (can_id >> 8) & 0x0F, can_id & 0xFF
-        counter = data[0] & 0x0F
-        n = {1: 3, 2: 2}.get(kind, 1)
-        key = (sa, kind)
-        if index == 0:
-            pending[key] = b""
-        pending[key] = pending.get(key, b"") + data[1:]
-        if index == n - 1:
-            body = pending.pop(key)
-            want = crc8_j1850(bytes([kind, sa, counter]) + body[:-1]) ^ 0xFF
-            if want != body[-1]:
-                print(f"CRC mismatch in message kind {kind} from {sa}: {body[-1]:#04x} != {want:#04x}")
-                return 1
+    try:
+        reassemble(frames)
+    except ValueError as err:
+        print(err)
+        return 1
     checked = 0
     for exp in expected:
         can_id, data = frames[exp["frame"]]

@@ -17,9 +17,8 @@ from collections import Counter, defaultdict
 import cantools
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "can-gateway", "tools"))
-from check_candump import crc8_j1850  # noqa: E402
+from check_candump import reassemble  # noqa: E402
 
-FRAMES = {1: 3, 2: 2}  # kind code -> frames per message (others: 1)
 KIND = {1: "State", 2: "Request", 3: "Grant", 4: "Revoke", 5: "Exit", 6: "Sync"}
 H = 0.01  # the period (Table I)
 
@@ -66,32 +65,25 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
         if iface != "vcan0":
             fail(f"{log_path}:{n}: interface {iface}")
     names = Counter()
-    pending = {}
+    decoded = []
+    for _ts, can_id, data in frames:
+        msg = db.get_message_by_frame_id(can_id)
+        decoded.append(msg.decode(data, decode_choices=False))
+        names[msg.name] += 1
+    try:
+        messages, incomplete = reassemble([(can_id, data) for _ts, can_id, data in frames])
+    except ValueError as err:
+        fail(err)
+    if incomplete:
+        fail(f"incomplete messages at the end of the log: {incomplete}")
     last_counter = {}
     states = {}  # (id, stamp ms) -> signals of the three frames
     syncs = []
-    for ts, can_id, data in frames:
-        msg = db.get_message_by_frame_id(can_id)
-        sig = msg.decode(data, decode_choices=False)
-        names[msg.name] += 1
-        kind, index, sa = (can_id >> 12) & 0x0F, (can_id >> 8) & 0x0F, can_id & 0xFF
-        n = FRAMES.get(kind, 1)
+    for sa, kind, counter, _body, parts in messages:
+        signals = {}
+        for i in parts:
+            signals.update(decoded[i])
         key = (sa, kind)
-        if index == 0:
-            pending[key] = (b"", {})
-        body, signals = pending.get(key, (None, None))
-        if body is None:
-            fail(f"frame {index} of a {KIND[kind]} from {sa} without its first frame")
-        body += data[1:]
-        signals.update(sig)
-        pending[key] = (body, signals)
-        if index < n - 1:
-            continue
-        del pending[key]
-        counter = data[0] & 0x0F
-        want = crc8_j1850(bytes([kind, sa, counter]) + body[:-1]) ^ 0xFF
-        if want != body[-1]:
-            fail(f"CRC of a {KIND[kind]} from {sa}: {body[-1]:#04x} != {want:#04x}")
         prev = last_counter.get(key)
         if prev is not None and counter != (prev + 1) % 16:
             fail(f"alive counter of {KIND[kind]} from {sa} jumped {prev} -> {counter}: a lost message")
@@ -102,8 +94,6 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
             states[(sa, round(signals["Timestamp"] * 1000))] = signals
         elif kind == 6:
             syncs.append((signals["Period"], signals["Last"]))
-    if pending:
-        fail(f"incomplete messages at the end of the log: {sorted(pending)}")
     periods = s["periods"]
     if [p for p, _ in syncs] != list(range(periods)):
         fail(f"SYNC periods not 0..{periods - 1} in order")
