@@ -7,7 +7,8 @@
 use crate::crc;
 use crate::wire::{
     frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, CLOCK_ADDRESS,
-    HEADING_RES, MAX_FRAMES, NO_LANE, POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES, YAW_RATE_RES,
+    HEADING_RES, MANAGER_ADDRESS, MAX_FRAMES, NO_LANE, POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES,
+    YAW_RATE_RES,
 };
 use embedded_can::{ExtendedId, Frame, Id};
 use heapless::Vec;
@@ -356,8 +357,9 @@ impl<const CAP: usize> Reassembler<CAP> {
                 Message::State(s) => s.id & 0xFF == u16::from(sa),
                 Message::Request(r) => r.id & 0xFF == u16::from(sa),
                 Message::Exit { id, .. } => id & 0xFF == u16::from(sa),
-                // Grants and revokes come from the intersection about another vehicle.
-                Message::Grant { .. } | Message::Revoke { .. } => true,
+                // Permissions come only from the intersection manager: a vehicle
+                // cannot grant itself (or another) entry to A_S.
+                Message::Grant { .. } | Message::Revoke { .. } => sa == MANAGER_ADDRESS,
                 Message::Sync { .. } => sa == CLOCK_ADDRESS,
             };
             if !sender_ok {
@@ -572,8 +574,8 @@ mod tests {
         let mut r = Reassembler::<8>::new();
         for (m, sa) in [
             (Message::Request(req), 9u8),
-            (Message::Grant { id: 9, until: 4.0 }, 0),
-            (Message::Revoke { id: 9, at: 4.5 }, 0),
+            (Message::Grant { id: 9, until: 4.0 }, MANAGER_ADDRESS),
+            (Message::Revoke { id: 9, at: 4.5 }, MANAGER_ADDRESS),
             (Message::Exit { id: 9, at: 9.0 }, 9),
         ] {
             let frames: Frames<TestFrame> = encode(&m, sa, 0).unwrap();
@@ -587,6 +589,22 @@ mod tests {
                     assert!((a.s - b.s).abs() < 0.006 && (a.arrival - b.arrival).abs() < 1e-9);
                 }
                 (a, b) => assert_eq!(a, b),
+            }
+        }
+        // A grant or revoke from anyone but the manager is refused (a vehicle granting
+        // itself entry), and leaves the reassembler as it was.
+        for m in [
+            Message::Grant { id: 9, until: 5.0 },
+            Message::Revoke { id: 9, at: 5.0 },
+        ] {
+            for sa in [9u8, 0, CLOCK_ADDRESS] {
+                let frames: Frames<TestFrame> = encode(&m, sa, 3).unwrap();
+                let before = r.slots.clone();
+                assert_eq!(
+                    r.push::<f64, _>(&frames[0]),
+                    Err(DecodeError::SenderMismatch)
+                );
+                assert_eq!(r.slots, before);
             }
         }
         // Encoding refuses what a field cannot carry.

@@ -34,7 +34,8 @@ pub const MAX_FRAMES: usize = 3;
 /// Source address of a fleet's time master (sends [`Message::Sync`]); vehicles use
 /// addresses below it.
 pub const CLOCK_ADDRESS: u8 = 0xF0;
-/// Source address of an intersection manager.
+/// Source address of an intersection manager: the only sender whose [`Message::Grant`]
+/// and [`Message::Revoke`] a receiver accepts.
 pub const MANAGER_ADDRESS: u8 = 0xF1;
 /// "No lane" in a 4-bit lane field.
 pub const NO_LANE: u8 = 15;

@@ -4,7 +4,7 @@
 //! every message CRC on its own.
 
 use can_gateway::log::candump_line;
-use can_gateway::wire::{Request, TrackWire, CLOCK_ADDRESS};
+use can_gateway::wire::{Request, TrackWire, CLOCK_ADDRESS, MANAGER_ADDRESS};
 use can_gateway::{encode, Frames, Message};
 use planner_core::VehicleState;
 use std::fmt::Write as _;
@@ -121,8 +121,12 @@ fn cantools_decodes_the_gateways_candump_log() {
         &mut expected,
     );
     for (m, sa, name) in [
-        (Message::Grant { id: 9, until: 4.0 }, 0u8, "LeaseUntil"),
-        (Message::Revoke { id: 9, at: 4.5 }, 0, "At"),
+        (
+            Message::Grant { id: 9, until: 4.0 },
+            MANAGER_ADDRESS,
+            "LeaseUntil",
+        ),
+        (Message::Revoke { id: 9, at: 4.5 }, MANAGER_ADDRESS, "At"),
         (Message::Exit { id: 9, at: 9.0 }, 9, "At"),
     ] {
         let t = match m {

@@ -8,14 +8,18 @@
 //! - the fleet runner ([`crate::fleet`]) gives every vehicle its own task and node.
 //!
 //! Mapping of the simulator's messages onto can-gateway's: `State` ↔ `State`,
-//! `Left { id, at }` ↔ `Exit { id, at }`, `Grant { id, until }` ↔ `Grant`. Crossing
-//! reports need the layout's route table on both sides to become a `Request` (inlet,
-//! outlet, arrival): not mapped yet, refused with [`CanError::Unmapped`].
+//! `Left { id, at }` ↔ `Exit { id, at }`, `Grant { id, until }` ↔ `Grant` (sent by the
+//! intersection manager's address only). A crossing report ↔ `Request` needs the
+//! layout's route table on both sides (route ↔ inlet and outlet tracks) and the arrival
+//! time: [`report_to_wire`] and [`report_from_wire`].
 
 use crate::bus::{Bus, BusError, Message, Received};
+use crate::sim::LENGTH_M;
 use can_gateway::codec::{DecodeError, EncodeError};
 use can_gateway::wire::{self, CLOCK_ADDRESS};
 use can_gateway::{encode, Frames, PlainFrame, Reassembler};
+use planner_core::crossing::CrossingReport;
+use planner_core::intersection::{Layout, Track};
 use serde::Serialize;
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions};
 use std::collections::{BTreeMap, VecDeque};
@@ -407,13 +411,70 @@ fn reason(e: DecodeError) -> String {
     }
 }
 
+/// A crossing report as can-gateway's `Request`: the route becomes its inlet and outlet
+/// tracks (the layout's route table), `arrival` is when the vehicle entered A_C by its
+/// own clock — or, before it has, the time of the report (the manager registers
+/// arrivals by its own clock either way, so no vehicle can move itself up the queue).
+/// The length is not carried (nor is it in a state message): every vehicle on this bus
+/// is of the class length [`LENGTH_M`], and a report of another length is refused.
+pub fn report_to_wire(
+    r: &CrossingReport<f64>,
+    arrival: f64,
+    layout: &Layout<f64>,
+) -> Result<wire::Message<f64>, CanError> {
+    let route = layout
+        .route(usize::from(r.route))
+        .ok_or(CanError::Unmapped("a route the layout does not have"))?;
+    if r.length != LENGTH_M {
+        return Err(CanError::Unmapped(
+            "a vehicle length other than the class length",
+        ));
+    }
+    let track = |t: Track| wire::TrackWire {
+        heading: t.heading,
+        lane: t.lane,
+    };
+    Ok(wire::Message::Request(wire::Request {
+        id: r.id,
+        inlet: track(route.inlet),
+        outlet: track(route.outlet),
+        arrival,
+        s: r.s,
+        v: r.v,
+    }))
+}
+
+/// A `Request` heard on the bus as a crossing report, if its (inlet, outlet) is a route
+/// of `layout` (each route has its own pair).
+pub fn report_from_wire(
+    q: &wire::Request<f64>,
+    layout: &Layout<f64>,
+) -> Option<CrossingReport<f64>> {
+    let same = |a: Track, b: wire::TrackWire| a.heading == b.heading && a.lane == b.lane;
+    let route = layout
+        .routes
+        .iter()
+        .position(|r| same(r.inlet, q.inlet) && same(r.outlet, q.outlet))?;
+    Some(CrossingReport {
+        id: q.id,
+        route: u8::try_from(route).ok()?,
+        s: q.s,
+        v: q.v,
+        length: LENGTH_M,
+    })
+}
+
 /// The simulator's message as can-gateway's.
 pub fn to_wire(msg: &Message) -> Result<wire::Message<f64>, CanError> {
     Ok(match *msg {
         Message::State(s) => wire::Message::State(s),
         Message::Left { id, at } => wire::Message::Exit { id, at },
         Message::Grant { id, until } => wire::Message::Grant { id, until },
-        Message::Crossing(..) => return Err(CanError::Unmapped("a crossing report")),
+        Message::Crossing(..) => {
+            return Err(CanError::Unmapped(
+                "a crossing report without its layout (see report_to_wire)",
+            ))
+        }
     })
 }
 

@@ -69,7 +69,8 @@ pub struct Latency {
 }
 
 impl Latency {
-    fn of(mut v: Vec<f64>) -> Self {
+    /// Percentiles of `v` (µs).
+    pub(crate) fn of(mut v: Vec<f64>) -> Self {
         if v.is_empty() {
             return Self::default();
         }
@@ -175,8 +176,9 @@ enum Report {
     },
 }
 
-/// Opens the port of a vehicle (`Some(id)`) or of the time master (`None`).
-type OpenPort = dyn FnMut(Option<u16>) -> io::Result<Box<dyn CanPort>>;
+/// Opens the port of a node (`Some(id)`: a vehicle, or an intersection manager's node
+/// id) or of the time master (`None`).
+pub(crate) type OpenPort = dyn FnMut(Option<u16>) -> io::Result<Box<dyn CanPort>>;
 
 /// What a task hands back at the end.
 type TaskResult<const N: usize> = (Agent<N>, Counters, CanStats);
@@ -191,8 +193,22 @@ pub fn run(
     trace: &mut dyn FnMut(&TraceRow),
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<FleetSummary, FleetError> {
+    run_with_ports(
+        scenario,
+        solver,
+        seed,
+        &medium.to_string(),
+        opener(medium),
+        trace,
+        progress,
+    )
+}
+
+/// The ports of `medium`: a socket per node (the master's transmit-only), or a port on
+/// one new hub.
+pub(crate) fn opener(medium: &Medium) -> Box<OpenPort> {
     // One port type for both media: a frame's dynamic call is nothing next to a plan.
-    let open: Box<OpenPort> = match medium {
+    match medium {
         Medium::SocketCan(iface) => {
             let iface = iface.clone();
             Box::new(move |id| {
@@ -207,16 +223,7 @@ pub fn run(
             let hub = Hub::new();
             Box::new(move |_| Ok(Box::new(hub.port()) as Box<dyn CanPort>))
         }
-    };
-    run_with_ports(
-        scenario,
-        solver,
-        seed,
-        &medium.to_string(),
-        open,
-        trace,
-        progress,
-    )
+    }
 }
 
 /// [`run`] on ports from `open`: `open(Some(id))` for vehicle `id`'s node, `open(None)`
@@ -422,13 +429,13 @@ fn run_n<const N: usize, P: CanPort + 'static>(
     })
 }
 
-fn micros(from: SystemTime, to: SystemTime) -> f64 {
+pub(crate) fn micros(from: SystemTime, to: SystemTime) -> f64 {
     to.duration_since(from)
         .map_or(0.0, |d| d.as_secs_f64() * 1e6)
 }
 
 /// Tells every task to stop (a last SYNC after `period`).
-fn end<P: CanPort>(clock: &mut CanNode<P>, period: u32) -> Result<(), CanError> {
+pub(crate) fn end<P: CanPort>(clock: &mut CanNode<P>, period: u32) -> Result<(), CanError> {
     clock.send_wire(&wire::Message::Sync {
         period: period.saturating_add(1),
         last: true,

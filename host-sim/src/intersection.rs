@@ -57,15 +57,285 @@ pub fn params(v_limit: f64) -> Params<f64> {
     Params::new(spec).unwrap_or_else(|_| Params::table_i())
 }
 
-struct Car {
-    id: u16,
-    route: u8,
-    s: f64,
-    v: f64,
+/// One vehicle of an intersection run: its route, where it is, and its planner.
+pub(crate) struct Car {
+    pub(crate) id: u16,
+    pub(crate) route: u8,
+    pub(crate) s: f64,
+    pub(crate) v: f64,
     v_before: f64,
     planner: Box<CrossingPlanner<f64, HORIZON, MANAGER_CAP>>,
     arrived_at: Option<f64>,
     left_as_at: Option<f64>,
+}
+
+/// What the monitor needs of a vehicle at one instant (ground truth).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct CarTruth {
+    pub(crate) id: u16,
+    pub(crate) route: u8,
+    pub(crate) s: f64,
+    pub(crate) v: f64,
+    pub(crate) v_before: f64,
+}
+
+impl Car {
+    /// Vehicle `p` with its own planner.
+    pub(crate) fn new(params: &Params<f64>, p: &Placement) -> Self {
+        Self {
+            id: p.id,
+            route: p.route,
+            s: p.s,
+            v: p.v,
+            v_before: p.v,
+            planner: Box::new(CrossingPlanner::new(
+                Planner::new(*params, weights())
+                    .unwrap_or_else(|_| unreachable!("the weights are valid")),
+                p.id,
+                p.route,
+                LENGTH_M,
+            )),
+            arrived_at: None,
+            left_as_at: None,
+        }
+    }
+
+    /// Others' positions reach this vehicle rounded to `position` (m).
+    pub(crate) fn set_bus_resolution(
+        &mut self,
+        position: f64,
+    ) -> Result<(), planner_core::ConfigError> {
+        self.planner.set_bus_resolution(position)
+    }
+
+    /// What it broadcasts about itself (V2V and V2I in one).
+    pub(crate) fn report(&self) -> CrossingReport<f64> {
+        CrossingReport {
+            id: self.id,
+            route: self.route,
+            s: self.s,
+            v: self.v,
+            length: LENGTH_M,
+        }
+    }
+
+    /// When it entered A_C (its own clock), if it has.
+    pub(crate) fn arrived_at(&self) -> Option<f64> {
+        self.arrived_at
+    }
+
+    /// Takes one message it heard.
+    pub(crate) fn hear(&mut self, msg: &Message) {
+        match *msg {
+            Message::Grant { id, until } => self.planner.hear_grant(id, until),
+            Message::Left { id, .. } => self.planner.hear_left(id),
+            Message::Crossing(rep, stamp) => {
+                // The view holds MANAGER_CAP vehicles, as many as the manager.
+                let _ = self.planner.hear_report(&rep, stamp);
+            }
+            Message::State(_) => {}
+        }
+    }
+
+    /// Plans at `t` from what it heard: the speed for the next period, and whether the
+    /// certified fallback was applied for another reason than having no room.
+    pub(crate) fn decide(
+        &mut self,
+        layout: &Layout<f64>,
+        params: &Params<f64>,
+        t: f64,
+    ) -> (f64, bool) {
+        let permitted = self.planner.permitted(layout, self.s, t);
+        match self.planner.step(layout, self.s, self.v, t) {
+            Ok(cmd) => match cmd.status {
+                StepStatus::Fallback(why) if why != planner_core::FallbackReason::NoRoom => {
+                    if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                        eprintln!(
+                            "t={t:.2} id={} route={} s={:.2} v={:.2} permitted={permitted} {why:?} gap={:.3}",
+                            self.id, self.route, self.s, self.v, cmd.gap
+                        );
+                    }
+                    (cmd.v, true)
+                }
+                _ => (cmd.v, false),
+            },
+            Err(_) => (
+                planner_core::safety::max_braking_command(params, self.v),
+                true,
+            ),
+        }
+    }
+
+    /// Drives at `v` for one period h along its path.
+    pub(crate) fn advance(&mut self, v: f64, h: f64) {
+        self.v_before = self.v;
+        self.v = v;
+        self.s += v * h;
+    }
+
+    /// Bookkeeping at `now`, after a move: arrival in A_C, leaving A_S; `Some(time from
+    /// arrival)` once it has crossed (arrived, went through A_S, and left A_C on its
+    /// outlet).
+    pub(crate) fn crossed(&mut self, layout: &Layout<f64>, now: f64) -> Option<f64> {
+        let route = layout.route(usize::from(self.route))?;
+        let q = route.path.pose_at(self.s);
+        let inside_ac = layout.in_comm_region(q.x, q.y);
+        if inside_ac && self.arrived_at.is_none() {
+            self.arrived_at = Some(now);
+        }
+        if self.s - 0.5 * LENGTH_M >= route.path.exit() && self.left_as_at.is_none() {
+            self.left_as_at = Some(now);
+        }
+        match (self.arrived_at, self.left_as_at) {
+            (Some(a), Some(_)) if !inside_ac => Some(now - a),
+            _ => None,
+        }
+    }
+
+    /// Ground truth for the monitor.
+    pub(crate) fn truth(&self) -> CarTruth {
+        CarTruth {
+            id: self.id,
+            route: self.route,
+            s: self.s,
+            v: self.v,
+            v_before: self.v_before,
+        }
+    }
+}
+
+/// The manager's part of a period at `t`: takes the reports and departures it heard,
+/// decides, and answers the vehicles that hold a permission now (each is sent a lease).
+pub(crate) fn manage(
+    manager: &mut Manager<f64, MANAGER_CAP>,
+    heard: &[Received],
+    t: f64,
+) -> Vec<u16> {
+    for r in heard {
+        match r.msg {
+            Message::Crossing(rep, _) => {
+                let _ = manager.observe(&rep, t);
+            }
+            Message::Left { id, .. } => manager.forget(id),
+            _ => {}
+        }
+    }
+    manager.update();
+    manager
+        .entries()
+        .iter()
+        .filter(|e| e.permitted)
+        .map(|e| e.id)
+        .collect()
+}
+
+/// The independent checks of an intersection run, from ground truth and from what the
+/// manager granted (never from a planner's view).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct CrossingMonitor {
+    pub(crate) collisions: u64,
+    pub(crate) invariant_violations: u64,
+    pub(crate) limit_violations: u64,
+    pub(crate) unpermitted: u64,
+    ever_permitted: Vec<u16>,
+}
+
+impl CrossingMonitor {
+    /// The manager granted `ids` a permission.
+    pub(crate) fn granted(&mut self, ids: &[u16]) {
+        for &id in ids {
+            if !self.ever_permitted.contains(&id) {
+                self.ever_permitted.push(id);
+            }
+        }
+    }
+
+    /// Checks one instant: collisions, the invariant between vehicles sharing a path
+    /// piece, speed and acceleration limits, and IC Protocol (ii) (nobody inside A_S who
+    /// was never permitted).
+    pub(crate) fn check(&mut self, layout: &Layout<f64>, lim: &Limits, cars: &[CarTruth]) {
+        let path = |c: &CarTruth| {
+            layout
+                .route(usize::from(c.route))
+                .map_or(layout.routes[0].path, |r| r.path)
+        };
+        let truths: Vec<Truth> = cars
+            .iter()
+            .map(|c| {
+                let q = path(c).pose_at(c.s);
+                Truth {
+                    x: q.x,
+                    y: q.y,
+                    theta: q.theta,
+                    length: LENGTH_M,
+                    width: WIDTH_M,
+                    lane: 0,
+                    keeps_invariant: true,
+                    v: c.v,
+                    v_before: c.v_before,
+                }
+            })
+            .collect();
+        for (k, a) in truths.iter().enumerate() {
+            for b in truths.iter().skip(k + 1) {
+                if rectangles_overlap(a, b) {
+                    self.collisions += 1;
+                }
+            }
+        }
+        // The invariant between vehicles sharing a path piece (same route; same inlet
+        // while the leader is on it; same outlet once both are on it).
+        for a in cars {
+            for b in cars {
+                if a.id == b.id {
+                    continue;
+                }
+                let (Some(ra), Some(rb)) = (
+                    layout.route(usize::from(a.route)),
+                    layout.route(usize::from(b.route)),
+                ) else {
+                    continue;
+                };
+                let (fa, fb) = if a.route == b.route
+                    || (ra.inlet == rb.inlet && b.s < rb.path.entry())
+                {
+                    (a.s, b.s)
+                } else if ra.outlet == rb.outlet && a.s >= ra.path.exit() && b.s >= rb.path.exit() {
+                    (a.s - ra.path.exit(), b.s - rb.path.exit())
+                } else {
+                    continue;
+                };
+                if fa < fb {
+                    let gap = fb - fa - LENGTH_M;
+                    if gap - lim.d0 <= lim.safe_distance(a.v) {
+                        self.invariant_violations += 1;
+                    }
+                }
+            }
+        }
+        for c in cars {
+            let dv = c.v - c.v_before;
+            if c.v < 0.0
+                || c.v > lim.v_max + 1e-9
+                || dv > lim.a_max * lim.h + 1e-9
+                || dv < -lim.brake * lim.h - 1e-9
+            {
+                self.limit_violations += 1;
+            }
+        }
+        for c in cars {
+            let Some(r) = layout.route(usize::from(c.route)) else {
+                continue;
+            };
+            let front = c.s + 0.5 * LENGTH_M;
+            if front > r.path.entry()
+                && c.s - 0.5 * LENGTH_M < r.path.exit()
+                && !self.ever_permitted.contains(&c.id)
+            {
+                self.unpermitted += 1;
+            }
+        }
+    }
 }
 
 /// A vehicle to place.
@@ -123,14 +393,10 @@ pub struct CrossingSim {
     pending: Vec<(u16, u8)>,
     /// Vehicles that left, repeating `Left`: (id, when it left).
     departing: Vec<(u16, f64)>,
+    /// Crossing times of the vehicles that crossed.
     times: Vec<f64>,
-    crossed: u64,
-    collisions: u64,
-    invariant_violations: u64,
-    limit_violations: u64,
-    unpermitted: u64,
     fallback_steps: u64,
-    ever_permitted: Vec<u16>,
+    monitor: CrossingMonitor,
 }
 
 impl CrossingSim {
@@ -160,7 +426,7 @@ impl CrossingSim {
         let params = params(layout.spec.v_limit);
         let mut nodes: Vec<u16> = placements.iter().map(|p| p.id).collect();
         nodes.push(MANAGER_NODE);
-        let cars = placements.iter().map(|p| Self::car(&params, p)).collect();
+        let cars = placements.iter().map(|p| Car::new(&params, p)).collect();
         let mut lim = Limits::table_i();
         lim.v_max = layout.spec.v_limit;
         Self {
@@ -176,32 +442,8 @@ impl CrossingSim {
             pending: Vec::new(),
             departing: Vec::new(),
             times: Vec::new(),
-            crossed: 0,
-            collisions: 0,
-            invariant_violations: 0,
-            limit_violations: 0,
-            unpermitted: 0,
             fallback_steps: 0,
-            ever_permitted: Vec::new(),
-        }
-    }
-
-    fn car(params: &Params<f64>, p: &Placement) -> Car {
-        Car {
-            id: p.id,
-            route: p.route,
-            s: p.s,
-            v: p.v,
-            v_before: p.v,
-            planner: Box::new(CrossingPlanner::new(
-                Planner::new(*params, weights())
-                    .unwrap_or_else(|_| unreachable!("the weights are valid")),
-                p.id,
-                p.route,
-                LENGTH_M,
-            )),
-            arrived_at: None,
-            left_as_at: None,
+            monitor: CrossingMonitor::default(),
         }
     }
 
@@ -237,114 +479,40 @@ impl CrossingSim {
             let _ = self.bus.send(id, &Message::Left { id, at }, t);
         }
         for c in &self.cars {
-            let r = CrossingReport {
-                id: c.id,
-                route: c.route,
-                s: c.s,
-                v: c.v,
-                length: LENGTH_M,
-            };
-            let _ = self.bus.send(c.id, &Message::Crossing(r, t), t);
+            let _ = self.bus.send(c.id, &Message::Crossing(c.report(), t), t);
         }
         // 2. The manager hears them, decides, and grants leases.
         self.inbox.clear();
         let _ = self.bus.receive(MANAGER_NODE, t, &mut self.inbox);
-        for r in &self.inbox {
-            match r.msg {
-                Message::Crossing(rep, _) => {
-                    let _ = self.manager.observe(&rep, t);
-                }
-                Message::Left { id, .. } => self.manager.forget(id),
-                _ => {}
-            }
-        }
-        self.manager.update();
-        let granted: Vec<u16> = self
-            .manager
-            .entries()
-            .iter()
-            .filter(|e| e.permitted)
-            .map(|e| e.id)
-            .collect();
+        let granted = manage(&mut self.manager, &self.inbox, t);
+        self.monitor.granted(&granted);
         for id in granted {
-            let _ = self.bus.send(
-                MANAGER_NODE,
-                &Message::Grant {
-                    id,
-                    until: t + LEASE_S,
-                },
-                t,
-            );
+            let until = t + LEASE_S;
+            let _ = self
+                .bus
+                .send(MANAGER_NODE, &Message::Grant { id, until }, t);
         }
         // 3. Every vehicle plans from what it heard.
         let mut commands = Vec::with_capacity(self.cars.len());
-        let layout = &self.layout;
-        for i in 0..self.cars.len() {
+        for c in &mut self.cars {
             self.inbox.clear();
-            let id = self.cars[i].id;
-            let _ = self.bus.receive(id, t, &mut self.inbox);
-            let c = &mut self.cars[i];
+            let _ = self.bus.receive(c.id, t, &mut self.inbox);
             for r in &self.inbox {
-                match r.msg {
-                    Message::Grant { id, until } => c.planner.hear_grant(id, until),
-                    Message::Left { id, .. } => c.planner.hear_left(id),
-                    Message::Crossing(rep, stamp) => {
-                        // The view holds MANAGER_CAP vehicles, as many as the manager.
-                        let _ = c.planner.hear_report(&rep, stamp);
-                    }
-                    _ => {}
-                }
+                c.hear(&r.msg);
             }
-            let permitted = c.planner.permitted(layout, c.s, t);
-            let v = match c.planner.step(layout, c.s, c.v, t) {
-                Ok(cmd) => {
-                    if let StepStatus::Fallback(why) = cmd.status {
-                        if why != planner_core::FallbackReason::NoRoom {
-                            self.fallback_steps += 1;
-                            if std::env::var_os("HOST_SIM_DEBUG").is_some() {
-                                eprintln!(
-                                    "t={t:.2} id={} route={} s={:.2} v={:.2} permitted={permitted} {why:?} gap={:.3}",
-                                    c.id, c.route, c.s, c.v, cmd.gap
-                                );
-                            }
-                        }
-                    }
-                    cmd.v
-                }
-                Err(_) => {
-                    self.fallback_steps += 1;
-                    planner_core::safety::max_braking_command(&self.params, c.v)
-                }
-            };
+            let (v, fell_back) = c.decide(&self.layout, &self.params, t);
+            self.fallback_steps += u64::from(fell_back);
             commands.push(v);
         }
         // 4. Move along the paths; bookkeeping of arrivals and departures.
         for (c, v) in self.cars.iter_mut().zip(commands) {
-            c.v_before = c.v;
-            c.v = v;
-            c.s += v * h;
+            c.advance(v, h);
         }
         self.t = t + h;
         let mut leaving = Vec::new();
         for (i, c) in self.cars.iter_mut().enumerate() {
-            let Some(route) = self.layout.route(usize::from(c.route)) else {
-                continue;
-            };
-            let q = route.path.pose_at(c.s);
-            let inside_ac = self.layout.in_comm_region(q.x, q.y);
-            if inside_ac && c.arrived_at.is_none() {
-                c.arrived_at = Some(self.t);
-            }
-            if c.s - 0.5 * LENGTH_M >= route.path.exit() && c.left_as_at.is_none() {
-                c.left_as_at = Some(self.t);
-            }
-            // Crossed: it arrived, went through A_S, and has left A_C on its outlet.
-            let done = c.arrived_at.is_some() && !inside_ac && c.left_as_at.is_some();
-            if done {
-                if let Some(a) = c.arrived_at {
-                    self.times.push(self.t - a);
-                }
-                self.crossed += 1;
+            if let Some(dt) = c.crossed(&self.layout, self.t) {
+                self.times.push(dt);
                 leaving.push(i);
             }
         }
@@ -365,7 +533,8 @@ impl CrossingSim {
             }
         }
         self.spawn_pending();
-        self.monitor();
+        let truths: Vec<CarTruth> = self.cars.iter().map(Car::truth).collect();
+        self.monitor.check(&self.layout, &self.lim, &truths);
     }
 
     fn spawn_pending(&mut self) {
@@ -389,7 +558,7 @@ impl CrossingSim {
                 gap - self.lim.d0 > self.lim.safe_distance(v) + crate::sim::START_MARGIN_M
             });
             if ok {
-                let car = Self::car(
+                let car = Car::new(
                     &self.params,
                     &Placement {
                         id,
@@ -406,97 +575,6 @@ impl CrossingSim {
             }
         }
         self.pending = still;
-    }
-
-    /// The independent checks of one instant.
-    fn monitor(&mut self) {
-        let truths: Vec<(usize, Truth)> = self
-            .cars
-            .iter()
-            .enumerate()
-            .map(|(i, c)| {
-                let q = self.path(c).pose_at(c.s);
-                (
-                    i,
-                    Truth {
-                        x: q.x,
-                        y: q.y,
-                        theta: q.theta,
-                        length: LENGTH_M,
-                        width: WIDTH_M,
-                        lane: 0,
-                        keeps_invariant: true,
-                        v: c.v,
-                        v_before: c.v_before,
-                    },
-                )
-            })
-            .collect();
-        for (k, (_, a)) in truths.iter().enumerate() {
-            for (_, b) in truths.iter().skip(k + 1) {
-                if rectangles_overlap(a, b) {
-                    self.collisions += 1;
-                }
-            }
-        }
-        // The invariant between vehicles sharing a path piece (same route; same inlet
-        // while the leader is on it; same outlet once both are on it).
-        for a in &self.cars {
-            for b in &self.cars {
-                if a.id == b.id {
-                    continue;
-                }
-                let (Some(ra), Some(rb)) = (
-                    self.layout.route(usize::from(a.route)),
-                    self.layout.route(usize::from(b.route)),
-                ) else {
-                    continue;
-                };
-                let (fa, fb) = if a.route == b.route
-                    || (ra.inlet == rb.inlet && b.s < rb.path.entry())
-                {
-                    (a.s, b.s)
-                } else if ra.outlet == rb.outlet && a.s >= ra.path.exit() && b.s >= rb.path.exit() {
-                    (a.s - ra.path.exit(), b.s - rb.path.exit())
-                } else {
-                    continue;
-                };
-                if fa < fb {
-                    let gap = fb - fa - LENGTH_M;
-                    if gap - self.lim.d0 <= self.lim.safe_distance(a.v) {
-                        self.invariant_violations += 1;
-                    }
-                }
-            }
-        }
-        for c in &self.cars {
-            let dv = c.v - c.v_before;
-            if c.v < 0.0
-                || c.v > self.lim.v_max + 1e-9
-                || dv > self.lim.a_max * self.lim.h + 1e-9
-                || dv < -self.lim.brake * self.lim.h - 1e-9
-            {
-                self.limit_violations += 1;
-            }
-        }
-        // IC Protocol (ii): nobody inside A_S who was never permitted.
-        for e in self.manager.entries().iter().filter(|e| e.permitted) {
-            if !self.ever_permitted.contains(&e.id) {
-                self.ever_permitted.push(e.id);
-            }
-        }
-        for c in &self.cars {
-            let Some(r) = self.layout.route(usize::from(c.route)) else {
-                continue;
-            };
-            let front = c.s + 0.5 * LENGTH_M;
-            if front > r.path.entry()
-                && c.s - 0.5 * LENGTH_M < r.path.exit()
-                && !self.ever_permitted.contains(&c.id)
-            {
-                self.unpermitted += 1;
-            }
-        }
     }
 
     /// Every vehicle's (id, route, s, v, lease end) and the manager's entries, for
@@ -517,20 +595,40 @@ impl CrossingSim {
 
     /// Summary so far.
     pub fn summary(&self) -> CrossingSummary {
-        let n = self.times.len().max(1) as f64;
-        CrossingSummary {
-            algorithm: self.manager.algorithm().name(),
-            sim_seconds: self.t,
-            crossed: self.crossed,
-            crossing_time_mean_s: self.times.iter().sum::<f64>() / n,
-            crossing_time_max_s: self.times.iter().copied().fold(0.0, f64::max),
-            collisions: self.collisions,
-            invariant_violations: self.invariant_violations,
-            limit_violations: self.limit_violations,
-            unpermitted_entries: self.unpermitted,
-            fallback_steps: self.fallback_steps,
-            in_system: self.cars.len(),
-        }
+        summarize(
+            self.manager.algorithm(),
+            self.t,
+            &self.times,
+            self.fallback_steps,
+            &self.monitor,
+            self.cars.len(),
+        )
+    }
+}
+
+/// The summary of a run at `t`: crossing times of the vehicles that crossed, the
+/// monitor's findings, vehicles still in the system.
+pub(crate) fn summarize(
+    algorithm: Algorithm,
+    t: f64,
+    times: &[f64],
+    fallback_steps: u64,
+    monitor: &CrossingMonitor,
+    in_system: usize,
+) -> CrossingSummary {
+    let n = times.len().max(1) as f64;
+    CrossingSummary {
+        algorithm: algorithm.name(),
+        sim_seconds: t,
+        crossed: times.len() as u64,
+        crossing_time_mean_s: times.iter().sum::<f64>() / n,
+        crossing_time_max_s: times.iter().copied().fold(0.0, f64::max),
+        collisions: monitor.collisions,
+        invariant_violations: monitor.invariant_violations,
+        limit_violations: monitor.limit_violations,
+        unpermitted_entries: monitor.unpermitted,
+        fallback_steps,
+        in_system,
     }
 }
 

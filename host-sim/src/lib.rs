@@ -10,6 +10,7 @@
 pub mod bench;
 pub mod bus;
 pub mod can;
+pub mod crossing_fleet;
 pub mod faulty;
 pub mod fleet;
 pub mod instances;

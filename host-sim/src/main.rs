@@ -202,14 +202,7 @@ fn run(
         Err(e) => return bad_input(format!("{}: cannot read: {e}", file.display())),
     };
     if host_sim::intersection::is_crossing_scenario(&text) {
-        if medium.is_some() {
-            return bad_input(format!(
-                "{}: intersection scenarios run on the in-process bus only (crossing reports \
-                 have no CAN mapping yet)",
-                file.display()
-            ));
-        }
-        return run_crossing(&file, &text, json, plot, trace.is_some());
+        return run_crossing(&file, &text, json, plot, trace.is_some(), medium.as_ref());
     }
     let scenario = match Scenario::parse(&text, &file) {
         Ok(s) => s,
@@ -484,13 +477,15 @@ fn finish<T: serde::Serialize + std::fmt::Debug>(
     }
 }
 
-/// `host-sim run` on an intersection scenario (a file with an `[intersection]` table).
+/// `host-sim run` on an intersection scenario (a file with an `[intersection]` table),
+/// on the in-process bus or, with `medium`, as a fleet of tasks on CAN.
 fn run_crossing(
     file: &std::path::Path,
     text: &str,
     json: bool,
     plot: Option<PathBuf>,
     trace: bool,
+    medium: Option<&Medium>,
 ) -> ExitCode {
     if trace {
         return bad_input("--trace is not available for intersection scenarios (yet)");
@@ -499,15 +494,38 @@ fn run_crossing(
         Ok(s) => s,
         Err(e) => return bad_input(e),
     };
+    if let Some(m) = medium {
+        if !sc.faults.is_none() {
+            return bad_input(format!(
+                "{}: [faults] are injected by the in-process bus; `--bus {m}` carries frames as they are",
+                file.display()
+            ));
+        }
+        for p in &sc.placements {
+            if let Err(e) = host_sim::can::vehicle_address(p.id) {
+                return bad_input(format!("{}: {e}", file.display()));
+            }
+        }
+    }
     let mut data = PlotData::default();
     let t0 = std::time::Instant::now();
-    let summary = sc.run(&mut |t, poses| {
+    let mut sample = |t: f64, poses: &[host_sim::intersection::PoseSample]| {
         if plot.is_some() && ((t * 100.0).round() as i64) % 10 == 0 {
             for &(id, x, y, th, v) in poses {
                 data.series.entry(id).or_default().push((t, x, y, th, v));
             }
         }
-    });
+    };
+    let (summary, fleet) = match medium {
+        None => (sc.run(&mut sample), None),
+        Some(m) => match host_sim::crossing_fleet::run(&sc, m, &mut sample, &mut |_, _| {}) {
+            Ok(f) => (f.run.clone(), Some(f)),
+            Err(e) => {
+                eprintln!("error: --bus {m}: {e}");
+                return ExitCode::from(EXIT_BUS);
+            }
+        },
+    };
     if let Some(path) = &plot {
         if let Err(e) = host_sim::plot::crossing(&data, &sc.layout, &sc.name, path) {
             eprintln!("error: {e}");
@@ -516,25 +534,59 @@ fn run_crossing(
     }
     let completed = summary.in_system == 0;
     if json {
+        /// The run (in-process, or the fleet's with its CAN figures) and the scenario.
         #[derive(serde::Serialize)]
-        struct Out<'a> {
+        struct Out<'a, S: serde::Serialize> {
             scenario: &'a str,
             vehicles: usize,
             completed: bool,
             #[serde(flatten)]
-            summary: &'a host_sim::intersection::CrossingSummary,
+            run: &'a S,
             wall_seconds: f64,
         }
-        if let Err(code) = print_json(&Out {
-            scenario: &sc.name,
-            vehicles: sc.placements.len(),
-            completed,
-            summary: &summary,
-            wall_seconds: t0.elapsed().as_secs_f64(),
-        }) {
+        let (scenario, vehicles) = (sc.name.as_str(), sc.placements.len());
+        let wall_seconds = t0.elapsed().as_secs_f64();
+        let printed = match &fleet {
+            Some(f) => print_json(&Out {
+                scenario,
+                vehicles,
+                completed,
+                run: f,
+                wall_seconds,
+            }),
+            None => print_json(&Out {
+                scenario,
+                vehicles,
+                completed,
+                run: &summary,
+                wall_seconds,
+            }),
+        };
+        if let Err(code) = printed {
             return code;
         }
     } else {
+        if let Some(f) = &fleet {
+            println!(
+                "{}: {} tasks (vehicles and the manager), {} periods of 2 SYNC ticks; {} requests, \
+                 {} grants, {} exits; frames sent {}, received {}, rejected {}; request latency \
+                 p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs; grant latency p50 {:.0} µs, p99 {:.0} µs",
+                f.medium,
+                f.tasks,
+                f.periods,
+                f.messages.requests,
+                f.messages.grants,
+                f.messages.exits,
+                f.can.frames_sent,
+                f.can.frames_received,
+                f.can.rejected_total(),
+                f.request_latency.p50_us,
+                f.request_latency.p99_us,
+                f.request_latency.max_us,
+                f.grant_latency.p50_us,
+                f.grant_latency.p99_us,
+            );
+        }
         println!(
             "{}: {} vehicles, {} crossed in {:.2} s ({}); collisions {}, invariant violations {}, \
              entries without permission {}",

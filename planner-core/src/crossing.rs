@@ -6,6 +6,7 @@
 //! which vehicles hold a permission; it tracks at most `CAP` vehicles.
 
 use crate::intersection::{Layout, CONFLICT_SAMPLE_M};
+use crate::planner::ConfigError;
 use crate::real::Real;
 use core::cmp::Ordering;
 use heapless::Vec;
@@ -135,6 +136,13 @@ pub struct Manager<F, const CAP: usize> {
     algorithm: Algorithm,
     entries: Vec<Entry<F>, CAP>,
     crossed: u32,
+    /// Half the step to which reported positions were rounded (0: exact reports).
+    half_step: F,
+}
+
+/// `true` for a usable bus resolution: finite, non-negative, below 1 (m or m/s).
+fn valid_resolution<F: Real>(r: F) -> bool {
+    r.is_finite() && r >= F::ZERO && r < F::ONE
 }
 
 impl<F: Real, const CAP: usize> Manager<F, CAP> {
@@ -145,7 +153,21 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             algorithm,
             entries: Vec::new(),
             crossed: 0,
+            half_step: F::ZERO,
         }
+    }
+
+    /// Reports reach the manager with positions rounded to `position` (m), e.g. by a CAN
+    /// codec: a reported s may then be up to half a step ahead of the vehicle. The
+    /// manager takes every report half a step further back — registration, progress
+    /// through A_S (Step 4's conflict-zone test) and departure onto the outlet all
+    /// happen no earlier than on exact data. Zero (the default) takes reports as exact.
+    pub fn set_position_resolution(&mut self, position: F) -> Result<(), ConfigError> {
+        if !valid_resolution(position) {
+            return Err(ConfigError::InvalidResolution);
+        }
+        self.half_step = F::HALF * position;
+        Ok(())
     }
 
     /// The layout.
@@ -189,8 +211,10 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
         let (entry, exit) = (route.path.entry(), route.path.exit());
         let half = F::HALF * r.length;
+        // The furthest back the vehicle can be, given the reports' rounding.
+        let s = r.s - self.half_step;
         let idx = self.entries.iter().position(|e| e.id == r.id);
-        if r.s - half >= exit {
+        if s - half >= exit {
             // On its outlet track: no longer in C^I_t (25).
             if let Some(i) = idx {
                 self.entries.swap_remove(i);
@@ -198,7 +222,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             }
             return Ok(());
         }
-        let to_line = entry - (r.s + half);
+        let to_line = entry - (s + half);
         let stopped =
             r.v == F::ZERO && to_line >= F::ZERO && to_line <= F::from_f64(STOP_LINE_ZONE_M);
         match idx.and_then(|i| self.entries.get_mut(i)) {
@@ -206,7 +230,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 if e.route != r.route {
                     return Err(ManagerError::RouteChanged);
                 }
-                e.progress = r.s - entry;
+                e.progress = s - entry;
                 e.to_line = to_line;
                 if stopped && e.stopped_at.is_none() {
                     e.stopped_at = Some(now);
@@ -214,7 +238,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             }
             None => {
                 // Only an unregistered vehicle needs its pose: is it inside A_C yet?
-                let pose = route.path.pose_at(r.s);
+                let pose = route.path.pose_at(s);
                 if !self.layout.in_comm_region(pose.x, pose.y) {
                     return Ok(());
                 }
@@ -223,7 +247,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                         id: r.id,
                         route: r.route,
                         tau: now,
-                        progress: r.s - entry,
+                        progress: s - entry,
                         to_line,
                         stopped_at: stopped.then_some(now),
                         permitted: false,
@@ -384,6 +408,8 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     id: u16,
     length: F,
     lease_until: F,
+    /// Step to which others' reported positions were rounded (0: exact).
+    position_step: F,
     others: Vec<(u16, u8, F, F), CAP>,
     obstacles: Vec<crate::planner::Vehicle<F>, CAP>,
 }
@@ -397,6 +423,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             id,
             length,
             lease_until: F::from_f64(-1e30),
+            position_step: F::ZERO,
             others: Vec::new(),
             obstacles: Vec::new(),
         }
@@ -405,6 +432,19 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
     /// The route.
     pub fn route(&self) -> u8 {
         self.route
+    }
+
+    /// Others' reports arrive with positions rounded to `position` (m), e.g. by a CAN
+    /// codec: each reported vehicle may be up to half a step further back or ahead, so
+    /// it is taken as an obstacle one step longer (half a step at each end), which keeps
+    /// (2) and the invariant on the true positions. Zero (the default) takes reports as
+    /// exact.
+    pub fn set_bus_resolution(&mut self, position: F) -> Result<(), ConfigError> {
+        if !valid_resolution(position) {
+            return Err(ConfigError::InvalidResolution);
+        }
+        self.position_step = position;
+        Ok(())
     }
 
     /// Takes another vehicle's report stamped `stamp`; older or duplicate reports and
@@ -482,7 +522,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             if let Some(x) = on_my_path {
                 let _ = self.obstacles.push(crate::planner::Vehicle {
                     x,
-                    length: self.length,
+                    length: self.length + self.position_step,
                 });
             }
         }

@@ -181,3 +181,69 @@ fn fifo_and_stop_permit_one_at_a_time_and_bad_reports_change_nothing() {
     m.update();
     assert!(m.permitted(1));
 }
+
+/// Reports rounded by a bus (0.01 m) may put a vehicle up to 5 mm ahead of itself: with
+/// the resolution set, the manager keeps it until its rear is surely past A_S.
+#[test]
+fn position_resolution_keeps_a_vehicle_until_it_has_surely_left() {
+    let l = layout();
+    let exit = l.route(0).unwrap().path.exit();
+    let mut almost = report(&l, 1, 0, At::Inside);
+    let mut exact = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    let mut rounded = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    assert!(rounded.set_position_resolution(-0.01).is_err());
+    assert!(rounded.set_position_resolution(f64::NAN).is_err());
+    assert!(rounded.set_position_resolution(1.0).is_err());
+    rounded.set_position_resolution(0.01).unwrap();
+    for m in [&mut exact, &mut rounded] {
+        m.observe(&almost, 1.0).unwrap();
+        m.update();
+        assert!(m.permitted(1));
+    }
+    // Reported rear 3 mm past the exit: it may still be 2 mm inside.
+    almost.s = exit + 0.5 * almost.length + 0.003;
+    exact.observe(&almost, 2.0).unwrap();
+    rounded.observe(&almost, 2.0).unwrap();
+    assert_eq!((exact.crossed(), exact.entries().len()), (1, 0));
+    assert_eq!((rounded.crossed(), rounded.entries().len()), (0, 1));
+    assert!(rounded.permitted(1));
+    // 6 mm past: surely out.
+    almost.s += 0.003;
+    rounded.observe(&almost, 3.0).unwrap();
+    assert_eq!((rounded.crossed(), rounded.entries().len()), (1, 0));
+}
+
+/// With reports rounded to 0.01 m, a vehicle ahead on the same route is taken 5 mm
+/// longer at each end: the follower's gap shrinks by exactly half a step.
+#[test]
+fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
+    use planner_core::crossing::CrossingPlanner;
+    use planner_core::{CostWeights, Planner};
+    let l = layout();
+    let p = Params::<f64>::table_i();
+    let entry = l.route(0).unwrap().path.entry();
+    let gap = |res: f64| {
+        let planner = Planner::<f64, 20>::new(p, CostWeights::default()).unwrap();
+        let mut c = CrossingPlanner::<f64, 20, 8>::new(planner, 1, 0, 4.5);
+        c.set_bus_resolution(res).unwrap();
+        c.hear_grant(1, 10.0);
+        let ahead = CrossingReport {
+            id: 2,
+            route: 0,
+            s: entry - 10.0,
+            v: 5.0,
+            length: 4.5,
+        };
+        c.hear_report(&ahead, 0.0).unwrap();
+        c.step(&l, entry - 40.0, 5.0, 0.0).unwrap().gap
+    };
+    let (exact, rounded) = (gap(0.0), gap(0.01));
+    assert!(
+        (exact - rounded - 0.005).abs() < 1e-12,
+        "{exact} vs {rounded}"
+    );
+    let planner = Planner::<f64, 20>::new(p, CostWeights::default()).unwrap();
+    let mut c = CrossingPlanner::<f64, 20, 8>::new(planner, 1, 0, 4.5);
+    assert!(c.set_bus_resolution(f64::INFINITY).is_err());
+    assert!(c.set_bus_resolution(-1e-3).is_err());
+}

@@ -1,0 +1,330 @@
+//! Intersection scenarios as fleets on CAN frames (issue 6, item 4): a task per vehicle
+//! and one for the intersection manager, on the in-process frame hub with the code that
+//! runs on SocketCAN (the real vcan run is `host-sim/vcan/run-in-qemu.sh`, run by CI).
+
+mod common;
+
+use can_gateway::wire;
+use can_gateway::{encode, Frames, PlainFrame, Reassembler};
+use common::builtin;
+use host_sim::can::{report_from_wire, report_to_wire, CanPort, Hub, HubPort};
+use host_sim::crossing_fleet::{self, CrossingFleetSummary};
+use host_sim::fleet::{FleetError, Medium, TIMEOUT};
+use host_sim::intersection::{CrossingScenario, CrossingSummary, MANAGER_NODE};
+use host_sim::sim::LENGTH_M;
+use planner_core::crossing::CrossingReport;
+use planner_core::intersection::ROUTES;
+use std::io;
+use std::process::Command;
+use std::time::{Duration, SystemTime};
+
+fn scenario(name: &str, algorithm: Option<&str>) -> CrossingScenario {
+    let path = builtin(name);
+    let mut text = std::fs::read_to_string(&path).expect("read");
+    if let Some(a) = algorithm {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("algorithm = "))
+            .expect("an algorithm line")
+            .to_string();
+        text = text.replace(&line, &format!("algorithm = \"{a}\""));
+    }
+    CrossingScenario::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn on_hub(sc: &CrossingScenario) -> CrossingFleetSummary {
+    crossing_fleet::run(sc, &Medium::Hub, &mut |_, _| {}, &mut |_, _| {})
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn safe_and_all_crossed(s: &CrossingSummary, vehicles: usize) {
+    assert_eq!(
+        (
+            s.collisions,
+            s.invariant_violations,
+            s.limit_violations,
+            s.unpermitted_entries
+        ),
+        (0, 0, 0, 0),
+        "{s:?}"
+    );
+    assert_eq!((s.crossed, s.in_system), (vehicles as u64, 0), "{s:?}");
+}
+
+/// Queues at every stop line, under every algorithm, as fleets: safe, everyone crosses,
+/// within two periods of the in-process run (the manager and the planners see rounded
+/// reports), every frame accepted and accounted for.
+#[test]
+fn queued_intersection_fleets_on_can_frames() {
+    for alg in ["stop", "fifo", "concurrent", "concurrent_fair", "pipelined"] {
+        let sc = scenario("intersection-queues.toml", Some(alg));
+        let n = sc.placements.len();
+        let f = on_hub(&sc);
+        safe_and_all_crossed(&f.run, n);
+        let exact = sc.run(&mut |_, _| {});
+        safe_and_all_crossed(&exact, n);
+        for (a, b) in [
+            (exact.sim_seconds, f.run.sim_seconds),
+            (exact.crossing_time_mean_s, f.run.crossing_time_mean_s),
+            (exact.crossing_time_max_s, f.run.crossing_time_max_s),
+        ] {
+            assert!(
+                (a - b).abs() <= 0.02 + 1e-9,
+                "{alg}: in-process {a}, on CAN {b}"
+            );
+        }
+        assert_eq!(f.tasks, n + 1);
+        assert_eq!(f.sync_ticks, 2 * f.periods + 1, "{alg}");
+        assert!(f.can.rejected.is_empty(), "{alg}: {:?}", f.can.rejected);
+        let m = f.messages;
+        // A request per vehicle and period in the system; every vehicle says it left for
+        // 0.5 s (50 periods) unless the run ended first.
+        assert!(m.requests >= n as u64 && m.grants > 0, "{alg}: {m:?}");
+        assert!(m.exits > 0 && m.exits <= 50 * n as u64, "{alg}: {m:?}");
+        // Two frames per request, one per grant and exit.
+        assert_eq!(
+            f.can.frames_sent,
+            2 * m.requests + m.grants + m.exits,
+            "{alg}"
+        );
+        // On the hub, every node but the sender hears every frame (and every SYNC).
+        assert_eq!(
+            f.can.frames_received,
+            f.can.frames_sent * n as u64 + f.sync_ticks * (n as u64 + 1),
+            "{alg}"
+        );
+        assert_eq!(f.grant_latency.count, m.grants * n as u64, "{alg}");
+    }
+}
+
+/// Every route of the layout goes over CAN as its own (inlet, outlet) pair and comes
+/// back; what a `Request` cannot carry is refused.
+#[test]
+fn crossing_reports_map_onto_requests_and_back() {
+    let sc = scenario("intersection.toml", None);
+    let l = &sc.layout;
+    let mut pairs = Vec::new();
+    for route in 0..ROUTES as u8 {
+        let r = CrossingReport {
+            id: 7,
+            route,
+            s: 12.345,
+            v: 9.87,
+            length: LENGTH_M,
+        };
+        let m = report_to_wire(&r, 3.25, l).expect("maps");
+        let wire::Message::Request(q) = m else {
+            panic!("a request: {m:?}")
+        };
+        pairs.push((q.inlet, q.outlet));
+        assert_eq!(q.arrival, 3.25);
+        // Through the codec: position and speed rounded, the route intact.
+        let frames: Frames<PlainFrame> = encode(&m, 7, 0).expect("encodes");
+        let mut rx = Reassembler::<4>::new();
+        let mut got = None;
+        for f in &frames {
+            got = rx.push::<f64, _>(f).expect("accepted");
+        }
+        let Some(wire::Message::Request(q)) = got else {
+            panic!("a request back")
+        };
+        let back = report_from_wire(&q, l).expect("a route");
+        assert_eq!((back.id, back.route, back.length), (7, route, LENGTH_M));
+        assert!((back.s - r.s).abs() <= 0.005 + 1e-9 && (back.v - r.v).abs() <= 0.01 + 1e-9);
+    }
+    pairs.sort_by_key(|(i, o)| (i.heading, i.lane, o.heading, o.lane));
+    pairs.dedup();
+    assert_eq!(pairs.len(), ROUTES, "each route its own inlet/outlet pair");
+    let bad_route = CrossingReport {
+        id: 7,
+        route: ROUTES as u8,
+        s: 1.0,
+        v: 1.0,
+        length: LENGTH_M,
+    };
+    assert!(report_to_wire(&bad_route, 0.0, l).is_err());
+    let long = CrossingReport {
+        route: 0,
+        length: LENGTH_M + 1.0,
+        ..bad_route
+    };
+    assert!(report_to_wire(&long, 0.0, l).is_err());
+    // A pair that is no route (straight on from the inner lane into the outer one).
+    let mut q = wire::Request {
+        id: 7,
+        inlet: wire::TrackWire {
+            heading: 0,
+            lane: 0,
+        },
+        outlet: wire::TrackWire {
+            heading: 0,
+            lane: 1,
+        },
+        arrival: 0.0,
+        s: 1.0,
+        v: 1.0,
+    };
+    assert!(report_from_wire(&q, l).is_none());
+    q.outlet.lane = 0;
+    assert_eq!(report_from_wire(&q, l).map(|r| r.route), Some(0));
+}
+
+/// A port that, with every request its vehicle sends, forges a grant for that vehicle
+/// from the vehicle's own address (as a compromised or buggy node would).
+struct Forger {
+    inner: HubPort,
+    sa: Option<u8>,
+    forged: u8,
+}
+
+impl CanPort for Forger {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        self.inner.transmit(frame)?;
+        let Some(sa) = self.sa else {
+            return Ok(());
+        };
+        let id = match embedded_can::Frame::id(frame) {
+            embedded_can::Id::Extended(e) => e.as_raw(),
+            embedded_can::Id::Standard(_) => return Ok(()),
+        };
+        // After the last frame of one of its requests.
+        if wire::split_id(id) == Some((wire::MessageKind::Request as u8, 1, sa)) {
+            let grant = wire::Message::Grant {
+                id: u16::from(sa),
+                until: 1e5,
+            };
+            let frames: Frames<PlainFrame> =
+                encode(&grant, sa, self.forged).map_err(|e| io::Error::other(format!("{e:?}")))?;
+            self.forged = (self.forged + 1) & 0x0F;
+            for f in &frames {
+                self.inner.transmit(f)?;
+            }
+        }
+        Ok(())
+    }
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        self.inner.receive(timeout)
+    }
+}
+
+/// Vehicles forging their own permissions are refused by every receiver (only the
+/// manager's address may grant): the run is the clean run, to the bit.
+#[test]
+fn forged_grants_are_refused_and_change_nothing() {
+    let sc = scenario("intersection.toml", Some("fifo"));
+    let clean = on_hub(&sc);
+    let hub = Hub::new();
+    let forged = crossing_fleet::run_with_ports(
+        &sc,
+        "forging hub",
+        |id| {
+            Ok(Forger {
+                inner: hub.port(),
+                sa: id.filter(|&i| i != MANAGER_NODE).map(|i| i as u8),
+                forged: 0,
+            })
+        },
+        &mut |_, _| {},
+        &mut |_, _| {},
+    )
+    .expect("runs");
+    let rejected = forged.can.rejected.get("SenderMismatch").copied();
+    assert!(rejected.unwrap_or(0) > 0, "{:?}", forged.can.rejected);
+    assert_eq!(forged.can.rejected.len(), 1, "{:?}", forged.can.rejected);
+    safe_and_all_crossed(&forged.run, sc.placements.len());
+    assert_eq!(
+        format!("{:?}", forged.run),
+        format!("{:?}", clean.run),
+        "the forged grants changed the run"
+    );
+    assert_eq!(forged.messages, clean.messages);
+}
+
+/// A port whose transmitter fails after `left` frames.
+struct Failing {
+    inner: HubPort,
+    left: u32,
+}
+
+impl CanPort for Failing {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        if self.left == 0 {
+            return Err(io::Error::other("bus-off"));
+        }
+        self.left -= 1;
+        self.inner.transmit(frame)
+    }
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        self.inner.receive(timeout)
+    }
+}
+
+/// A manager or a vehicle whose transmitter fails ends the run at once with a typed
+/// error naming it; nothing waits for a timeout.
+#[test]
+fn a_failing_manager_or_vehicle_ends_the_run_with_its_error() {
+    let sc = scenario("intersection.toml", None);
+    for (who, after) in [(MANAGER_NODE, 40), (3, 60)] {
+        let hub = Hub::new();
+        let t0 = std::time::Instant::now();
+        let r = crossing_fleet::run_with_ports(
+            &sc,
+            "failing hub",
+            |id| {
+                Ok(Failing {
+                    inner: hub.port(),
+                    left: if id == Some(who) { after } else { u32::MAX },
+                })
+            },
+            &mut |_, _| {},
+            &mut |_, _| {},
+        );
+        match (who, r) {
+            (MANAGER_NODE, Err(FleetError::Harness(e))) => {
+                assert!(e.contains("manager") && e.contains("bus-off"), "{e}")
+            }
+            (3, Err(FleetError::Vehicle { id: 3, error })) => {
+                assert!(error.contains("bus-off"), "{error}")
+            }
+            (_, other) => panic!("expected node {who} to fail, got {other:?}"),
+        }
+        assert!(t0.elapsed() < TIMEOUT / 2);
+    }
+}
+
+/// The CLI runs intersection files on CAN (`--bus can-hub`), prints the fleet's JSON,
+/// and refuses `[faults]` there (exit 2).
+#[test]
+fn cli_runs_intersections_on_the_bus() {
+    let bin = || Command::new(env!("CARGO_BIN_EXE_host-sim"));
+    let out = bin()
+        .arg("run")
+        .arg(builtin("intersection.toml"))
+        .args(["--bus", "can-hub", "--json"])
+        .output()
+        .expect("runs");
+    assert!(out.status.success(), "{out:?}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(v["medium"], "can-hub");
+    assert_eq!(
+        (v["crossed"].as_u64(), v["collisions"].as_u64()),
+        (Some(8), Some(0))
+    );
+    assert_eq!(v["tasks"], 9);
+    assert!(v["messages"]["grants"].as_u64().expect("count") > 0);
+    let dir = std::env::temp_dir().join(format!("crossing-fleet-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let faulty = dir.join("faulty-intersection.toml");
+    let text = std::fs::read_to_string(builtin("intersection.toml")).expect("read");
+    std::fs::write(&faulty, text + "\n[faults]\nloss = 0.2\n").expect("write");
+    let out = bin()
+        .arg("run")
+        .arg(&faulty)
+        .args(["--bus", "can-hub"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("[faults]"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
