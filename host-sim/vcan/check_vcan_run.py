@@ -1,11 +1,15 @@
 #!/usr/bin/env python3
 """Checks a fleet run on real vcan (run-in-qemu.sh): the host-sim summary (no collision,
-no violation, every frame accepted, one task per vehicle), and the `candump -l` log of
-vcan0 decoded with cantools and the DBC — every frame decodes, every message's CRC-8 and
-alive counter are right, one SYNC per period in order, and every vehicle state on the
-bus equals the vehicle's trace within half a resolution step.
+no violation, every frame accepted, the goals met, one task per vehicle — and one for an
+intersection's manager), and the candump log of vcan0 decoded with cantools and the DBC:
+every frame decodes, every message's CRC-8 and alive counter are right (no message
+lost), the SYNC ticks come in order with the end flag on the last. For a road scenario,
+one state per vehicle and period, each equal to the vehicle's trace within half a
+resolution step. For an intersection scenario, grants only from the manager's address
+(0xF1), as many requests, grants and exits on the bus as the fleet sent, each request
+on a route of the layout with its vehicle's position never going back.
 
-Usage: check_vcan_run.py DBC SUMMARY.json CANDUMP.log TRACE.csv VM_STATUS
+Usage: check_vcan_run.py DBC SUMMARY.json CANDUMP.log TRACE.csv|- VM_STATUS
 Exit 0 when every check holds; 1 with the first failure."""
 import csv
 import json
@@ -21,6 +25,7 @@ from check_candump import reassemble  # noqa: E402
 
 KIND = {1: "State", 2: "Request", 3: "Grant", 4: "Revoke", 5: "Exit", 6: "Sync"}
 H = 0.01  # the period (Table I)
+MANAGER = 0xF1  # can-gateway's wire::MANAGER_ADDRESS
 
 
 def fail(msg):
@@ -28,28 +33,47 @@ def fail(msg):
     sys.exit(1)
 
 
-def main(dbc_path, summary_path, log_path, trace_path, vm_status):
-    s = json.load(open(summary_path))
-    unsafe = {k: s[k] for k in ("collisions", "invariant_violations", "limit_violations",
-                                "road_end_overruns", "off_road")}
-    print(f"summary: {s['medium']}, {s['tasks']} tasks, {s['periods']} SYNC periods, "
-          f"{s['sim_seconds']:.2f} s simulated in {s['wall_seconds']:.1f} s; {unsafe}; "
-          f"lane changes {s['lane_changes']['changes']}, completed {s['completed']}; "
-          f"state latency p50 {s['state_latency']['p50_us']:.0f} µs, "
-          f"p99 {s['state_latency']['p99_us']:.0f} µs, max {s['state_latency']['max_us']:.0f} µs")
+def check_summary(s, vm_status):
+    """The run's own verdict: safe, live, every frame accepted. True for an
+    intersection run."""
+    crossing = "crossed" in s
+    keys = ("collisions", "invariant_violations", "limit_violations") + (
+        ("unpermitted_entries",) if crossing else ("road_end_overruns", "off_road"))
+    unsafe = {k: s[k] for k in keys}
+    if crossing:
+        print(f"summary: {s['scenario']} ({s['algorithm']}), {s['medium']}, {s['tasks']} tasks, "
+              f"{s['periods']} periods ({s['sync_ticks']} SYNC ticks), {s['sim_seconds']:.2f} s "
+              f"simulated in {s['wall_seconds']:.1f} s; {unsafe}; crossed {s['crossed']} of "
+              f"{s['vehicles']}, mean {s['crossing_time_mean_s']:.2f} s, max "
+              f"{s['crossing_time_max_s']:.2f} s; messages {s['messages']}; request latency p50 "
+              f"{s['request_latency']['p50_us']:.0f} µs, p99 {s['request_latency']['p99_us']:.0f} "
+              f"µs, max {s['request_latency']['max_us']:.0f} µs; grant latency p50 "
+              f"{s['grant_latency']['p50_us']:.0f} µs, p99 {s['grant_latency']['p99_us']:.0f} µs")
+    else:
+        print(f"summary: {s['medium']}, {s['tasks']} tasks, {s['periods']} SYNC periods, "
+              f"{s['sim_seconds']:.2f} s simulated in {s['wall_seconds']:.1f} s; {unsafe}; "
+              f"lane changes {s['lane_changes']['changes']}, completed {s['completed']}; "
+              f"state latency p50 {s['state_latency']['p50_us']:.0f} µs, "
+              f"p99 {s['state_latency']['p99_us']:.0f} µs, max {s['state_latency']['max_us']:.0f} µs")
     if any(unsafe.values()):
         fail(f"unsafe run: {unsafe}")
     if s["medium"] != "socketcan:vcan0":
         fail(f"medium {s['medium']}")
-    if s["tasks"] != s["vehicles"]:
+    tasks = s["vehicles"] + (1 if crossing else 0)
+    if s["tasks"] != tasks:
         fail(f"{s['tasks']} tasks for {s['vehicles']} vehicles")
     if s["can"]["rejected"]:
         fail(f"frames rejected: {s['can']['rejected']}")
-    if not s["completed"]:
+    if not s["completed"] or (crossing and s["crossed"] != s["vehicles"]):
         fail("liveness goals not met")
     if vm_status != "0":
         fail(f"host-sim exited {vm_status} in the VM")
+    return crossing
 
+
+def main(dbc_path, summary_path, log_path, trace_path, vm_status):
+    s = json.load(open(summary_path))
+    crossing = check_summary(s, vm_status)
     db = cantools.database.load_file(dbc_path, frame_id_mask=0x1FFFFF00)
     frames = []
     for n, line in enumerate(open(log_path), 1):
@@ -78,6 +102,8 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
         fail(f"incomplete messages at the end of the log: {incomplete}")
     last_counter = {}
     states = {}  # (id, stamp ms) -> signals of the three frames
+    requests = defaultdict(list)  # vehicle -> [(inlet, outlet, s, v)] in bus order
+    kinds = Counter()
     syncs = []
     for sa, kind, counter, _body, parts in messages:
         signals = {}
@@ -88,21 +114,33 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
         if prev is not None and counter != (prev + 1) % 16:
             fail(f"alive counter of {KIND[kind]} from {sa} jumped {prev} -> {counter}: a lost message")
         last_counter[key] = counter
+        kinds[KIND[kind]] += 1
+        if kind in (1, 2, 5) and signals["VehicleId"] != sa:
+            fail(f"{KIND[kind]} of vehicle {signals['VehicleId']} sent by {sa}")
+        if kind in (3, 4) and sa != MANAGER:
+            fail(f"{KIND[kind]} sent by {sa:#x}, not the manager")
         if kind == 1:
-            if signals["VehicleId"] != sa:
-                fail(f"state of {signals['VehicleId']} sent by {sa}")
             states[(sa, round(signals["Timestamp"] * 1000))] = signals
+        elif kind == 2:
+            requests[sa].append(((signals["InletHeading"], signals["InletLane"]),
+                                 (signals["OutletHeading"], signals["OutletLane"]),
+                                 signals["PathPosition"], signals["Speed"]))
         elif kind == 6:
             syncs.append((signals["Period"], signals["Last"]))
-    periods = s["periods"]
-    if [p for p, _ in syncs] != list(range(periods)):
-        fail(f"SYNC periods not 0..{periods - 1} in order")
-    if [l for _, l in syncs] != [0] * (periods - 1) + [1]:
+    ticks = s["sync_ticks"] if crossing else s["periods"]
+    if [p for p, _ in syncs] != list(range(ticks)):
+        fail(f"SYNC ticks not 0..{ticks - 1} in order")
+    if [l for _, l in syncs] != [0] * (ticks - 1) + [1]:
         fail("the last flag is not on the last SYNC alone")
-    if len(states) != s["vehicles"] * periods:
-        fail(f"{len(states)} state messages, expected {s['vehicles']} x {periods}")
+    span = frames[-1][0] - frames[0][0] if frames else 0.0
+    if crossing:
+        return check_crossing(s, requests, kinds, frames, names, span)
+    if len(states) != s["vehicles"] * ticks:
+        fail(f"{len(states)} state messages, expected {s['vehicles']} x {ticks}")
 
     rows = {}
+    if trace_path == "-":
+        fail("a road scenario's check needs its trace")
     for r in csv.DictReader(open(trace_path)):
         rows[(int(r["id"]), round(float(r["t"]) * 1000))] = r
     checked = 0
@@ -130,12 +168,42 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
         checked += 1
     if checked < len(states) - s["vehicles"]:
         fail(f"only {checked} of {len(states)} states found in the trace")
-    span = frames[-1][0] - frames[0][0] if frames else 0.0
     print(f"cantools decoded {len(frames)} frames over {span:.1f} s of vcan0 "
           f"({', '.join(f'{k} {v}' for k, v in sorted(names.items()))}); "
           f"every CRC and alive counter right; {len(syncs)} SYNC in order; "
           f"{checked} vehicle states equal the trace within half a step "
           f"(largest errors: {', '.join(f'{k} {v:.4g}' for k, v in sorted(worst.items()))})")
+    return 0
+
+
+def check_crossing(s, requests, kinds, frames, names, span):
+    """An intersection run: the messages on the bus are the ones the fleet sent, each
+    request on a route (inlet, outlet) of the four-road layout, no vehicle going back."""
+    m = s["messages"]
+    got = {"requests": kinds["Request"], "grants": kinds["Grant"], "exits": kinds["Exit"]}
+    if got != {k: m[k] for k in got}:
+        fail(f"messages on the bus {got}, the fleet sent {m}")
+    if len(requests) != s["vehicles"]:
+        fail(f"requests from {len(requests)} vehicles, expected {s['vehicles']}")
+    for vid, reqs in requests.items():
+        routes = {(i, o) for i, o, _s, _v in reqs}
+        if len(routes) != 1:
+            fail(f"vehicle {vid} changed its route: {routes}")
+        (ih, il), (oh, ol) = routes.pop()
+        # Inner lane: straight or left into the inner outlet; outer: straight or right.
+        ok = ((il, ol) == (0, 0) and oh in (ih, (ih + 1) % 4)) or \
+             ((il, ol) == (1, 1) and oh in (ih, (ih + 3) % 4))
+        if not ok:
+            fail(f"vehicle {vid}: ({ih}, {il}) -> ({oh}, {ol}) is not a route of the layout")
+        for (_, _, a, _), (_, _, b, _) in zip(reqs, reqs[1:]):
+            if b < a:
+                fail(f"vehicle {vid} went back from {a} m to {b} m along its path")
+    print(f"cantools decoded {len(frames)} frames over {span:.1f} s of vcan0 "
+          f"({', '.join(f'{k} {v}' for k, v in sorted(names.items()))}); "
+          f"every CRC and alive counter right; {s['sync_ticks']} SYNC ticks in order; "
+          f"{got['requests']} requests, {got['grants']} grants (all from 0x{MANAGER:X}), "
+          f"{got['exits']} exits, as the fleet sent them; every vehicle on one route of the "
+          f"layout, never going back")
     return 0
 
 

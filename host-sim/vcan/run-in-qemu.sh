@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
 # The real-vcan test (issue 6): boots Debian's own kernel under qemu-system-x86_64 (TCG;
 # this machine's kernel has no CAN), loads its can, can-raw, can-dev and vcan modules,
-# and runs `host-sim run SCENARIO --bus vcan0` there — a task and a SocketCAN socket per
-# vehicle — with `candump -l vcan0` logging every frame. Then, on the host, checks the
-# summary (no collision, no violation, every frame accepted) and decodes the candump log
-# with cantools and the DBC against the vehicles' trace (check_vcan_run.py).
+# and runs `host-sim run SCENARIO --bus vcan0` there for each scenario — a task and a
+# SocketCAN socket per vehicle (and one for an intersection's manager) — with candump
+# logging every frame of each run. Then, on the host, checks each summary (no collision,
+# no violation, every frame accepted, the goals met) and decodes each candump log with
+# cantools and the DBC (check_vcan_run.py): against the vehicles' trace for a road
+# scenario, against the summary's message counts for an intersection.
 #
-# Usage: host-sim/vcan/run-in-qemu.sh [SCENARIO.toml] [OUT_DIR]
+# Usage: host-sim/vcan/run-in-qemu.sh [SCENARIO.toml ...]   (default: multilane.toml)
+# Results go to $VCAN_OUT (default target/vcan-qemu).
 # Needs: qemu-system-x86_64, apt-get (Debian's archive), cargo with the
 # x86_64-unknown-linux-musl target, python3 with cantools (.ci/run installs all of them).
 # The kernel, busybox-static and can-utils come from Debian's packages (apt-get download);
@@ -14,8 +17,12 @@
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
-scenario="$(realpath "${1:-$root/scenarios/multilane.toml}")"
-out="$(mkdir -p "${2:-$root/target/vcan-qemu}" && cd "${2:-$root/target/vcan-qemu}" && pwd)"
+scenarios=()
+for sc in "${@:-$root/scenarios/multilane.toml}"; do
+  [ -f "$sc" ] || { echo "run-in-qemu: no scenario $sc" >&2; exit 2; }
+  scenarios+=("$(realpath "$sc")")
+done
+out="$(mkdir -p "${VCAN_OUT:-$root/target/vcan-qemu}" && cd "${VCAN_OUT:-$root/target/vcan-qemu}" && pwd)"
 debs="$out/debs"
 mkdir -p "$debs"
 
@@ -53,9 +60,9 @@ if file "$hostsim" 2>/dev/null | grep -q 'dynamically linked'; then
   exit 1
 fi
 
-echo "== initramfs: busybox, candump (+ its libc), the 4 modules, host-sim, the scenario"
+echo "== initramfs: busybox, candump (+ its libc), the 4 modules, host-sim, the scenarios"
 r="$out/rootfs"
-mkdir -p "$r"/{bin,proc,sys,dev,work,lib/modules,lib64,lib/x86_64-linux-gnu}
+mkdir -p "$r"/{bin,proc,sys,dev,work/scenarios,lib/modules,lib64,lib/x86_64-linux-gnu}
 cp "$out/pkg/bin/busybox" "$r/bin/busybox"
 cp "$out/pkg/usr/bin/candump" "$r/bin/candump"
 # candump is linked against glibc: the loader and libc of this (same-release) system.
@@ -69,7 +76,11 @@ cp "$mods/net/can/can.ko" "$mods/net/can/can-raw.ko" \
 cp "$hostsim" "$r/bin/host-sim"
 cp "$here/init" "$r/init"
 chmod +x "$r/init"
-cp "$scenario" "$r/work/scenario.toml"
+i=0
+for sc in "${scenarios[@]}"; do # numbered: run in the order given
+  i=$((i + 1))
+  cp "$sc" "$r/work/scenarios/$i-$(basename "$sc")"
+done
 echo "${HOST_SIM_ARGS:-}" > "$r/work/args"
 (cd "$r" && find . | "$r/bin/busybox" cpio -o -H newc 2>/dev/null | gzip -1) > "$out/initramfs.gz"
 
@@ -84,20 +95,32 @@ echo "VM ran $(( $(date +%s) - start )) s"
 section() { # name → stdout
   awk -v b="=== BEGIN $1" -v e="=== END $1" '$0==e{p=0} p{print} $0==b{p=1}' "$out/console.txt"
 }
-status="$(sed -n 's/^=== VCAN-TEST STATUS //p' "$out/console.txt" | tail -1)"
 grep '^=== vcan0' "$out/console.txt" || true
-if [ -z "$status" ]; then
+if ! grep -q '^=== VCAN-TEST STATUS done$' "$out/console.txt"; then
   echo "run-in-qemu: the VM did not finish; console:" >&2
   tail -40 "$out/console.txt" >&2
   exit 1
 fi
-section summary.json > "$out/summary.json"
-log_name="$(sed -n 's/^=== BEGIN \(candump-.*\.log\)$/\1/p' "$out/console.txt" | head -1)"
-[ -n "$log_name" ] || { echo "run-in-qemu: no candump log in the console output" >&2; exit 1; }
-section "$log_name" | base64 -d | gunzip > "$out/candump.log"
-section trace.csv | base64 -d | gunzip > "$out/trace.csv"
-echo "host-sim exit status in the VM: $status"
-cat "$out/summary.json"
-echo
-python3 "$here/check_vcan_run.py" "$root/can-gateway/can-gateway.dbc" \
-  "$out/summary.json" "$out/candump.log" "$out/trace.csv" "$status"
+failed=0
+i=0
+for sc in "${scenarios[@]}"; do
+  i=$((i + 1))
+  name="$i-$(basename "$sc" .toml)"
+  d="$out/$name"
+  rm -rf "$d"
+  mkdir -p "$d"
+  status="$(sed -n "s/^=== SCENARIO $name STATUS //p" "$out/console.txt" | tail -1)"
+  echo "== $name: host-sim exit status in the VM: ${status:-none}"
+  section "$name/summary.json" > "$d/summary.json"
+  section "$name/candump.log" | base64 -d | gunzip > "$d/candump.log" || true
+  trace="-"
+  if grep -q "^=== BEGIN $name/trace.csv\$" "$out/console.txt"; then
+    section "$name/trace.csv" | base64 -d | gunzip > "$d/trace.csv"
+    trace="$d/trace.csv"
+  fi
+  cat "$d/summary.json"
+  echo
+  python3 "$here/check_vcan_run.py" "$root/can-gateway/can-gateway.dbc" \
+    "$d/summary.json" "$d/candump.log" "$trace" "${status:-none}" || failed=1
+done
+exit "$failed"
