@@ -23,7 +23,7 @@
 
 use crate::bus::{Message, Received};
 use crate::can::{report_from_wire, report_to_wire, CanError, CanNode, CanPort, CanStats, Polled};
-use crate::fleet::{end, micros, opener, FleetError, Latency, Medium, TIMEOUT};
+use crate::fleet::{end, join, micros, opener, start, FleetError, Latency, Medium, Task, TIMEOUT};
 use crate::intersection::{
     manage, params, summarize, Car, CarTruth, CrossingMonitor, CrossingScenario, CrossingSummary,
     PoseSample, LEASE_S, LEFT_REPEAT_S, MANAGER_CAP, MANAGER_NODE,
@@ -187,39 +187,17 @@ pub fn run_with_ports<P: CanPort + 'static>(
     let outcome = std::thread::scope(|scope| {
         let mut handles = Vec::with_capacity(n + 1);
         let manager_tx = tx.clone();
-        let spawned = std::thread::Builder::new()
-            .name("manager".into())
-            .spawn_scoped(scope, move || {
-                manager_task(manager, manager_node, order, total, &manager_tx)
-            });
-        match spawned {
-            Ok(h) => handles.push(h),
-            Err(e) => {
-                return Err(FleetError::Harness(format!(
-                    "cannot start the manager's task: {e}"
-                )))
-            }
-        }
+        handles.push(start(scope, &mut clock, Task::Manager, move || {
+            manager_task(manager, manager_node, order, total, &manager_tx)
+        })?);
         for (index, (car, node)) in cars.into_iter().zip(nodes).enumerate() {
             let task_tx = tx.clone();
-            let id = car.id;
-            let spawned = std::thread::Builder::new()
-                .name(format!("vehicle-{id}"))
-                .spawn_scoped(scope, move || {
-                    vehicle_task(index, car, node, layout, params, order, total, &task_tx)
-                });
-            match spawned {
-                Ok(h) => handles.push(h),
-                Err(e) => {
-                    drop(tx);
-                    // Tasks already started stop at the first SYNC they see.
-                    let _ = end(&mut clock, 0);
-                    return Err(FleetError::Vehicle {
-                        id,
-                        error: format!("cannot start its task: {e}"),
-                    });
-                }
-            }
+            handles.push(start(
+                scope,
+                &mut clock,
+                Task::Vehicle(car.id),
+                move || vehicle_task(index, car, node, layout, params, order, total, &task_tx),
+            )?);
         }
         drop(tx);
         let mut request_sent: HashMap<u16, SystemTime> = HashMap::new();
@@ -371,20 +349,8 @@ pub fn run_with_ports<P: CanPort + 'static>(
             let _ = end(&mut clock, ticks as u32);
         }
         let mut can = CanStats::default();
-        for h in handles {
-            match h.join() {
-                Ok(Ok(s)) => can.add(&s),
-                Ok(Err(e)) => {
-                    if result.is_ok() {
-                        result = Err(e);
-                    }
-                }
-                Err(_) => {
-                    if result.is_ok() {
-                        result = Err(FleetError::Harness("a task panicked".into()));
-                    }
-                }
-            }
+        for stats in join(handles, &mut result) {
+            can.add(&stats);
         }
         result.map(|()| can)
     })?;
@@ -418,14 +384,57 @@ fn pose(layout: &Layout<f64>, c: &CarTruth) -> PoseSample {
     (c.id, q.x, q.y, q.theta, c.v)
 }
 
+/// What a node heard in one phase, as the simulator's messages at the period's time:
+/// requests (as crossing reports on the layout's routes), grants, exits; with the receive
+/// stamps of requests and grants (for the latency figures).
+#[derive(Debug, Default)]
+struct Heard {
+    inbox: Vec<Received>,
+    requests_rx: Vec<(u16, SystemTime)>,
+    grants_rx: Vec<SystemTime>,
+}
+
+impl Heard {
+    fn take(&mut self, m: wire::Message<f64>, at: SystemTime, t: f64, layout: &Layout<f64>) {
+        let msg = match m {
+            wire::Message::Request(q) => {
+                self.requests_rx.push((q.id, at));
+                // A pair that is no route of this layout is not acted on.
+                let Some(rep) = report_from_wire(&q, layout) else {
+                    return;
+                };
+                Message::Crossing(rep, t)
+            }
+            wire::Message::Grant { id, until } => {
+                self.grants_rx.push(at);
+                Message::Grant { id, until }
+            }
+            wire::Message::Exit { id, at } => Message::Left { id, at },
+            wire::Message::State(_) | wire::Message::Revoke { .. } | wire::Message::Sync { .. } => {
+                return
+            }
+        };
+        self.inbox.push(Received { msg, at: t });
+    }
+
+    /// The inbox in scenario order (the in-process bus's), whatever order the tasks'
+    /// frames interleaved in.
+    fn in_order(&mut self, order: &HashMap<u16, usize>) -> &[Received] {
+        self.inbox
+            .sort_by_key(|r| order.get(&r.msg.subject().0).copied().unwrap_or(usize::MAX));
+        &self.inbox
+    }
+}
+
 /// Reads frames until the SYNC tick `want` (skipping the other phase's tick `skip`),
-/// handing every other verified message and its receive stamp to `each`. `Ok(None)` on
-/// the last tick (the run ends), else the tick's receive stamp.
+/// taking every other verified message into `heard` as of time `t`. `Ok(None)` on the
+/// last tick (the run ends), else the tick's receive stamp.
 fn await_tick<P: CanPort>(
     node: &mut CanNode<P>,
-    want: u64,
-    skip: Option<u64>,
-    mut each: impl FnMut(wire::Message<f64>, SystemTime),
+    (want, skip): (u64, Option<u64>),
+    heard: &mut Heard,
+    t: f64,
+    layout: &Layout<f64>,
 ) -> Result<Option<SystemTime>, String> {
     let deadline = Instant::now() + TIMEOUT;
     loop {
@@ -445,7 +454,7 @@ fn await_tick<P: CanPort>(
                     p => return Err(format!("SYNC {p} while waiting for SYNC {want}")),
                 }
             }
-            Polled::Message(m, at) => each(m, at),
+            Polled::Message(m, at) => heard.take(m, at, t, layout),
         }
     }
 }
@@ -468,34 +477,16 @@ fn manager_task<P: CanPort>(
     };
     let h = Limits::table_i().h;
     let layout = manager.layout().clone();
-    let mut inbox: Vec<Received> = Vec::new();
     for k in 0..=total {
         let t = k as f64 * h;
-        inbox.clear();
-        let mut requests_rx = Vec::new();
-        let skip = k.checked_mul(2).and_then(|x| x.checked_sub(1));
-        let tick = await_tick(&mut node, 2 * k, skip, |m, at| match m {
-            wire::Message::Request(q) => {
-                requests_rx.push((q.id, at));
-                if let Some(rep) = report_from_wire(&q, &layout) {
-                    inbox.push(Received {
-                        msg: Message::Crossing(rep, t),
-                        at: t,
-                    });
-                }
-            }
-            wire::Message::Exit { id, at: left } => inbox.push(Received {
-                msg: Message::Left { id, at: left },
-                at: t,
-            }),
-            _ => {}
-        })
-        .map_err(fail)?;
-        let Some(sync_rx) = tick else {
+        let mut heard = Heard::default();
+        // SYNC(2k): every vehicle's request for kh is in (SYNC(2k−1) ended phase 2).
+        let tick = (2 * k, (2 * k).checked_sub(1));
+        let Some(sync_rx) = await_tick(&mut node, tick, &mut heard, t, &layout).map_err(fail)?
+        else {
             break;
         };
-        inbox.sort_by_key(|r| order.get(&r.msg.subject().0).copied().unwrap_or(usize::MAX));
-        let granted = manage(&mut manager, &inbox, t);
+        let granted = manage(&mut manager, heard.in_order(order), t);
         let published = SystemTime::now();
         for &id in &granted {
             let lease = wire::Message::Grant {
@@ -508,7 +499,7 @@ fn manager_task<P: CanPort>(
             period: k,
             granted,
             published,
-            requests_rx,
+            requests_rx: heard.requests_rx,
             sync_rx,
         };
         if tx.send(report).is_err() {
@@ -540,10 +531,9 @@ fn vehicle_task<P: CanPort>(
         FleetError::Vehicle { id, error }
     };
     let h = Limits::table_i().h;
-    let mut inbox: Vec<Received> = Vec::new();
     let mut gone_at: Option<f64> = None;
     let (mut crossed, mut fallback) = (None, false);
-    let (mut requests_rx, mut grants_rx, mut sync_rx) = (Vec::new(), Vec::new(), None);
+    let (mut heard, mut sync_rx) = (Heard::default(), None);
     for k in 0..=total {
         let t = k as f64 * h;
         // Publish: the request while in the system, then `Exit` for LEFT_REPEAT_S.
@@ -571,48 +561,24 @@ fn vehicle_task<P: CanPort>(
             fallback: std::mem::take(&mut fallback),
             exit,
             published,
-            requests_rx: std::mem::take(&mut requests_rx),
-            grants_rx: std::mem::take(&mut grants_rx),
+            requests_rx: std::mem::take(&mut heard.requests_rx),
+            grants_rx: std::mem::take(&mut heard.grants_rx),
             sync_rx: sync_rx.take(),
         };
         if tx.send(report).is_err() {
             return Err(fail("the harness is gone".into()));
         }
         // Everything before SYNC(2k+1): the others' requests for kh, the grants, exits.
-        inbox.clear();
-        let tick = await_tick(&mut node, 2 * k + 1, Some(2 * k), |m, at| match m {
-            wire::Message::Request(q) => {
-                requests_rx.push((q.id, at));
-                if let Some(rep) = report_from_wire(&q, layout) {
-                    inbox.push(Received {
-                        msg: Message::Crossing(rep, t),
-                        at: t,
-                    });
-                }
-            }
-            wire::Message::Grant { id, until } => {
-                grants_rx.push(at);
-                inbox.push(Received {
-                    msg: Message::Grant { id, until },
-                    at: t,
-                });
-            }
-            wire::Message::Exit { id, at: left } => inbox.push(Received {
-                msg: Message::Left { id, at: left },
-                at: t,
-            }),
-            _ => {}
-        })
-        .map_err(fail)?;
-        let Some(rx_at) = tick else {
+        heard.inbox.clear();
+        let tick = (2 * k + 1, Some(2 * k));
+        let Some(rx_at) = await_tick(&mut node, tick, &mut heard, t, layout).map_err(fail)? else {
             break;
         };
         sync_rx = Some(rx_at);
         if k == total || gone_at.is_some() {
             continue;
         }
-        inbox.sort_by_key(|r| order.get(&r.msg.subject().0).copied().unwrap_or(usize::MAX));
-        for r in &inbox {
+        for r in heard.in_order(order) {
             car.hear(&r.msg);
         }
         let (v, fell_back) = car.decide(layout, params, t);

@@ -281,23 +281,9 @@ fn run_n<const N: usize, P: CanPort + 'static>(
         for (index, (agent, node)) in agents.into_iter().zip(nodes).enumerate() {
             let task_tx = tx.clone();
             let id = agent.id();
-            let spawned = std::thread::Builder::new()
-                .name(format!("vehicle-{id}"))
-                .spawn_scoped(sc, move || {
-                    vehicle_task(index, agent, node, scenario_ref, total, &task_tx)
-                });
-            match spawned {
-                Ok(h) => handles.push(h),
-                Err(e) => {
-                    drop(tx);
-                    // Tasks already started stop at the first SYNC they see.
-                    let _ = end(&mut clock, 0);
-                    return Err(FleetError::Vehicle {
-                        id,
-                        error: format!("cannot start its task: {e}"),
-                    });
-                }
-            }
+            handles.push(start(sc, &mut clock, Task::Vehicle(id), move || {
+                vehicle_task(index, agent, node, scenario_ref, total, &task_tx)
+            })?);
         }
         drop(tx);
         let mut published: HashMap<u16, SystemTime> = HashMap::new();
@@ -378,22 +364,7 @@ fn run_n<const N: usize, P: CanPort + 'static>(
         if result.is_err() {
             let _ = end(&mut clock, periods as u32);
         }
-        let mut done = Vec::with_capacity(n);
-        for h in handles {
-            match h.join() {
-                Ok(Ok(r)) => done.push(r),
-                Ok(Err(e)) => {
-                    if result.is_ok() {
-                        result = Err(e);
-                    }
-                }
-                Err(_) => {
-                    if result.is_ok() {
-                        result = Err(FleetError::Harness("a vehicle task panicked".into()));
-                    }
-                }
-            }
-        }
+        let done = join(handles, &mut result);
         result.map(|()| done)
     })?;
     let mut counters = Counters::default();
@@ -432,6 +403,63 @@ fn run_n<const N: usize, P: CanPort + 'static>(
 pub(crate) fn micros(from: SystemTime, to: SystemTime) -> f64 {
     to.duration_since(from)
         .map_or(0.0, |d| d.as_secs_f64() * 1e6)
+}
+
+/// Whose task a thread runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Task {
+    /// Vehicle `id`'s.
+    Vehicle(u16),
+    /// The intersection manager's.
+    Manager,
+}
+
+/// Starts `who`'s task in `scope`; if the system refuses a thread, tells the tasks
+/// already started to stop (a last SYNC) and answers the error.
+pub(crate) fn start<'scope, T: Send + 'scope, P: CanPort>(
+    scope: &'scope std::thread::Scope<'scope, '_>,
+    clock: &mut CanNode<P>,
+    who: Task,
+    task: impl FnOnce() -> T + Send + 'scope,
+) -> Result<std::thread::ScopedJoinHandle<'scope, T>, FleetError> {
+    let name = match who {
+        Task::Vehicle(id) => format!("vehicle-{id}"),
+        Task::Manager => "manager".to_string(),
+    };
+    std::thread::Builder::new()
+        .name(name)
+        .spawn_scoped(scope, task)
+        .map_err(|e| {
+            let _ = end(clock, 0);
+            let error = format!("cannot start its task: {e}");
+            match who {
+                Task::Vehicle(id) => FleetError::Vehicle { id, error },
+                Task::Manager => FleetError::Harness(format!("the manager: {error}")),
+            }
+        })
+}
+
+/// Waits for every task; their results, and the first failure in `result` (unless it
+/// already holds one).
+pub(crate) fn join<T>(
+    handles: Vec<std::thread::ScopedJoinHandle<'_, Result<T, FleetError>>>,
+    result: &mut Result<(), FleetError>,
+) -> Vec<T> {
+    let mut done = Vec::with_capacity(handles.len());
+    for h in handles {
+        let failure = match h.join() {
+            Ok(Ok(r)) => {
+                done.push(r);
+                continue;
+            }
+            Ok(Err(e)) => e,
+            Err(_) => FleetError::Harness("a task panicked".into()),
+        };
+        if result.is_ok() {
+            *result = Err(failure);
+        }
+    }
+    done
 }
 
 /// Tells every task to stop (a last SYNC after `period`).

@@ -5,7 +5,7 @@
 mod common;
 
 use can_gateway::PlainFrame;
-use common::builtin;
+use common::{builtin, Failing};
 use embedded_can::{Frame, Id, StandardId};
 use host_sim::bus::Bus;
 use host_sim::can::{CanBus, CanPort, Hub, HubPort, RESOLUTION};
@@ -172,25 +172,6 @@ fn duplicates_and_foreign_frames_change_nothing() {
     );
 }
 
-/// A port whose transmitter fails after `left` frames.
-struct Failing {
-    inner: HubPort,
-    left: u32,
-}
-
-impl CanPort for Failing {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
-        if self.left == 0 {
-            return Err(io::Error::other("bus-off"));
-        }
-        self.left -= 1;
-        self.inner.transmit(frame)
-    }
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
-        self.inner.receive(timeout)
-    }
-}
-
 /// A vehicle whose transmitter fails ends the run at once with a typed error naming it
 /// (every other task stops at the master's last SYNC; nothing waits for a timeout).
 #[test]
@@ -278,13 +259,5 @@ fn cli_bus_option() {
         assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
         assert!(err.contains(says), "{args:?}: {err}");
     }
-    let out = bin()
-        .arg("run")
-        .arg(builtin("multilane-faults.toml"))
-        .args(["--bus", "can-hub"])
-        .output()
-        .expect("runs");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("[faults]"), "{err}");
+    common::refused_on_the_bus(&builtin("multilane-faults.toml"), "[faults]");
 }

@@ -6,11 +6,11 @@ mod common;
 
 use can_gateway::wire;
 use can_gateway::{encode, Frames, PlainFrame, Reassembler};
-use common::builtin;
+use common::{assert_all_crossed_safely, builtin, Failing};
 use host_sim::can::{report_from_wire, report_to_wire, CanPort, Hub, HubPort};
 use host_sim::crossing_fleet::{self, CrossingFleetSummary};
 use host_sim::fleet::{FleetError, Medium, TIMEOUT};
-use host_sim::intersection::{CrossingScenario, CrossingSummary, MANAGER_NODE};
+use host_sim::intersection::{CrossingScenario, MANAGER_NODE};
 use host_sim::sim::LENGTH_M;
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::ROUTES;
@@ -37,20 +37,6 @@ fn on_hub(sc: &CrossingScenario) -> CrossingFleetSummary {
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn safe_and_all_crossed(s: &CrossingSummary, vehicles: usize) {
-    assert_eq!(
-        (
-            s.collisions,
-            s.invariant_violations,
-            s.limit_violations,
-            s.unpermitted_entries
-        ),
-        (0, 0, 0, 0),
-        "{s:?}"
-    );
-    assert_eq!((s.crossed, s.in_system), (vehicles as u64, 0), "{s:?}");
-}
-
 /// Queues at every stop line, under every algorithm, as fleets: safe, everyone crosses,
 /// within two periods of the in-process run (the manager and the planners see rounded
 /// reports), every frame accepted and accounted for.
@@ -60,9 +46,9 @@ fn queued_intersection_fleets_on_can_frames() {
         let sc = scenario("intersection-queues.toml", Some(alg));
         let n = sc.placements.len();
         let f = on_hub(&sc);
-        safe_and_all_crossed(&f.run, n);
+        assert_all_crossed_safely(&f.run, n as u64);
         let exact = sc.run(&mut |_, _| {});
-        safe_and_all_crossed(&exact, n);
+        assert_all_crossed_safely(&exact, n as u64);
         for (a, b) in [
             (exact.sim_seconds, f.run.sim_seconds),
             (exact.crossing_time_mean_s, f.run.crossing_time_mean_s),
@@ -231,32 +217,13 @@ fn forged_grants_are_refused_and_change_nothing() {
     let rejected = forged.can.rejected.get("SenderMismatch").copied();
     assert!(rejected.unwrap_or(0) > 0, "{:?}", forged.can.rejected);
     assert_eq!(forged.can.rejected.len(), 1, "{:?}", forged.can.rejected);
-    safe_and_all_crossed(&forged.run, sc.placements.len());
+    assert_all_crossed_safely(&forged.run, sc.placements.len() as u64);
     assert_eq!(
         format!("{:?}", forged.run),
         format!("{:?}", clean.run),
         "the forged grants changed the run"
     );
     assert_eq!(forged.messages, clean.messages);
-}
-
-/// A port whose transmitter fails after `left` frames.
-struct Failing {
-    inner: HubPort,
-    left: u32,
-}
-
-impl CanPort for Failing {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
-        if self.left == 0 {
-            return Err(io::Error::other("bus-off"));
-        }
-        self.left -= 1;
-        self.inner.transmit(frame)
-    }
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
-        self.inner.receive(timeout)
-    }
 }
 
 /// A manager or a vehicle whose transmitter fails ends the run at once with a typed
@@ -317,14 +284,6 @@ fn cli_runs_intersections_on_the_bus() {
     let faulty = dir.join("faulty-intersection.toml");
     let text = std::fs::read_to_string(builtin("intersection.toml")).expect("read");
     std::fs::write(&faulty, text + "\n[faults]\nloss = 0.2\n").expect("write");
-    let out = bin()
-        .arg("run")
-        .arg(&faulty)
-        .args(["--bus", "can-hub"])
-        .output()
-        .expect("runs");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("[faults]"), "{err}");
+    common::refused_on_the_bus(&faulty, "[faults]");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,9 +2,14 @@
 // Each test file uses part of these helpers.
 #![allow(dead_code)]
 
-use host_sim::intersection::CrossingScenario;
+use can_gateway::PlainFrame;
+use host_sim::can::{CanPort, HubPort};
+use host_sim::intersection::{CrossingScenario, CrossingSummary};
 use host_sim::sim::RunSummary;
+use std::io;
 use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, SystemTime};
 
 /// A scenario file shipped in `scenarios/`.
 pub fn builtin(name: &str) -> PathBuf {
@@ -26,6 +31,12 @@ pub fn intersection_all_cross(alg: &str, extra: &str) {
     let sc = CrossingScenario::parse(&t, &path).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(sc.placements.len(), 8);
     let s = sc.run(&mut |_, _| {});
+    assert_all_crossed_safely(&s, 8);
+}
+
+/// No collision, invariant or limit violation, nobody in A_S without a permission, and
+/// all `vehicles` crossed.
+pub fn assert_all_crossed_safely(s: &CrossingSummary, vehicles: u64) {
     assert_eq!(
         (
             s.collisions,
@@ -34,9 +45,9 @@ pub fn intersection_all_cross(alg: &str, extra: &str) {
             s.unpermitted_entries
         ),
         (0, 0, 0, 0),
-        "{alg}: {s:?}"
+        "{s:?}"
     );
-    assert_eq!((s.crossed, s.in_system), (8, 0), "{alg}: {s:?}");
+    assert_eq!((s.crossed, s.in_system), (vehicles, 0), "{s:?}");
 }
 
 /// No collision, invariant, limit, road-end or off-road finding in a run.
@@ -52,4 +63,36 @@ pub fn assert_safe(s: &RunSummary) {
         (0, 0, 0, 0, 0),
         "{s:?}"
     );
+}
+
+/// A port whose transmitter fails (bus-off) after `left` frames.
+pub struct Failing {
+    pub inner: HubPort,
+    pub left: u32,
+}
+
+impl CanPort for Failing {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        if self.left == 0 {
+            return Err(io::Error::other("bus-off"));
+        }
+        self.left -= 1;
+        self.inner.transmit(frame)
+    }
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        self.inner.receive(timeout)
+    }
+}
+
+/// `host-sim run FILE --bus can-hub` refuses `file` as bad input (exit 2), saying `says`.
+pub fn refused_on_the_bus(file: &Path, says: &str) {
+    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .arg("run")
+        .arg(file)
+        .args(["--bus", "can-hub"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{}: {err}", file.display());
+    assert!(err.contains(says), "{}: {err}", file.display());
 }
