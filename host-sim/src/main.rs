@@ -152,6 +152,26 @@ fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
     }
 }
 
+/// Whether a scenario file can run as a fleet on `medium`: no `[faults]` (a fleet
+/// carries frames as they are) and every vehicle id a CAN source address.
+fn fits_the_bus(
+    file: &std::path::Path,
+    medium: &Medium,
+    no_faults: bool,
+    mut ids: impl Iterator<Item = u16>,
+) -> Result<(), String> {
+    if !no_faults {
+        return Err(format!(
+            "{}: [faults] are injected by the in-process bus; `--bus {medium}` carries frames as they are",
+            file.display()
+        ));
+    }
+    match ids.find_map(|id| host_sim::can::vehicle_address(id).err()) {
+        Some(e) => Err(format!("{}: {e}", file.display())),
+        None => Ok(()),
+    }
+}
+
 /// `--bus`: `None` for the in-process message bus, else the CAN medium of a fleet.
 fn parse_bus(bus: &str) -> Result<Option<Medium>, String> {
     match bus {
@@ -209,16 +229,9 @@ fn run(
         Err(e) => return bad_input(e),
     };
     if let Some(m) = &medium {
-        if !scenario.faults.is_none() {
-            return bad_input(format!(
-                "{}: [faults] are injected by the in-process bus; `--bus {m}` carries frames as they are",
-                file.display()
-            ));
-        }
-        for v in &scenario.vehicles {
-            if let Err(e) = host_sim::can::vehicle_address(v.id) {
-                return bad_input(format!("{}: {e}", file.display()));
-            }
+        let ids = scenario.vehicles.iter().map(|v| v.id);
+        if let Err(e) = fits_the_bus(&file, m, scenario.faults.is_none(), ids) {
+            return bad_input(e);
         }
     }
     let mut writer = match &trace {
@@ -495,16 +508,9 @@ fn run_crossing(
         Err(e) => return bad_input(e),
     };
     if let Some(m) = medium {
-        if !sc.faults.is_none() {
-            return bad_input(format!(
-                "{}: [faults] are injected by the in-process bus; `--bus {m}` carries frames as they are",
-                file.display()
-            ));
-        }
-        for p in &sc.placements {
-            if let Err(e) = host_sim::can::vehicle_address(p.id) {
-                return bad_input(format!("{}: {e}", file.display()));
-            }
+        let ids = sc.placements.iter().map(|p| p.id);
+        if let Err(e) = fits_the_bus(file, m, sc.faults.is_none(), ids) {
+            return bad_input(e);
         }
     }
     let mut data = PlotData::default();

@@ -229,19 +229,11 @@ fn bin() -> Command {
 }
 
 /// The CLI: `--bus can-hub` prints the fleet's JSON; bad `--bus` values, a scenario with
-/// `[faults]` (the CAN bus carries frames as they are), and an interface that cannot be opened are refused with a
-/// message and their exit codes (2 bad input, 4 bus failure).
+/// `[faults]` (the CAN bus carries frames as they are), and an interface that cannot be
+/// opened are refused with a message and their exit codes (2 bad input, 4 bus failure).
 #[test]
 fn cli_bus_option() {
-    let out = bin()
-        .arg("run")
-        .arg(builtin("road-end.toml"))
-        .args(["--bus", "can-hub", "--json"])
-        .output()
-        .expect("runs");
-    assert!(out.status.success(), "{out:?}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
-    assert_eq!(v["medium"], "can-hub");
+    let v = common::json_on_the_hub(&builtin("road-end.toml"));
     assert_eq!(v["collisions"], 0);
     assert!(v["can"]["frames_sent"].as_u64().expect("count") > 0);
     for (args, code, says) in [

@@ -15,7 +15,6 @@ use host_sim::sim::LENGTH_M;
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::ROUTES;
 use std::io;
-use std::process::Command;
 use std::time::{Duration, SystemTime};
 
 fn scenario(name: &str, algorithm: Option<&str>) -> CrossingScenario {
@@ -263,16 +262,7 @@ fn a_failing_manager_or_vehicle_ends_the_run_with_its_error() {
 /// and refuses `[faults]` there (exit 2).
 #[test]
 fn cli_runs_intersections_on_the_bus() {
-    let bin = || Command::new(env!("CARGO_BIN_EXE_host-sim"));
-    let out = bin()
-        .arg("run")
-        .arg(builtin("intersection.toml"))
-        .args(["--bus", "can-hub", "--json"])
-        .output()
-        .expect("runs");
-    assert!(out.status.success(), "{out:?}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
-    assert_eq!(v["medium"], "can-hub");
+    let v = common::json_on_the_hub(&builtin("intersection.toml"));
     assert_eq!(
         (v["crossed"].as_u64(), v["collisions"].as_u64()),
         (Some(8), Some(0))

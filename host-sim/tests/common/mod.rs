@@ -96,3 +96,17 @@ pub fn refused_on_the_bus(file: &Path, says: &str) {
     assert_eq!(out.status.code(), Some(2), "{}: {err}", file.display());
     assert!(err.contains(says), "{}: {err}", file.display());
 }
+
+/// `host-sim run FILE --bus can-hub --json`: succeeds; its JSON, on the hub.
+pub fn json_on_the_hub(file: &Path) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .arg("run")
+        .arg(file)
+        .args(["--bus", "can-hub", "--json"])
+        .output()
+        .expect("runs");
+    assert!(out.status.success(), "{out:?}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(v["medium"], "can-hub");
+    v
+}
