@@ -11,6 +11,10 @@
 //! (Lemma 14 (ii): a permission is kept until the vehicle is on its outlet). Target
 //! switching of Sec. VII-B: x^f = end of inlet while not permitted, end of route when
 //! permitted, end of outlet after A_S.
+//!
+//! [`CrossingSim`] runs every vehicle and the manager in one task on the in-process bus;
+//! [`crate::crossing_fleet`] runs the same vehicle, manager and monitor parts (`Car`,
+//! `manage`, `CrossingMonitor`) as tasks on CAN.
 
 use crate::bus::{Bus, Faults, InProcessBus, Message, Received};
 use crate::monitor::{rectangles_overlap, Limits, Truth};
