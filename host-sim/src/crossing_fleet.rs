@@ -23,7 +23,9 @@
 
 use crate::bus::{Message, Received};
 use crate::can::{report_from_wire, report_to_wire, CanError, CanNode, CanPort, CanStats, Polled};
-use crate::fleet::{end, join, micros, opener, start, FleetError, Latency, Medium, Task, TIMEOUT};
+use crate::fleet::{
+    end, join, micros, opener, start, sync, FleetError, Latency, Medium, Task, TIMEOUT,
+};
 use crate::intersection::{
     manage, params, summarize, Car, CarTruth, CrossingMonitor, CrossingScenario, CrossingSummary,
     PoseSample, LEASE_S, LEFT_REPEAT_S, MANAGER_CAP, MANAGER_NODE,
@@ -280,16 +282,13 @@ pub fn run_with_ports<P: CanPort + 'static>(
             progress(k, total);
             let last = k == total || truths.is_empty();
             // Phase 1: the requests for kh are in; the manager decides.
-            let _ = clock.drain(|_| {});
-            let tick = wire::Message::Sync {
-                period: (2 * k) as u32,
-                last,
+            let sent_at = match sync(&mut clock, 2 * k, last) {
+                Ok(at) => at,
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
             };
-            let sent_at = SystemTime::now();
-            if let Err(e) = clock.send_wire(&tick) {
-                result = Err(FleetError::Can(e));
-                break;
-            }
             ticks += 1;
             periods = k;
             if last {
@@ -333,15 +332,12 @@ pub fn run_with_ports<P: CanPort + 'static>(
                 }
             }
             // Phase 2: the grants are in; the vehicles plan.
-            let _ = clock.drain(|_| {});
-            last_tick_tx = Some(SystemTime::now());
-            let tick = wire::Message::Sync {
-                period: (2 * k + 1) as u32,
-                last: false,
-            };
-            if let Err(e) = clock.send_wire(&tick) {
-                result = Err(FleetError::Can(e));
-                break;
+            match sync(&mut clock, 2 * k + 1, false) {
+                Ok(at) => last_tick_tx = Some(at),
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
             }
             ticks += 1;
         }

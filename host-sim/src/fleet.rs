@@ -347,17 +347,12 @@ fn run_n<const N: usize, P: CanPort + 'static>(
                 findings.check(&lim, &t, scenario_ref.road.end_x, scenario_ref.road.lanes);
             }
             progress(k, total);
-            // The master's own port hears the fleet on a hub; nothing else reads it (a
-            // failed read only leaves frames queued there).
-            let _ = clock.drain(|_| {});
-            last_sync_tx = Some(SystemTime::now());
-            let tick = wire::Message::Sync {
-                period: k as u32,
-                last: k == total,
-            };
-            if let Err(e) = clock.send_wire(&tick) {
-                result = Err(FleetError::Can(e));
-                break;
+            match sync(&mut clock, k, k == total) {
+                Ok(at) => last_sync_tx = Some(at),
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
             }
             periods += 1;
         }
@@ -460,6 +455,24 @@ pub(crate) fn join<T>(
         }
     }
     done
+}
+
+/// The time master's tick `period` (`last`: the run ends); when it was written.
+pub(crate) fn sync<P: CanPort>(
+    clock: &mut CanNode<P>,
+    period: u64,
+    last: bool,
+) -> Result<SystemTime, FleetError> {
+    // The master's own port hears the fleet on a hub; nothing else reads it (a failed
+    // read only leaves frames queued there).
+    let _ = clock.drain(|_| {});
+    let at = SystemTime::now();
+    let tick = wire::Message::Sync {
+        period: period as u32,
+        last,
+    };
+    clock.send_wire(&tick).map_err(FleetError::Can)?;
+    Ok(at)
 }
 
 /// Tells every task to stop (a last SYNC after `period`).
