@@ -264,58 +264,45 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     }
 
     /// Recomputes the permissions by the algorithm.
+    ///
+    /// Every algorithm but [`Algorithm::Concurrent`] (kept exactly as the paper writes
+    /// it) orders vehicles consistently with their order on each inlet lane and gives
+    /// up a permission that a vehicle cannot use; see [`Manager::priority`] and
+    /// [`Manager::revoke_blocked`] for why both are needed for liveness.
     pub fn update(&mut self) {
-        // FIFO order: τ, then route index Ψ, then id (total on any input).
-        let fifo = |a: &Entry<F>, b: &Entry<F>| {
-            a.tau
-                .partial_cmp(&b.tau)
-                .unwrap_or(Ordering::Equal)
-                .then(a.route.cmp(&b.route))
-                .then(a.id.cmp(&b.id))
-        };
+        let as_written = self.algorithm == Algorithm::Concurrent;
+        if !as_written {
+            self.revoke_blocked();
+        }
         match self.algorithm {
             Algorithm::Fifo | Algorithm::AllWayStop => {
                 if self.entries.iter().any(|e| e.permitted) {
                     return;
                 }
-                let stop = self.algorithm == Algorithm::AllWayStop;
-                let mut best: Option<usize> = None;
-                for (i, e) in self.entries.iter().enumerate() {
-                    if stop && e.stopped_at.is_none() {
-                        continue;
-                    }
-                    let better = match best.and_then(|b| self.entries.get(b)) {
-                        None => true,
-                        Some(b) => {
-                            let key = |x: &Entry<F>| if stop { x.stopped_at } else { Some(x.tau) };
-                            match key(e).partial_cmp(&key(b)).unwrap_or(Ordering::Equal) {
-                                Ordering::Equal => fifo(e, b) == Ordering::Less,
-                                o => o == Ordering::Less,
-                            }
-                        }
-                    };
-                    if better {
-                        best = Some(i);
-                    }
-                }
-                if let Some(e) = best.and_then(|b| self.entries.get_mut(b)) {
+                let order = self.priority(false);
+                let first = if self.algorithm == Algorithm::AllWayStop {
+                    // Served in the order they stopped (only a lane's first vehicle can
+                    // stop at its line); ties in priority order.
+                    let stopped = |i: &usize| self.entries.get(*i).and_then(|e| e.stopped_at);
+                    order
+                        .iter()
+                        .filter(|i| stopped(i).is_some())
+                        .min_by(|a, b| {
+                            stopped(a)
+                                .partial_cmp(&stopped(b))
+                                .unwrap_or(Ordering::Equal)
+                        })
+                } else {
+                    order.first()
+                };
+                if let Some(e) = first.copied().and_then(|b| self.entries.get_mut(b)) {
                     e.permitted = true;
                 }
             }
             Algorithm::Concurrent | Algorithm::ConcurrentFair | Algorithm::Pipelined => {
                 // Step 1: the permitted keep their permission (they are still in C^I_t).
-                // Step 2: the rest in FIFO order (indices sorted, bounded by CAP).
-                let mut order: Vec<usize, CAP> = Vec::new();
-                for (i, e) in self.entries.iter().enumerate() {
-                    if !e.permitted {
-                        let _ = order.push(i);
-                    }
-                }
-                let entries = &self.entries;
-                order.sort_unstable_by(|&a, &b| match (entries.get(a), entries.get(b)) {
-                    (Some(x), Some(y)) => fifo(x, y),
-                    _ => Ordering::Equal,
-                });
+                // Step 2: the rest in priority order (FIFO; lane-consistent but for CON).
+                let order = self.priority(as_written);
                 // Steps 3–5.
                 let mut waiting: u32 = 0;
                 let mut grant: Vec<usize, CAP> = Vec::new();
@@ -323,6 +310,9 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                     let Some(c) = self.entries.get(i) else {
                         continue;
                     };
+                    if c.permitted {
+                        continue;
+                    }
                     if self.algorithm == Algorithm::Pipelined
                         && !(c.to_line <= F::from_f64(REQUEST_DISTANCE_M))
                     {
@@ -350,6 +340,104 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 }
             }
         }
+    }
+
+    /// The inlet lane of entry `e` (route index / 2: each inlet lane serves two routes).
+    fn inlet_of(e: &Entry<F>) -> u8 {
+        e.route / 2
+    }
+
+    /// `true` if `a` is ahead of `b` on the same inlet lane, neither having entered A_S.
+    fn ahead_on_inlet(a: &Entry<F>, b: &Entry<F>) -> bool {
+        Self::inlet_of(a) == Self::inlet_of(b)
+            && a.id != b.id
+            && a.progress > b.progress
+            && a.to_line >= F::ZERO
+    }
+
+    /// Liveness fix 2 (root cause of the queue deadlocks of issue 14): a permitted vehicle
+    /// that has not entered A_S while an *unpermitted* vehicle is ahead of it on its inlet
+    /// lane cannot use its permission — it cannot pass that vehicle — yet under FIFO it
+    /// keeps every other vehicle out, and under the Concurrent algorithms it keeps
+    /// conflicting routes out, while the vehicle ahead waits for exactly those: a
+    /// deadlock. Such a permission is withdrawn (its lease lapses).
+    ///
+    /// Safe: the vehicle ahead is not permitted, so by IC Protocol (ii) it is still
+    /// before the stop line, and the follower keeps the invariant toward it (it is an
+    /// obstacle on their common inlet), so the follower can stop before the vehicle
+    /// ahead and hence before the line; withdrawing only ever adds the stop line to
+    /// constraints it already keeps. Positions in reports may be stale, but the order of
+    /// two vehicles on one lane cannot change.
+    fn revoke_blocked(&mut self) {
+        let mut revoke: Vec<usize, CAP> = Vec::new();
+        for (i, f) in self.entries.iter().enumerate() {
+            let usable = !f.permitted
+                || !self
+                    .entries
+                    .iter()
+                    .any(|l| !l.permitted && Self::ahead_on_inlet(l, f));
+            if !usable {
+                let _ = revoke.push(i);
+            }
+        }
+        for i in revoke {
+            if let Some(e) = self.entries.get_mut(i) {
+                e.permitted = false;
+            }
+        }
+    }
+
+    /// Indices of the entries in priority order ≺^I_t (26): FIFO by arrival τ, ties by
+    /// the route index Ψ, then id (total on any input).
+    ///
+    /// Liveness fix 1: unless `as_written`, a vehicle ranks by the earliest arrival of
+    /// itself and every vehicle behind it on its inlet lane, and ties go by inlet lane
+    /// (Ψ / 2, the same order as Ψ across lanes), then by position along it (ahead
+    /// first). So no vehicle ever ranks before a vehicle ahead of it on its own lane.
+    /// The paper's order breaks ties between vehicles that arrive together — all that
+    /// start inside A_C, or reports delayed or lost on a real bus — by Ψ alone, which can
+    /// put a follower first: it gets the permission it cannot use (see
+    /// [`Manager::revoke_blocked`]). When vehicles arrive one at a time, a follower
+    /// always after its leader, both orders coincide.
+    fn priority(&self, as_written: bool) -> Vec<usize, CAP> {
+        let mut key: Vec<F, CAP> = Vec::new();
+        for e in self.entries.iter() {
+            let behind = self
+                .entries
+                .iter()
+                .filter(|b| !as_written && Self::ahead_on_inlet(e, b))
+                .map(|b| b.tau);
+            let _ = key.push(behind.fold(e.tau, |k, t| k.min(t)));
+        }
+        let mut order: Vec<usize, CAP> = Vec::new();
+        for i in 0..self.entries.len() {
+            let _ = order.push(i);
+        }
+        let cmp = |a: &usize, b: &usize| {
+            let (Some(x), Some(y), Some(kx), Some(ky)) = (
+                self.entries.get(*a),
+                self.entries.get(*b),
+                key.get(*a),
+                key.get(*b),
+            ) else {
+                return Ordering::Equal;
+            };
+            let by_key = kx.partial_cmp(ky).unwrap_or(Ordering::Equal);
+            if as_written {
+                return by_key.then(x.route.cmp(&y.route)).then(x.id.cmp(&y.id));
+            }
+            by_key
+                .then(Self::inlet_of(x).cmp(&Self::inlet_of(y)))
+                .then(
+                    y.progress
+                        .partial_cmp(&x.progress)
+                        .unwrap_or(Ordering::Equal),
+                )
+                .then(x.route.cmp(&y.route))
+                .then(x.id.cmp(&y.id))
+        };
+        order.sort_unstable_by(cmp);
+        order
     }
 
     /// Step 4's test: c's route conflicts with no route held by a permitted vehicle or

@@ -30,6 +30,15 @@ use crate::unicycle::{lateral_half_extent, step, Pose};
 /// Heading (rad) below which a vehicle may start a lane change, and must be to end one:
 /// changes start and end (nearly) parallel to the road, as Lemma 12's S-curve does.
 pub const STRAIGHT_HEADING_RAD: f64 = 0.02;
+/// How close (m) to the new lane's centre line a change must have come to complete.
+/// Lemma 12's S-curve ends on the centre line. Completing as soon as the rectangle is
+/// inside the new lane (as this planner first did) can leave a vehicle a few cm from the
+/// lane's edge; once its heading is straightened there, no turn within the horizon
+/// keeps its rear corner inside the lane (the rear swings out by (L/2)θ before y gains),
+/// so it never steers again and a second change never starts (issue 14's dead-end
+/// failures). 0.6 m from the centre leaves 0.35 m to the edge. Until the change
+/// completes its band spans both lanes, so the S-curve can finish.
+pub const CENTRED_M: f64 = 0.6;
 /// Margin (m) by which the lateral QP tightens the band: the QP's linearisation and
 /// move blocking are approximate; 5 cm keeps the exact check from failing on them.
 pub const LATERAL_MARGIN_M: f64 = 0.05;
@@ -515,7 +524,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             let lane_m = obs.road.band(m, None);
             let ext = lateral_half_extent(p.length(), p.width(), obs.pose.theta);
             let inside = lane_m.lo <= obs.pose.y - ext && obs.pose.y + ext <= lane_m.hi;
+            let centred = (obs.pose.y - obs.road.lane_centre(m)).abs() <= F::from_f64(CENTRED_M);
             if inside
+                && centred
                 && obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD)
                 && braking_tail_ok(&p, obs.pose, obs.v_prev, lane_m)
             {
@@ -671,7 +682,6 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
                     }
                 }
                 let nominal = crate::planner::shifted(&self.omega_plan);
-                let margin = F::from_f64(LATERAL_MARGIN_M);
                 let tm = F::from_f64(HEADING_MARGIN_RAD);
                 let input = LateralInput {
                     h: p.h(),
@@ -685,7 +695,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
                     omega_lo: &lo,
                     omega_hi: &hi,
                     theta_bounds: (p.theta_min() + tm, p.theta_max() - tm),
-                    band: (lanes.lo + margin, lanes.hi - margin),
+                    band: qp_band(&p, obs.pose, lanes),
                     half_length: F::HALF * p.length(),
                     half_width: F::HALF * p.width(),
                     weights: self.lateral_weights,
@@ -776,6 +786,20 @@ fn straightening_plan<F: Real, const N: usize>(p: &Params<F>, theta: F, v: &[F; 
         th += *o * p.h();
     }
     out
+}
+
+/// The band the lateral QP keeps the rectangle in: `lanes` tightened by
+/// [`LATERAL_MARGIN_M`] on each side, but never by more than the clearance the rectangle
+/// has there now. A vehicle closer to an edge than the margin would otherwise make the
+/// QP's own start state infeasible; the QP then fails every step and the straightening
+/// plan pins θ at 0 (issue 14's dead-end failures). The exact check
+/// ([`verify_lateral`]) is on the untightened lanes.
+fn qp_band<F: Real>(p: &Params<F>, pose: Pose<F>, lanes: Band<F>) -> (F, F) {
+    let margin = F::from_f64(LATERAL_MARGIN_M);
+    let ext = lateral_half_extent(p.length(), p.width(), pose.theta);
+    let below = (pose.y - ext - lanes.lo).max(F::ZERO);
+    let above = (lanes.hi - pose.y - ext).max(F::ZERO);
+    (lanes.lo + margin.min(below), lanes.hi - margin.min(above))
 }
 
 /// `true` if the rectangle at `pose` is inside the lanes `band` and its heading within

@@ -247,3 +247,64 @@ fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
     assert!(c.set_bus_resolution(f64::INFINITY).is_err());
     assert!(c.set_bus_resolution(-1e-3).is_err());
 }
+
+/// A queue on one inlet lane: the leader 0.5 m before its line, the follower 10 m
+/// behind it. Their routes are chosen so that the paper's tie-break (route index Ψ)
+/// ranks the follower first.
+fn queue(l: &Layout<f64>) -> (CrossingReport<f64>, CrossingReport<f64>) {
+    use planner_core::intersection::Movement;
+    let leader_route = Layout::<f64>::route_index(0, 0, Movement::Left) as u8;
+    let follower_route = Layout::<f64>::route_index(0, 0, Movement::Straight) as u8;
+    assert!(follower_route < leader_route, "Ψ puts the follower first");
+    let leader = report(l, 1, leader_route, At::Waiting);
+    let mut follower = report(l, 2, follower_route, At::Waiting);
+    follower.s = leader.s - 10.0;
+    follower.v = 0.0;
+    (leader, follower)
+}
+
+/// Issue 14's queue deadlock, first cause: vehicles that arrive together (all that start
+/// inside A_C) were ordered by Ψ, which can rank a follower before its leader on the
+/// same lane. Every live algorithm now serves the leader first.
+#[test]
+fn vehicles_arriving_together_are_served_in_lane_order() {
+    let l = layout();
+    let (leader, follower) = queue(&l);
+    for alg in [
+        Algorithm::Fifo,
+        Algorithm::ConcurrentFair,
+        Algorithm::Pipelined,
+    ] {
+        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+        m.observe(&follower, 0.0).unwrap();
+        m.observe(&leader, 0.0).unwrap();
+        m.update();
+        assert!(m.permitted(1), "{alg:?}: the leader is served first");
+        assert!(!m.permitted(2), "{alg:?}: not the follower ahead of it");
+    }
+    // The paper's algorithm as written keeps Ψ: the follower is permitted, the leader
+    // (sharing its inlet, hence conflicting) is not — the deadlock it cannot leave.
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Concurrent);
+    m.observe(&follower, 0.0).unwrap();
+    m.observe(&leader, 0.0).unwrap();
+    for _ in 0..3 {
+        m.update();
+        assert!(m.permitted(2) && !m.permitted(1));
+    }
+}
+
+/// Second cause: a follower can register first (its leader's reports were lost or
+/// delayed) and be permitted; it cannot use the permission past its unpermitted leader.
+/// The permission is withdrawn and passes to the leader.
+#[test]
+fn a_permission_blocked_by_an_unpermitted_leader_is_withdrawn() {
+    let l = layout();
+    let (leader, follower) = queue(&l);
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    m.observe(&follower, 0.0).unwrap();
+    m.update();
+    assert!(m.permitted(2));
+    m.observe(&leader, 1.0).unwrap();
+    m.update();
+    assert!(m.permitted(1) && !m.permitted(2));
+}

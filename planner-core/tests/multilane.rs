@@ -434,3 +434,73 @@ fn bus_resolution_widens_seventeen_by_half_a_step() {
         assert_eq!(started, starts, "resolution {resolution}");
     }
 }
+
+/// Drives the exact model from `q` at speed `v` toward `target` on an empty 3-lane road;
+/// returns the poses at which changes completed, or `None` after `steps` steps.
+fn drive_changes(
+    mut q: Pose<f64>,
+    mut v: f64,
+    lane: u8,
+    target: u8,
+    steps: usize,
+) -> Vec<Pose<f64>> {
+    let mut pl = LanePlanner::<f64, 20>::new(p(), CostWeights::default(), lane).unwrap();
+    let mut w = 0.0;
+    let mut done = Vec::new();
+    for _ in 0..steps {
+        let mut o = obs(q.x, q.y, v, &[], target);
+        o.pose = q;
+        o.omega_prev = w;
+        let c = pl.step(&o).unwrap();
+        if let Some(LaneEvent::Completed(_)) = c.event {
+            done.push(q);
+            if c.lane == target {
+                return done;
+            }
+        }
+        (v, w) = (c.v, c.omega);
+        q = step(q, v, w, 0.01);
+    }
+    done
+}
+
+/// Issue 14's dead-end failures: a change used to complete as soon as the rectangle was
+/// inside the new lane — millimetres from its edge, still heading toward the centre. From there
+/// the lateral QP (band tightened by 5 cm) found its own start state infeasible, the
+/// straightening fallback pinned θ at 0, and at the edge with θ = 0 no turn within the
+/// horizon keeps the rear corner in the lane: the vehicle never steered again. It must
+/// go on into the next lane.
+#[test]
+fn a_vehicle_at_its_lanes_edge_still_changes_lanes() {
+    // The rotated rectangle 5 mm inside lane 1's lower edge.
+    let theta: f64 = 0.015;
+    let edge = 3.6 + 2.25 * theta.sin() + 0.85 * theta.cos() + 0.005;
+    let q = Pose {
+        x: 0.0,
+        y: edge,
+        theta,
+    };
+    let done = drive_changes(q, 13.0, 1, 2, 1500);
+    assert_eq!(done.len(), 1, "the change 1 → 2 completes within 15 s");
+}
+
+/// Two changes in a row (0 → 1 → 2) complete, each near the new lane's centre line, so
+/// the second starts from where Lemma 12's S-curve ends.
+#[test]
+fn successive_changes_complete_near_the_centre_line() {
+    use planner_core::lane_change::CENTRED_M;
+    let q = Pose {
+        x: 0.0,
+        y: 1.8,
+        theta: 0.0,
+    };
+    let done = drive_changes(q, 15.0, 0, 2, 3000);
+    assert_eq!(done.len(), 2, "both changes complete within 30 s");
+    for (pose, centre) in done.iter().zip([5.4, 9.0]) {
+        assert!(
+            (pose.y - centre).abs() <= CENTRED_M,
+            "completed at y = {} (centre {centre})",
+            pose.y
+        );
+    }
+}
