@@ -38,9 +38,13 @@ pub enum Field {
     PathPosition,
     /// A track's heading.
     TrackHeading,
-    /// A flag byte other than 0 or 1.
+    /// A flag byte other than 0 or 1, or an undefined flag bit set.
     Flag,
 }
+
+/// State message, byte 13, high nibble: the sender does not cooperate (a scripted or
+/// legacy vehicle: it neither hears intentions nor yields).
+const NOT_COOPERATIVE: u8 = 0x10;
 
 /// Why a message could not be encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -144,7 +148,9 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
                     .to_le_bytes(),
             );
             w.put(&(q(s.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16).to_le_bytes());
-            w.put(&[lane_nibble(s.beta)?]);
+            // β in the low nibble; flags in the high one (bit 4: does not cooperate).
+            let flags = if s.cooperative { 0 } else { NOT_COOPERATIVE };
+            w.put(&[lane_nibble(s.beta)? | flags]);
             w.put(
                 &(q(s.omega, YAW_RATE_RES, -32768.0, 32767.0, Field::YawRate)? as i16)
                     .to_le_bytes(),
@@ -407,8 +413,9 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
             if own == NO_LANE {
                 return Err(DecodeError::OutOfRange(Field::Lane));
             }
-            if byte(13) & 0xF0 != 0 {
-                return Err(DecodeError::OutOfRange(Field::Lane));
+            // Flags: only "does not cooperate" is defined; the rest must be clear.
+            if byte(13) & 0xF0 & !NOT_COOPERATIVE != 0 {
+                return Err(DecodeError::OutOfRange(Field::Flag));
             }
             let th = f64::from(rd_u16(b, 9) as i16) * HEADING_RES;
             if th.abs() > core::f64::consts::PI + HEADING_RES {
@@ -423,8 +430,9 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
                 omega: f(f64::from(rd_u16(b, 14) as i16) * YAW_RATE_RES),
                 lane: own,
                 alpha: lane(lanes >> 4),
-                beta: lane(byte(13)),
+                beta: lane(byte(13) & 0x0F),
                 stamp: f(f64::from(rd_u32(b, 16)) * TIME_RES),
+                cooperative: byte(13) & NOT_COOPERATIVE == 0,
             })
         }
         MessageKind::Request => {
@@ -491,6 +499,7 @@ mod tests {
             alpha: Some(1),
             beta: None,
             stamp: 12.34,
+            cooperative: true,
         }
     }
 

@@ -58,6 +58,7 @@ fn cantools_decodes_the_gateways_candump_log() {
             alpha: (i == 1).then_some(2),
             beta: (i == 2).then_some(1),
             stamp: 12.34 + i as f64,
+            cooperative: i != 1,
         };
         let frames: Frames<F8> = encode(&Message::State(s), s.id as u8, i as u8).expect("encodes");
         let deg = 180.0 / std::f64::consts::PI;
@@ -77,6 +78,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                     ("Heading", theta * deg),
                     ("Speed", v),
                     ("IntendedLane", f64::from(s.beta.unwrap_or(15))),
+                    ("NotCooperative", if s.cooperative { 0.0 } else { 1.0 }),
                     ("FrameIndex", 1.0),
                 ],
                 vec![

@@ -79,8 +79,9 @@ proptest! {
         beta in prop::option::of(0u8..15),
         stamp in 0.0f64..4.0e6,
         counter in 0u8..16,
+        cooperative in any::<bool>(),
     ) {
-        let s = VehicleState { id, x, y, theta, v, omega, lane, alpha, beta, stamp };
+        let s = VehicleState { id, x, y, theta, v, omega, lane, alpha, beta, stamp, cooperative };
         let frames: Frames<F8> = encode(&Message::State(s), (id & 0xFF) as u8, counter).expect("in range");
         prop_assert_eq!(frames.len(), MessageKind::State.frames());
         let mut r = Reassembler::<2>::new();
@@ -89,7 +90,7 @@ proptest! {
             got = r.push::<f64, _>(f).expect("valid frames");
         }
         let Some(Message::State(d)) = got else { panic!("a state") };
-        prop_assert_eq!((d.id, d.lane, d.alpha, d.beta), (id, lane, alpha, beta));
+        prop_assert_eq!((d.id, d.lane, d.alpha, d.beta, d.cooperative), (id, lane, alpha, beta, cooperative));
         prop_assert!((d.x - x).abs() <= POS_RES / 2.0 + 1e-9);
         prop_assert!((d.y - y).abs() <= POS_RES / 2.0 + 1e-9);
         prop_assert!((d.theta - theta).abs() <= HEADING_RES / 2.0 + 1e-9);

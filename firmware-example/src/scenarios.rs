@@ -134,6 +134,8 @@ pub fn approach<const N: usize>(
             alpha: None,
             beta: None,
             stamp: t,
+            // A stopped car: whatever drives it, it is not a planner that yields.
+            cooperative: false,
         };
         let frames: Frames<PlainFrame> =
             encode(&Message::State(leader), 1, (step % 16) as u8).ok()?;

@@ -145,7 +145,7 @@ pub fn run_with_ports<P: CanPort + 'static>(
     let (pos_res, _) = crate::can::RESOLUTION;
     let mut cars = Vec::with_capacity(sc.placements.len());
     for p in &sc.placements {
-        let mut car = Car::new(&params, p);
+        let mut car = Car::new(&params, p, params.h());
         car.set_bus_resolution(pos_res)
             .map_err(|e| FleetError::Harness(format!("bus resolution: {e:?}")))?;
         cars.push(car);

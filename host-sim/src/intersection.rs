@@ -85,20 +85,23 @@ pub(crate) struct CarTruth {
 
 impl Car {
     /// Vehicle `p` with its own planner.
-    pub(crate) fn new(params: &Params<f64>, p: &Placement) -> Self {
+    pub(crate) fn new(params: &Params<f64>, p: &Placement, notify: f64) -> Self {
+        let mut planner = CrossingPlanner::new(
+            Planner::new(*params, weights())
+                .unwrap_or_else(|_| unreachable!("the weights are valid")),
+            p.id,
+            p.route,
+            LENGTH_M,
+        );
+        // A validated bus's bound is finite.
+        let _ = planner.set_notify_latency(notify);
         Self {
             id: p.id,
             route: p.route,
             s: p.s,
             v: p.v,
             v_before: p.v,
-            planner: Box::new(CrossingPlanner::new(
-                Planner::new(*params, weights())
-                    .unwrap_or_else(|_| unreachable!("the weights are valid")),
-                p.id,
-                p.route,
-                LENGTH_M,
-            )),
+            planner: Box::new(planner),
             arrived_at: None,
             left_as_at: None,
         }
@@ -401,6 +404,8 @@ pub struct CrossingSim {
     times: Vec<f64>,
     fallback_steps: u64,
     monitor: CrossingMonitor,
+    /// The bus's notification bound (s), for the planners of spawned vehicles.
+    notify: f64,
 }
 
 impl CrossingSim {
@@ -430,7 +435,11 @@ impl CrossingSim {
         let params = params(layout.spec.v_limit);
         let mut nodes: Vec<u16> = placements.iter().map(|p| p.id).collect();
         nodes.push(MANAGER_NODE);
-        let cars = placements.iter().map(|p| Car::new(&params, p)).collect();
+        let notify = faults.notify_bound(params.h());
+        let cars = placements
+            .iter()
+            .map(|p| Car::new(&params, p, notify))
+            .collect();
         let mut lim = Limits::table_i();
         lim.v_max = layout.spec.v_limit;
         Self {
@@ -448,6 +457,7 @@ impl CrossingSim {
             times: Vec::new(),
             fallback_steps: 0,
             monitor: CrossingMonitor::default(),
+            notify,
         }
     }
 
@@ -491,7 +501,8 @@ impl CrossingSim {
         let granted = manage(&mut self.manager, &self.inbox, t);
         self.monitor.granted(&granted);
         for id in granted {
-            let until = t + LEASE_S;
+            // A lease must outlive its own delivery: LEASE_S beyond the bus's bound.
+            let until = t + LEASE_S + (self.notify - h);
             let _ = self
                 .bus
                 .send(MANAGER_NODE, &Message::Grant { id, until }, t);
@@ -570,6 +581,7 @@ impl CrossingSim {
                         s: s0,
                         v,
                     },
+                    self.notify,
                 );
                 // Back as a new vehicle: its old `Left` no longer applies.
                 self.departing.retain(|&(d, _)| d != id);
@@ -987,6 +999,14 @@ impl CrossingScenario {
                 planner_core::intersection::LayoutError::InletShorterThanCommRegion => {
                     "inlet_length must reach back to the edge of A_C (≥ comm_margin)".to_string()
                 }
+                planner_core::intersection::LayoutError::OutletShorterThanCommRegion {
+                    length,
+                    needed,
+                } => format!(
+                    "outlet_length {length} m ends inside A_C: vehicles leave the intersection \
+                     once they are on their outlet outside A_C, so it must be at least \
+                     comm_margin + L = {needed:.2} m"
+                ),
             };
             err(Some(span.clone()), format!("intersection: {why}"))
         })?;

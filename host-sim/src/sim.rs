@@ -177,6 +177,8 @@ impl<const N: usize> Agent<N> {
             alpha: self.alpha,
             beta: self.beta,
             stamp: t,
+            // Scripted and random drivers neither hear intentions nor yield.
+            cooperative: matches!(self.driver, Driver::Planner { .. }),
         }
     }
 

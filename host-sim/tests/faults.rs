@@ -22,6 +22,7 @@ fn state(id: u16, stamp: f64) -> Message {
         alpha: None,
         beta: None,
         stamp,
+        cooperative: true,
     })
 }
 

@@ -8,6 +8,7 @@
 use crate::intersection::{Layout, CONFLICT_SAMPLE_M};
 use crate::planner::ConfigError;
 use crate::real::Real;
+use crate::sensing::{still_unheard, Sensing};
 use core::cmp::Ordering;
 use heapless::Vec;
 
@@ -498,7 +499,15 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     lease_until: F,
     /// Step to which others' reported positions were rounded (0: exact).
     position_step: F,
+    /// Bound on how long reports take to arrive (≥ h); see [`CrossingPlanner::set_notify_latency`].
+    notify: F,
+    /// The ego's range sensors, if any.
+    sensing: Option<Sensing<F>>,
+    /// Steps planned so far (saturating).
+    steps: u32,
     others: Vec<(u16, u8, F, F), CAP>,
+    /// Sensor returns of this step: positions along this vehicle's path.
+    sensed: Vec<F, CAP>,
     obstacles: Vec<crate::planner::Vehicle<F>, CAP>,
 }
 
@@ -506,15 +515,58 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
     /// Vehicle `id` of `length` on `route`, planning with `planner`.
     pub fn new(planner: crate::planner::Planner<F, N>, id: u16, route: u8, length: F) -> Self {
         Self {
-            planner,
             route,
             id,
             length,
             lease_until: F::from_f64(-1e30),
             position_step: F::ZERO,
+            notify: planner.params().h(),
+            sensing: None,
+            steps: 0,
             others: Vec::new(),
+            sensed: Vec::new(),
             obstacles: Vec::new(),
+            planner,
         }
+    }
+
+    /// Sets a bound on how long other vehicles' reports take to arrive (delay, jitter,
+    /// repeated losses; ≥ h, the default). Until that long has passed since the first
+    /// step, a vehicle without sensors may not yet have heard of one just ahead of it, and
+    /// takes its path as blocked (issue 21: on a bus with 0.1 s of delay, a vehicle
+    /// accelerated into one standing 0.5 m ahead that it had not heard of yet). Reports
+    /// older than the bound may miss that their vehicle has reached this one's outlet;
+    /// such a vehicle is placed where it may be. A non-finite value changes nothing.
+    pub fn set_notify_latency(&mut self, latency: F) -> Result<(), ConfigError> {
+        if !latency.is_finite() {
+            return Err(ConfigError::InvalidLatency);
+        }
+        self.notify = latency.max(self.planner.params().h());
+        Ok(())
+    }
+
+    /// Gives the vehicle its own range sensors ([`crate::sensing`]); their returns come
+    /// through [`CrossingPlanner::hear_sensed`]. `None` (the default) is the paper's world.
+    pub fn set_sensing(&mut self, sensing: Option<Sensing<F>>) -> Result<(), ConfigError> {
+        if let Some(s) = &sensing {
+            s.validate(self.planner.params())?;
+        }
+        self.sensing = sensing;
+        Ok(())
+    }
+
+    /// This step's sensor returns: the centre positions, along this vehicle's own path,
+    /// of the vehicles its forward sensor sees on that path (replacing the last step's).
+    /// Each is taken `position_error_m` closer than measured. `Err(Full)` past `CAP`.
+    pub fn hear_sensed(&mut self, positions: &[F]) -> Result<(), ManagerError> {
+        self.sensed.clear();
+        for &x in positions {
+            if !x.is_finite() {
+                return Err(ManagerError::BadValue);
+            }
+            self.sensed.push(x).map_err(|_| ManagerError::Full)?;
+        }
+        Ok(())
     }
 
     /// The route.
@@ -592,17 +644,27 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         let (entry, exit) = (route.path.entry(), route.path.exit());
         let permitted = self.permitted(layout, s, now);
         let half = F::HALF * self.length;
+        let p = *self.planner.params();
         self.obstacles.clear();
-        for &(_, r, x, _) in self.others.iter() {
+        for &(_, r, x, stamp) in self.others.iter() {
             let Some(other) = layout.route(usize::from(r)) else {
                 continue;
             };
             let (oe, ox) = (other.path.entry(), other.path.exit());
+            // How far it may have gone since its report: reports older than the bound may
+            // not show it on my outlet yet.
+            let age = (now - stamp).max(F::ZERO);
+            let reach = if age > self.notify {
+                p.v_max() * age
+            } else {
+                F::ZERO
+            };
             let on_my_path = if r == self.route || (other.inlet == route.inlet && x - half < oe) {
                 // Same route, or still partly on our common inlet.
                 Some(x)
-            } else if other.outlet == route.outlet && x + half > ox {
-                // Its front is on my outlet: where it is along my path.
+            } else if other.outlet == route.outlet && x + reach + half > ox {
+                // Its front is (or may be) on my outlet: where it is along my path, at
+                // least (positions only grow).
                 Some(exit + (x - ox))
             } else {
                 None
@@ -614,6 +676,27 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
                 });
             }
         }
+        // Sensor returns, each taken at its nearest; space beyond the forward range (or,
+        // without sensors, all space until reports can have arrived) is not free.
+        let e = self.sensing.map_or(F::ZERO, |x| x.position_error_m);
+        for &x in self.sensed.iter() {
+            let _ = self.obstacles.push(crate::planner::Vehicle {
+                x: x - e,
+                length: self.length,
+            });
+        }
+        let blind = still_unheard(self.steps, p.h(), self.notify);
+        let unknown = match self.sensing {
+            Some(sn) => Some(s + half + sn.ahead_m + half),
+            None => blind.then_some(s + F::from_f64(1e-3)),
+        };
+        if let Some(x) = unknown {
+            let _ = self.obstacles.push(crate::planner::Vehicle {
+                x,
+                length: self.length,
+            });
+        }
+        self.steps = self.steps.saturating_add(1);
         let front = s + half;
         let target = if !permitted {
             entry

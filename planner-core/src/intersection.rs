@@ -222,6 +222,16 @@ pub enum LayoutError<F> {
     },
     /// The inlet track does not reach back to ∂A_C (vehicles must arrive through A_C).
     InletShorterThanCommRegion,
+    /// The outlet track does not reach a vehicle length beyond ∂A_C: a vehicle leaves the
+    /// intersection (C^I_t (25)) once it is on its outlet outside A_C, so every outlet must
+    /// take it there; a shorter one ends inside A_C, where vehicles could only pile up
+    /// (issue 21: 40 m outlets, 4,864 collisions).
+    OutletShorterThanCommRegion {
+        /// The outlet length (m).
+        length: F,
+        /// comm_margin + L (m).
+        needed: F,
+    },
 }
 
 /// The intersection: geometry, routes and their conflicts.
@@ -363,6 +373,13 @@ impl<F: Real> Layout<F> {
         }
         if !(spec.inlet_length >= spec.comm_margin) {
             return Err(LayoutError::InletShorterThanCommRegion);
+        }
+        let needed = spec.comm_margin + p.length();
+        if !(spec.outlet_length >= needed) {
+            return Err(LayoutError::OutletShorterThanCommRegion {
+                length: spec.outlet_length,
+                needed,
+            });
         }
         let half_pi = F::FRAC_PI_2;
         let mut routes = [Route {
@@ -615,5 +632,13 @@ mod tests {
             Layout::new(&p, s),
             Err(LayoutError::InletShorterThanCommRegion)
         );
+        let mut s = LayoutSpec::spec8(&p);
+        s.outlet_length = 54.4;
+        assert!(matches!(
+            Layout::new(&p, s),
+            Err(LayoutError::OutletShorterThanCommRegion { needed, .. }) if (needed - 54.5).abs() < 1e-12
+        ));
+        s.outlet_length = 54.5;
+        assert!(Layout::new(&p, s).is_ok());
     }
 }

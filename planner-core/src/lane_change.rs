@@ -17,13 +17,16 @@
 //! needed; longitudinally it is Lemma 2's, certified by the invariant toward (15).
 
 use crate::free_space::{FreeSpace, D_TURN_M};
-use crate::lanes::{in_behind_set, in_front_set, in_yield_set, Band, Key, Other, Road};
+use crate::lanes::{in_front_set, in_yield_set, may_occupy, Band, Key, Other, Road};
 use crate::lateral::{solve_lateral, LateralInput, LateralWeights};
 use crate::mpc::CostWeights;
 use crate::params::Params;
-use crate::planner::{free_road_gap, ConfigError, FallbackReason, InputError, Planner, StepStatus};
+use crate::planner::{
+    free_road_gap, in_range, ConfigError, FallbackReason, InputError, Planner, StepStatus,
+};
 use crate::real::Real;
 use crate::safety;
+use crate::sensing::{still_unheard, Sensing};
 use crate::solver::{IpmSolver, MpcSolver};
 use crate::unicycle::{lateral_half_extent, step, Pose};
 
@@ -243,6 +246,11 @@ pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     notify: F,
     /// Steps to which the bus rounds positions and speeds (0: exact).
     resolution: Resolution<F>,
+    /// The ego's own range sensors, if any (their returns come as `sensed` others).
+    sensing: Option<Sensing<F>>,
+    /// Steps planned so far (saturating): until the notification bound has passed, a
+    /// vehicle without sensors may not yet have heard of everyone.
+    steps: u32,
     omega_plan: [F; N],
     reference: Option<Reference<F>>,
 }
@@ -271,9 +279,24 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             beta_steps: 0,
             notify: params.h(),
             resolution: Resolution::EXACT,
+            sensing: None,
+            steps: 0,
             omega_plan: [F::ZERO; N],
             reference: None,
         })
+    }
+
+    /// Gives the planner its own range sensors ([`crate::sensing`]): their returns, passed
+    /// among `LaneObservation::others` with `sensed = true`, are used at their worst case
+    /// within the error bounds, and space they do not cover is not taken as free. `None`
+    /// (the default) is the paper's world, where every vehicle is known from V2V alone.
+    /// Invalid values are refused and change nothing.
+    pub fn set_sensing(&mut self, sensing: Option<Sensing<F>>) -> Result<(), ConfigError> {
+        if let Some(s) = &sensing {
+            s.validate(self.params())?;
+        }
+        self.sensing = sensing;
+        Ok(())
     }
 
     /// Sets a bound on the time until every other vehicle has heard what this one
@@ -360,6 +383,12 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         if !(obs.v_prev >= F::ZERO && obs.v_prev <= self.params().v_max()) {
             return Err(LaneInputError::Speed(InputError::SpeedOutOfRange));
         }
+        if !(in_range(&[obs.pose.x, obs.pose.y, obs.target, r.lane_width])
+            && r.end_x.is_none_or(|x| in_range(&[x]))
+            && obs.others.iter().all(|c| in_range(&[c.x, c.length])))
+        {
+            return Err(LaneInputError::Speed(InputError::OutOfRange));
+        }
         if obs.others.iter().any(|c| !(c.length > F::ZERO)) {
             return Err(LaneInputError::Speed(InputError::BadLength));
         }
@@ -386,7 +415,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     }
 
     /// x̄_t − x_t over the vehicles selected by `select` and the road end (22),
-    /// extent-adjusted; `None` if there is no obstacle.
+    /// extent-adjusted, and over space the ego cannot vouch for (see
+    /// [`LanePlanner::unknown_ahead`]); `None` if there is no obstacle.
     fn gap_over(
         &self,
         obs: &LaneObservation<'_, F>,
@@ -397,7 +427,41 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             .road
             .end_x
             .map(|xr| xr - F::HALF * p.length() - p.d0() - obs.pose.x);
-        min_gap(end, self.vehicle_gap(obs, select))
+        let known = min_gap(end, self.vehicle_gap(obs, select));
+        min_gap(known, self.unknown_ahead())
+    }
+
+    /// Where space ahead stops being known (as x̄_t − x_t), if it does. With sensors:
+    /// the end of the forward range, as if a stopped vehicle stood just beyond it. Without
+    /// (the paper's world): nowhere, except until the notification bound has passed since
+    /// the first step — a vehicle may then not yet have heard of one just ahead (issue 21:
+    /// a follower at the smallest safe gap accelerated for a period of bus delay before
+    /// it first heard its braking leader), so it takes the road ahead as blocked at once
+    /// and brakes, which is safe whatever is there.
+    fn unknown_ahead(&self) -> Option<F> {
+        let p = self.params();
+        match &self.sensing {
+            Some(s) => Some(s.ahead_m - p.d0()),
+            None => still_unheard(self.steps, p.h(), self.notify).then_some(F::ZERO),
+        }
+    }
+
+    /// The sensing error bounds (position m, speed m/s); zero without sensors.
+    fn errors(&self) -> (F, F) {
+        self.sensing.map_or((F::ZERO, F::ZERO), |s| {
+            (s.position_error_m, s.speed_error_mps)
+        })
+    }
+
+    /// The least x a vehicle ahead can have: a sensor return may be `position_error_m`
+    /// further back than measured; a V2V position only grows after its stamp (v ≥ 0), so
+    /// it is used as stamped, never extrapolated.
+    fn nearest_x(&self, c: &Other<F>) -> F {
+        if c.sensed {
+            c.x - self.errors().0
+        } else {
+            c.x
+        }
     }
 
     /// x̄_t − x_t over the vehicles selected by `select` alone, extent-adjusted.
@@ -412,7 +476,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         obs.others
             .iter()
             .filter(|c| select(c))
-            .map(|c| c.x - F::HALF * (c.length + len) - p.d0() - obs.pose.x)
+            .map(|c| self.nearest_x(c) - F::HALF * (c.length + len) - p.d0() - obs.pose.x)
             .reduce(|a, b| a.min(b))
     }
 
@@ -423,6 +487,20 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let p = self.params();
         let (reach, v_up) = unaware_reach(p, v, tau);
         reach + safety::d_s(p, v_up) - safety::d_s(p, v)
+    }
+
+    /// The room this vehicle keeps, beyond the invariant, toward a vehicle that is
+    /// entering or wants to enter one of its lanes, so that the other's entry check
+    /// ([`LanePlanner::entry_ok`]) passes: that check takes this vehicle at its worst
+    /// case — measured with the sensing error bounds, and moving unaware for the age of
+    /// the other's data of it plus a period. Aware vehicles keep that much more room, or
+    /// the other could never enter in front of one that follows it closely.
+    /// τ = max(h, 2(notify − h)) covers data up to the notification bound old.
+    fn entry_allowance(&self, v: F) -> F {
+        let p = self.params();
+        let (e, ev) = self.errors();
+        let tau = p.h().max(F::TWO * (self.notify - p.h()));
+        F::TWO * e + self.unaware_margin(v + ev, tau) + safety::d_s(p, v + ev) - safety::d_s(p, v)
     }
 
     /// This vehicle in ≺, as the others hear it (rounded to the bus's steps).
@@ -446,35 +524,157 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let key = self.key(obs);
         let x = obs.pose.x;
         let lane = self.lane;
-        let safe = self.gap_over(obs, |c| in_front_set(x, lane, alpha, c));
-        // (21) adds the vehicles I yield to. On a bus with latency I keep the room the
-        // declarer's (17) asks of me (my data up to `notify − h` old, then up to
-        // `notify − h` unaware), or it never starts; no extra room on the paper's bus.
-        let tau = F::from_f64(2.0) * (self.notify - self.params().h());
+        let mine = |j: u8| j == lane || Some(j) == alpha;
+        // A return up to `e` behind the ego may be ahead of it.
+        let e = self.errors().0;
+        let ahead = |c: &Other<F>| Other {
+            x: if c.sensed { c.x + e } else { c.x },
+            ..*c
+        };
+        // (15). While changing into α, also whatever may be entering α unheard of.
+        let front = |c: &Other<F>| {
+            in_front_set(x, lane, alpha, &ahead(c))
+                || alpha
+                    .is_some_and(|m| x <= ahead(c).x && may_occupy(m, c, self.intent_known(obs, c)))
+        };
+        let safe = self.gap_over(obs, front);
+        // Vehicles entering one of my lanes (α, or β under (21)) get the entry allowance.
+        let entering = |c: &Other<F>| {
+            !mine(c.lane)
+                && (in_front_set(x, lane, alpha, &ahead(c))
+                    || yields_to(&key, alpha, beta, c, self.resolution.position))
+        };
+        let allowance = self.entry_allowance(obs.v_prev);
         let yielding = self
             .vehicle_gap(obs, |c| {
-                yields_to(&key, alpha, beta, c, self.resolution.position)
+                entering(c) || yields_to(&key, alpha, beta, c, self.resolution.position)
             })
-            .map(|g| {
-                if tau > F::ZERO {
-                    g - self.unaware_margin(obs.v_prev, tau)
-                } else {
-                    g
-                }
-            });
+            .map(|g| g - allowance);
         let all = min_gap(safe, yielding);
         (safe, all)
+    }
+
+    /// The V2V record of vehicle `id`, if any.
+    fn heard<'a>(obs: &'a LaneObservation<'_, F>, id: u16) -> Option<&'a Other<F>> {
+        obs.others.iter().find(|o| o.id == id && !o.sensed)
+    }
+
+    /// `true` if c's intention is known: it cooperates and its V2V data is younger than
+    /// the notification bound (a change into a lane must have been declared that long
+    /// before it starts, so nothing newer can be under way), whichever record c is.
+    fn intent_known(&self, obs: &LaneObservation<'_, F>, c: &Other<F>) -> bool {
+        let v2v = if c.sensed {
+            Self::heard(obs, c.id)
+        } else {
+            Some(c)
+        };
+        v2v.is_some_and(|v| !v.cooperative || v.age < self.notify)
+    }
+
+    /// Every vehicle that may be in lane `m` behind the ego, fused per vehicle: a sensor
+    /// return (fresh, within the error bounds) is used in place of a V2V record of the same
+    /// vehicle, with that record's declared change and cooperation; a vehicle known only
+    /// from the sensor is taken as one that does not cooperate. With sensors, a vehicle
+    /// closing in at vmax from just beyond the rear range is added. Each is handed to `f`
+    /// with its worst-case position and speed and whether it cooperates.
+    fn for_each_behind(
+        &self,
+        obs: &LaneObservation<'_, F>,
+        m: u8,
+        mut f: impl FnMut(&Other<F>, F, F, bool) -> Result<(), StartBlock>,
+    ) -> Result<(), StartBlock> {
+        let x = obs.pose.x;
+        let (e, ev) = self.errors();
+        for c in obs.others.iter() {
+            let heard = if c.sensed {
+                Self::heard(obs, c.id)
+            } else {
+                None
+            };
+            if !c.sensed && obs.others.iter().any(|o| o.sensed && o.id == c.id) {
+                continue;
+            }
+            let cooperative = if c.sensed {
+                heard.is_some_and(|h| h.cooperative)
+            } else {
+                c.cooperative
+            };
+            let declared = heard.is_some_and(|h| h.alpha == Some(m));
+            let occupant = Other { cooperative, ..*c };
+            // A return up to `e` ahead of the ego may be behind it.
+            let behind = if c.sensed { c.x - e <= x } else { c.x <= x };
+            if !(behind && (declared || may_occupy(m, &occupant, self.intent_known(obs, c)))) {
+                continue;
+            }
+            let (cx, cv) = if c.sensed {
+                (c.x + e, c.v + ev)
+            } else {
+                (c.x, c.v)
+            };
+            f(c, cx, cv, cooperative)?;
+        }
+        if let Some(s) = &self.sensing {
+            let p = self.params();
+            let phantom = Other {
+                cooperative: false,
+                ..Other::v2v(
+                    u16::MAX,
+                    x - p.length() - s.behind_m,
+                    p.v_max(),
+                    p.length(),
+                    m,
+                    F::ZERO,
+                )
+            };
+            f(&phantom, phantom.x, phantom.v, false)?;
+        }
+        Ok(())
+    }
+
+    /// (17) toward one vehicle behind, taken at worst-case position `cx` and speed `cv`
+    /// and moving unaware for `tau`: it can still stop behind the ego.
+    fn clear_of(&self, obs: &LaneObservation<'_, F>, c: &Other<F>, cx: F, cv: F, tau: F) -> bool {
+        let p = self.params();
+        // Half a step on the bus's rounding: the true front and speed at their worst.
+        let r = self.resolution;
+        let (reach, v) = unaware_reach(p, cv + F::HALF * r.speed, tau);
+        let room = obs.pose.x
+            - F::HALF * (c.length + p.length() + r.position)
+            - p.d0()
+            - cx
+            - reach
+            - F::SAFETY_MARGIN_M;
+        safety::invariant_holds(p, v, room)
+    }
+
+    /// The entry check (issue 21; RSS-style): the ego, changing into `m`, may put its
+    /// rectangle into lane `m` at `lead` from now only if every vehicle that may be in `m`
+    /// behind it could stop behind it then even had it never heard of the change — moving
+    /// unaware, at up to amax, for the age of the ego's data of it plus `lead`. The
+    /// paper's (17) at the start assumes the others hear the ego's α within a period and
+    /// yield; on a bus that loses or delays messages without bound, or toward a vehicle
+    /// that does not cooperate, nothing else keeps it safe. Aware vehicles keep room for
+    /// this check ([`LanePlanner::entry_allowance`]), so on a working bus it passes.
+    fn entry_ok(&self, obs: &LaneObservation<'_, F>, m: u8, lead: F) -> bool {
+        self.for_each_behind(obs, m, |c, cx, cv, _| {
+            if self.clear_of(obs, c, cx, cv, c.age + lead) {
+                Ok(())
+            } else {
+                Err(StartBlock::Behind(c.id))
+            }
+        })
+        .is_ok()
     }
 
     /// The Lane Change Protocol (16)(17) for a change into `m`, with (17) tested against
     /// every vehicle of C⁻_t (18) (SPEC's choice), each inflated for the age of its data
     /// plus the notification latency beyond one period (SPEC §9: at most amax faster, see
     /// `unaware_reach`), and the free-space condition of Lemma 8 for the widened band.
+    /// A vehicle that does not cooperate will not hear the change: toward it (17) must
+    /// hold as if the ego entered its lane now ([`LanePlanner::entry_ok`]'s test).
     /// `Ok` when a change into `m` may start now; otherwise the first condition that fails.
     pub fn start_check(&self, obs: &LaneObservation<'_, F>, m: u8) -> Result<(), StartBlock> {
         let p = self.params();
-        let x = obs.pose.x;
-        let len = p.length();
         if !(obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD)) {
             return Err(StartBlock::Heading);
         }
@@ -485,27 +685,19 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         if !safety::invariant_holds(p, obs.v_prev, gap - F::SAFETY_MARGIN_M) {
             return Err(StartBlock::Ahead);
         }
-        // (17) for every c ∈ C⁻_t; stale data behind blocks the start (SPEC §9). Each is
-        // inflated for its data's age plus the time it may still not know of the change
-        // beyond the paper's one period.
+        // (17) for every c ∈ C⁻_t; stale data behind blocks the start (SPEC §9).
         let unaware = self.notify - p.h();
-        for c in obs.others.iter().filter(|c| in_behind_set(x, m, c)) {
+        self.for_each_behind(obs, m, |c, cx, cv, cooperative| {
             if !(c.age <= F::from_f64(STALE_AFTER_S)) {
                 return Err(StartBlock::Stale(c.id));
             }
-            // Half a step on the bus's rounding: the true front and speed at their worst.
-            let r = self.resolution;
-            let (reach, v) = unaware_reach(p, c.v + F::HALF * r.speed, c.age + unaware);
-            let room = x
-                - F::HALF * (c.length + len + r.position)
-                - p.d0()
-                - c.x
-                - reach
-                - F::SAFETY_MARGIN_M;
-            if !safety::invariant_holds(p, v, room) {
-                return Err(StartBlock::Behind(c.id));
+            let tau = c.age + if cooperative { unaware } else { p.h() };
+            if self.clear_of(obs, c, cx, cv, tau) {
+                Ok(())
+            } else {
+                Err(StartBlock::Behind(c.id))
             }
-        }
+        })?;
         // Lemma 8 (i)(ii) in the widened band.
         let band = obs
             .road
@@ -610,6 +802,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let lanes = obs.road.band(self.lane, self.alpha);
         let band = lanes.shrunk(F::HALF * p.width());
         let (safe, all) = self.gaps(obs, self.alpha, self.beta);
+        self.steps = self.steps.saturating_add(1);
         let free = free_road_gap(&p, N);
         let gap_all = all.map_or(free, |g| g.min(free));
         let gap_safe = safe.map_or(free, |g| g.min(free));
@@ -709,11 +902,14 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
                 }
             }
         };
-        let omega = if verify_lateral(&p, obs.pose, &v_plan, &omega, lanes) {
+        let accept = |w: &[F; N]| {
+            verify_lateral(&p, obs.pose, &v_plan, w, lanes) && self.entering_ok(obs, &v_plan, w)
+        };
+        let omega = if accept(&omega) {
             omega
         } else {
             let alt = straightening_plan(&p, obs.pose.theta, &v_plan);
-            if verify_lateral(&p, obs.pose, &v_plan, &alt, lanes) {
+            if accept(&alt) {
                 alt
             } else {
                 return Ok(self.fallback(obs, FallbackReason::Lateral, d_h, event));
@@ -735,6 +931,30 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             gap: d_h,
             lateral_iterations,
         })
+    }
+
+    /// The entry check ([`LanePlanner::entry_ok`]) for a plan: while a change into m has
+    /// not yet put the ego's rectangle into lane m, a plan is accepted only if neither its
+    /// first step nor the certified fallback from there (the braking tail) enters m before
+    /// the vehicles that may be there behind could stop for it. So the fallback, applied
+    /// when a later step finds no plan, is safe here too.
+    fn entering_ok(&self, obs: &LaneObservation<'_, F>, v: &[F; N], omega: &[F; N]) -> bool {
+        let Some(m) = self.alpha else {
+            return true;
+        };
+        let p = self.params();
+        let lane_m = obs.road.band(m, None);
+        if overlaps(p, obs.pose, lane_m) {
+            return true;
+        }
+        let (Some(&v0), Some(&w0)) = (v.first(), omega.first()) else {
+            return true;
+        };
+        let q1 = step(obs.pose, v0, w0, p.h());
+        match first_overlap(p, q1, v0, lane_m) {
+            None => true,
+            Some(j) => self.entry_ok(obs, m, p.h() * F::from_usize(j + 1)),
+        }
     }
 
     fn fallback(
@@ -811,6 +1031,32 @@ fn pose_ok<F: Real>(p: &Params<F>, pose: Pose<F>, band: Band<F>) -> bool {
         && pose.y + ext <= band.hi
         && p.theta_min() <= pose.theta
         && pose.theta <= p.theta_max()
+}
+
+/// `true` if the rectangle at `pose` overlaps the lane `band` (its interior).
+fn overlaps<F: Real>(p: &Params<F>, pose: Pose<F>, lane: Band<F>) -> bool {
+    let ext = lateral_half_extent(p.length(), p.width(), pose.theta);
+    pose.y + ext > lane.lo && pose.y - ext < lane.hi
+}
+
+/// The first step (0 = `pose` itself) of the braking tail from `pose` with v_{t−h} =
+/// `v_prev` (max braking with maximal straightening, as [`braking_tail_ok`] simulates)
+/// at which the rectangle overlaps `lane`; `None` if it stops first.
+fn first_overlap<F: Real>(p: &Params<F>, pose: Pose<F>, v_prev: F, lane: Band<F>) -> Option<usize> {
+    let mut q = pose;
+    let mut v = v_prev;
+    for j in 0..MAX_TAIL_STEPS {
+        if overlaps(p, q, lane) {
+            return Some(j);
+        }
+        if !(v > F::ZERO) {
+            return None;
+        }
+        v = safety::max_braking_command(p, v);
+        q = step(q, v, straighten(p, q.theta, v), p.h());
+    }
+    // Not stopped within the cap: assume it enters at the end of it.
+    Some(MAX_TAIL_STEPS)
 }
 
 /// The certificate of the fallback: from `pose` with v_{t−h} = `v_prev`, max braking

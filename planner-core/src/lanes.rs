@@ -102,6 +102,35 @@ pub struct Other<F> {
     pub beta: Option<u8>,
     /// Age of the information (s): now − the sender's time stamp; 0 when fresh.
     pub age: F,
+    /// It follows the protocols: it hears intentions and yields (the paper's vehicles).
+    /// `false` for a vehicle that does not (scripted, legacy, or whose messages were
+    /// rejected): it may accelerate at amax and never yields to an intention, though it
+    /// brakes for what is physically in its lane (RSS-style), and keeps its lane.
+    pub cooperative: bool,
+    /// A return of the ego's own range sensor ([`crate::sensing`]), not a message: x and
+    /// v are measurements within the sensing error bounds, `lane`/`alpha` the lanes its
+    /// rectangle overlaps (lowest, and the other one if it straddles two), age 0, and no
+    /// intention (β) is known from it.
+    pub sensed: bool,
+}
+
+impl<F: Real> Other<F> {
+    /// A cooperative vehicle known from its V2V message: at `x` in `lane` with speed `v`,
+    /// `length` long, data `age` old, no change declared or under way.
+    pub fn v2v(id: u16, x: F, v: F, length: F, lane: u8, age: F) -> Self {
+        Self {
+            id,
+            x,
+            v,
+            length,
+            lane,
+            alpha: None,
+            beta: None,
+            age,
+            cooperative: true,
+            sensed: false,
+        }
+    }
 }
 
 /// What the ordering and the sets need to know of a vehicle.
@@ -180,20 +209,23 @@ pub fn in_behind_set<F: Real>(ego_x: F, m: u8, c: &Other<F>) -> bool {
     c.x <= ego_x && (c.lane == m || c.alpha == Some(m))
 }
 
+/// `true` if c is in lane `m`, changing to it, or — when its intention is not known
+/// (`intent_known` false: its data is older than the notification bound, or it is known
+/// only from the ego's sensor) — next to `m`, so that it may have started a change into
+/// `m` the ego has not heard of. A vehicle that does not cooperate keeps its lane.
+pub fn may_occupy<F: Real>(m: u8, c: &Other<F>, intent_known: bool) -> bool {
+    c.lane == m || c.alpha == Some(m) || (!intent_known && c.cooperative && c.lane.abs_diff(m) == 1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn other(x: f64, lane: u8, alpha: Option<u8>, beta: Option<u8>) -> Other<f64> {
         Other {
-            id: 9,
-            x,
-            v: 10.0,
-            length: 4.5,
-            lane,
             alpha,
             beta,
-            age: 0.0,
+            ..Other::v2v(9, x, 10.0, 4.5, lane, 0.0)
         }
     }
 

@@ -48,6 +48,7 @@ pub mod params;
 pub mod planner;
 pub mod real;
 pub mod safety;
+pub mod sensing;
 pub mod solver;
 pub mod unicycle;
 pub mod world;
@@ -62,6 +63,7 @@ pub use planner::{
     Command, ConfigError, FallbackReason, InputError, Observation, Planner, StepStatus, Vehicle,
 };
 pub use real::Real;
+pub use sensing::Sensing;
 pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};
 pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};

@@ -100,6 +100,14 @@ pub enum InputError {
     SpeedOutOfRange,
     /// A vehicle length is not positive.
     BadLength,
+    /// A coordinate's magnitude exceeds [`Real::MAX_COORD_M`], where the precision's
+    /// spacing of representable positions approaches the safety margins.
+    OutOfRange,
+}
+
+/// `true` if every value is within ±[`Real::MAX_COORD_M`] (NaN is not).
+pub fn in_range<F: Real>(values: &[F]) -> bool {
+    values.iter().all(|x| x.abs() <= F::MAX_COORD_M)
 }
 
 /// Invalid planner configuration.
@@ -112,6 +120,9 @@ pub enum ConfigError {
     InvalidLatency,
     /// A bus resolution that is negative, not finite, or 1 or more.
     InvalidResolution,
+    /// Sensing values that are not finite, ranges below `Sensing::min_range`, or error
+    /// bounds outside [0, 1).
+    InvalidSensing,
 }
 
 /// The position x̄_t of the nearest obstacle ahead, extent-adjusted (SPEC §1):
@@ -226,6 +237,12 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         }
         if obs.vehicles.iter().any(|c| !(c.length > F::ZERO)) {
             return Err(InputError::BadLength);
+        }
+        if !(in_range(&[obs.x, obs.target_x])
+            && obs.stop_line.is_none_or(|x| in_range(&[x]))
+            && obs.vehicles.iter().all(|c| in_range(&[c.x, c.length])))
+        {
+            return Err(InputError::OutOfRange);
         }
         if !(obs.v_prev >= F::ZERO && obs.v_prev <= self.params.v_max()) {
             return Err(InputError::SpeedOutOfRange);

@@ -55,6 +55,13 @@ pub trait Real:
     /// f32) while J has long converged. The objective accuracy this buys is measured, not
     /// assumed: the Clarabel cross-check asserts ≤ 1e-6 relative (f64).
     const SOLVER_DUAL_TOL: Self;
+    /// Largest coordinate magnitude (m) the planner accepts: positions, road ends and
+    /// targets beyond it are refused (`InputError::OutOfRange`). The margins above hold
+    /// only while one ulp of a coordinate is far below them: f32 10 km (ulp 1 mm, half
+    /// of `SAFETY_MARGIN_M`'s 2 cm is 10 ulp); f64 1,000 km (ulp 1.2e-10 m, a thousandth
+    /// of `VERIFY_SLACK_M`). Beyond, the spacing of representable positions alone can
+    /// exceed the margins (issue 21: at x ≈ 5.6e14 m f64 positions are 6 cm apart).
+    const MAX_COORD_M: Self;
     /// Converts from `f64` (rounding to nearest).
     fn from_f64(x: f64) -> Self;
     /// Converts from a small count (horizon index).
@@ -118,6 +125,7 @@ impl Real for f32 {
     const VERIFY_SLACK_M: Self = 0.005;
     const SOLVER_TOL: Self = 2e-4;
     const SOLVER_DUAL_TOL: Self = 2e-2;
+    const MAX_COORD_M: Self = 1e4;
     #[inline]
     fn from_f64(x: f64) -> Self {
         x as f32
@@ -163,6 +171,7 @@ impl Real for f64 {
     const VERIFY_SLACK_M: Self = 1e-7;
     const SOLVER_TOL: Self = 1e-10;
     const SOLVER_DUAL_TOL: Self = 1e-6;
+    const MAX_COORD_M: Self = 1e6;
     #[inline]
     fn from_f64(x: f64) -> Self {
         x

@@ -34,6 +34,9 @@ pub struct VehicleState<F> {
     pub beta: Option<u8>,
     /// Time the state was measured, by the sender's clock (s).
     pub stamp: F,
+    /// The sender follows the protocols (see [`Other::cooperative`]); a scripted or
+    /// legacy vehicle says it does not.
+    pub cooperative: bool,
 }
 
 /// Why a message was not taken into the view (the view is unchanged).
@@ -141,14 +144,10 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
             let s = &k.state;
             // Cannot fail: `out` has the same capacity as `known`.
             let _ = out.push(Other {
-                id: s.id,
-                x: s.x,
-                v: s.v,
-                length,
-                lane: s.lane,
                 alpha: s.alpha,
                 beta: s.beta,
-                age: (now - s.stamp).max(F::ZERO),
+                cooperative: s.cooperative,
+                ..Other::v2v(s.id, s.x, s.v, length, s.lane, (now - s.stamp).max(F::ZERO))
             });
         }
     }
@@ -183,6 +182,7 @@ mod tests {
             alpha: None,
             beta: None,
             stamp,
+            cooperative: true,
         }
     }
 

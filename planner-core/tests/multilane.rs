@@ -108,16 +108,7 @@ proptest! {
 }
 
 fn other(id: u16, x: f64, v: f64, lane: u8) -> Other<f64> {
-    Other {
-        id,
-        x,
-        v,
-        length: 4.5,
-        lane,
-        alpha: None,
-        beta: None,
-        age: 0.0,
-    }
+    Other::v2v(id, x, v, 4.5, lane, 0.0)
 }
 
 fn obs<'a>(
