@@ -662,7 +662,7 @@ pub fn fig8_placements(layout: &Layout<f64>, seed: u64) -> Vec<Placement> {
             } else {
                 planner_core::intersection::Movement::Right
             };
-            let route = Layout::<f64>::route_index(heading, lane, movement) as u8;
+            let route = layout.route_index(heading, lane, movement).unwrap_or(0) as u8;
             out.push(Placement {
                 id: out.len() as u16 + 1,
                 route,
@@ -973,6 +973,7 @@ impl CrossingScenario {
             outlet_length: lt.outlet_length,
             lane_width: crate::sim::LANE_WIDTH_M,
             v_limit: lt.v_limit,
+            lanes: 2,
         };
         if !(lt.v_limit > 0.0 && lt.v_limit <= p.v_max()) {
             return Err(err(
@@ -1060,7 +1061,7 @@ impl CrossingScenario {
                 Heading::West => 2,
                 Heading::South => 3,
             };
-            let route = Layout::<f64>::route_index(heading, v.lane, movement) as u8;
+            let route = layout.route_index(heading, v.lane, movement).unwrap_or(0) as u8;
             let entry = lt.inlet_length;
             if !(v.s >= 0.5 * LENGTH_M && v.s + 0.5 * LENGTH_M + lim.d0 < entry) {
                 return Err(bad(format!(

@@ -343,14 +343,16 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
     }
 
-    /// The inlet lane of entry `e` (route index / 2: each inlet lane serves two routes).
-    fn inlet_of(e: &Entry<F>) -> u8 {
-        e.route / 2
+    /// The inlet lane of entry `e`, as an index in Ψ's order ([`Layout::inlet_index`]).
+    fn inlet_of(&self, e: &Entry<F>) -> usize {
+        self.layout
+            .route(usize::from(e.route))
+            .map_or(usize::MAX, |r| self.layout.inlet_index(r.inlet))
     }
 
-    /// `true` if `a` is ahead of `b` on the same inlet lane, neither having entered A_S.
-    fn ahead_on_inlet(a: &Entry<F>, b: &Entry<F>) -> bool {
-        Self::inlet_of(a) == Self::inlet_of(b)
+    /// `true` if `a` is ahead of `b` on the same inlet lane, `a` not having entered A_S.
+    fn ahead_on_inlet(&self, a: &Entry<F>, b: &Entry<F>) -> bool {
+        self.inlet_of(a) == self.inlet_of(b)
             && a.id != b.id
             && a.progress > b.progress
             && a.to_line >= F::ZERO
@@ -376,7 +378,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 || !self
                     .entries
                     .iter()
-                    .any(|l| !l.permitted && Self::ahead_on_inlet(l, f));
+                    .any(|l| !l.permitted && self.ahead_on_inlet(l, f));
             if !usable {
                 let _ = revoke.push(i);
             }
@@ -393,8 +395,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     ///
     /// Liveness fix 1: unless `as_written`, a vehicle ranks by the earliest arrival of
     /// itself and every vehicle behind it on its inlet lane, and ties go by inlet lane
-    /// (Ψ / 2, the same order as Ψ across lanes), then by position along it (ahead
-    /// first). So no vehicle ever ranks before a vehicle ahead of it on its own lane.
+    /// (in Ψ's order across lanes), then by position along it (ahead first). So no vehicle ever ranks before a vehicle ahead of it on its own lane.
     /// The paper's order breaks ties between vehicles that arrive together — all that
     /// start inside A_C, or reports delayed or lost on a real bus — by Ψ alone, which can
     /// put a follower first: it gets the permission it cannot use (see
@@ -406,7 +407,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             let behind = self
                 .entries
                 .iter()
-                .filter(|b| !as_written && Self::ahead_on_inlet(e, b))
+                .filter(|b| !as_written && self.ahead_on_inlet(e, b))
                 .map(|b| b.tau);
             let _ = key.push(behind.fold(e.tau, |k, t| k.min(t)));
         }
@@ -428,7 +429,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 return by_key.then(x.route.cmp(&y.route)).then(x.id.cmp(&y.id));
             }
             by_key
-                .then(Self::inlet_of(x).cmp(&Self::inlet_of(y)))
+                .then(self.inlet_of(x).cmp(&self.inlet_of(y)))
                 .then(
                     y.progress
                         .partial_cmp(&x.progress)

@@ -5,12 +5,14 @@
 //! All-Way STOP baseline, and a less conservative pipelined algorithm.
 //!
 //! Geometry (SPEC §8's choice): four roads meet at the origin; A_S is the square
-//! |x|, |y| ≤ a; A_C is A_S grown by `comm_margin`. Right-hand traffic, two inlet and two
-//! outlet lanes per road; lane 0 is the inner one. Inlets are numbered by the heading of
-//! travel d (0 east, 1 north, 2 west, 3 south): inlet (d, l) comes from the side opposite
-//! d. The inner lane goes straight or turns left into the inner outlet lane; the outer
-//! lane goes straight or turns right into the outer outlet lane: 16 routes. Everything is
-//! built for d = 0 and rotated by d · 90°.
+//! |x|, |y| ≤ a; A_C is A_S grown by `comm_margin`. Right-hand traffic, n inlet and n
+//! outlet lanes per road (2 by default, SPEC §8; 1 to [`MAX_LANES`] when configured, SPEC
+//! §10); lane 0 is the inner one. Inlets are numbered by the heading of travel d (0 east,
+//! 1 north, 2 west, 3 south): inlet (d, l) comes from the side opposite d. The inner lane
+//! goes straight or turns left into the inner outlet lane; the outer lane goes straight
+//! or turns right into the outer outlet lane; lanes between go straight into the outlet
+//! lane of the same index (a single lane does all three): 16 routes for n = 2, 4(n + 2)
+//! for n ≥ 2. Everything is built for d = 0 and rotated by d · 90°.
 
 use crate::params::Params;
 use crate::real::Real;
@@ -18,8 +20,13 @@ use crate::safety;
 use crate::unicycle::Pose;
 use heapless::Vec;
 
-/// Routes of the four-road layout.
+/// Routes of the SPEC §8 layout (two lanes per approach).
 pub const ROUTES: usize = 16;
+/// Most lanes per approach.
+pub const MAX_LANES: u8 = 4;
+/// Most routes of any layout: 4 (n + 2) for n = [`MAX_LANES`]; route sets are bit masks
+/// of a `u32`.
+pub const MAX_ROUTES: usize = 24;
 /// Spacing (m) of the poses sampled along a route to compute conflicts: 0.25 m is a
 /// fraction of the vehicle width, so no overlap of swept areas falls between samples
 /// by more than the margin below.
@@ -183,6 +190,8 @@ pub struct LayoutSpec<F> {
     pub lane_width: F,
     /// Speed limit inside the intersection scenario vImax (m/s).
     pub v_limit: F,
+    /// Inlet (and outlet) lanes per approach, 1 to [`MAX_LANES`].
+    pub lanes: u8,
 }
 
 impl<F: Real> LayoutSpec<F> {
@@ -195,6 +204,7 @@ impl<F: Real> LayoutSpec<F> {
             outlet_length: F::from_f64(60.0),
             lane_width: p.spec().lane_width,
             v_limit: F::HALF * p.v_max(),
+            lanes: 2,
         }
     }
 }
@@ -205,9 +215,10 @@ impl<F: Real> LayoutSpec<F> {
 pub enum LayoutError<F> {
     /// A value is NaN, infinite or not positive.
     NotPositive,
-    /// The two inlet lanes (2 Wl) do not fit in the half-size a.
+    /// The n inlet lanes (n Wl) do not fit in the half-size a, or n is not 1 to
+    /// [`MAX_LANES`].
     LanesDoNotFit,
-    /// A turn's radius would be below ρmin (the right turn has radius a − 1.5 Wl).
+    /// A turn's radius would be below ρmin (the right turn has radius a − (n − ½) Wl).
     TurnTooTight {
         /// The radius the layout gives (m).
         radius: F,
@@ -239,14 +250,26 @@ pub enum LayoutError<F> {
 pub struct Layout<F> {
     /// The spec it was built from.
     pub spec: LayoutSpec<F>,
-    /// The 16 routes, indexed by [`Layout::route_index`]; the index is also the fixed
+    /// The routes, indexed by [`Layout::route_index`]; the index is also the fixed
     /// route order Ψ of the FIFO tie-break.
-    pub routes: [Route<F>; ROUTES],
+    pub routes: Vec<Route<F>, MAX_ROUTES>,
     /// conflicts[i] bit j: γ_i ⊗ γ_j.
-    pub conflicts: [u32; ROUTES],
+    pub conflicts: [u32; MAX_ROUTES],
     /// zone_end[i][j]: along route i (distance from its A_S entry), where the part of its
     /// path whose footprint meets route j's swept area ends; NEG if none.
-    pub zone_end: [[F; ROUTES]; ROUTES],
+    pub zone_end: [[F; MAX_ROUTES]; MAX_ROUTES],
+}
+
+/// The manoeuvres inlet lane `lane` of `n` serves, in route order (SPEC §10): the inner
+/// lane (0) straight and left, the outer (n − 1) straight and right, the others straight;
+/// a single lane all three.
+pub fn lane_movements(lane: u8, n: u8) -> &'static [Movement] {
+    match (lane, n) {
+        (0, 1) => &[Movement::Straight, Movement::Left, Movement::Right],
+        (0, _) => &[Movement::Straight, Movement::Left],
+        (l, n) if l + 1 == n => &[Movement::Straight, Movement::Right],
+        _ => &[Movement::Straight],
+    }
 }
 
 fn rotate<F: Real>(p: Pose<F>, quarter_turns: u8) -> Pose<F> {
@@ -332,15 +355,32 @@ pub fn rectangles_meet<F: Real>(a: Pose<F>, b: Pose<F>, hl: F, hw: F) -> bool {
 }
 
 impl<F: Real> Layout<F> {
-    /// Route index of (inlet heading, lane, movement): 4 per heading.
-    pub fn route_index(heading: u8, lane: u8, movement: Movement) -> usize {
-        let k = match (lane, movement) {
-            (0, Movement::Straight) => 0,
-            (0, _) => 1,
-            (_, Movement::Straight) => 2,
-            (_, _) => 3,
-        };
-        usize::from(heading % 4) * 4 + k
+    /// Routes per heading: every lane's movements ([`lane_movements`]).
+    pub fn routes_per_heading(&self) -> usize {
+        (0..self.spec.lanes)
+            .map(|l| lane_movements(l, self.spec.lanes).len())
+            .sum()
+    }
+
+    /// Route index of (inlet heading, lane, movement), if that lane serves that movement:
+    /// by heading, then lane, then the lane's movements in [`lane_movements`] order (for
+    /// the SPEC §8 layout: 4 per heading, inner straight, inner left, outer straight,
+    /// outer right).
+    pub fn route_index(&self, heading: u8, lane: u8, movement: Movement) -> Option<usize> {
+        let n = self.spec.lanes;
+        if heading > 3 || lane >= n {
+            return None;
+        }
+        let before: usize = (0..lane).map(|l| lane_movements(l, n).len()).sum();
+        let k = lane_movements(lane, n)
+            .iter()
+            .position(|&m| m == movement)?;
+        Some(usize::from(heading) * self.routes_per_heading() + before + k)
+    }
+
+    /// The index of inlet track `t` among all inlets (heading-major, Ψ's order).
+    pub fn inlet_index(&self, t: Track) -> usize {
+        usize::from(t.heading) * usize::from(self.spec.lanes) + usize::from(t.lane)
     }
 
     /// Builds and checks a layout.
@@ -357,10 +397,11 @@ impl<F: Real> Layout<F> {
             return Err(LayoutError::NotPositive);
         }
         let (a, wl) = (spec.half_size, spec.lane_width);
-        if !(F::TWO * wl <= a) {
+        let n = F::from_usize(usize::from(spec.lanes));
+        if !(1..=MAX_LANES).contains(&spec.lanes) || !(n * wl <= a) {
             return Err(LayoutError::LanesDoNotFit);
         }
-        let r_right = a - F::from_f64(1.5) * wl;
+        let r_right = a - (n - F::HALF) * wl;
         if !(r_right >= p.rho_min()) {
             return Err(LayoutError::TurnTooTight { radius: r_right });
         }
@@ -381,103 +422,25 @@ impl<F: Real> Layout<F> {
                 needed,
             });
         }
-        let half_pi = F::FRAC_PI_2;
-        let mut routes = [Route {
-            inlet: Track {
-                heading: 0,
-                lane: 0,
-            },
-            outlet: Track {
-                heading: 0,
-                lane: 0,
-            },
-            movement: Movement::Straight,
-            path: Path {
-                pieces: [Segment::Line {
-                    start: Pose::default(),
-                    length: F::ZERO,
-                }; 3],
-            },
-        }; ROUTES];
+        let mut routes: Vec<Route<F>, MAX_ROUTES> = Vec::new();
         for d in 0..4u8 {
-            for (lane, movement) in [
-                (0u8, Movement::Straight),
-                (0, Movement::Left),
-                (1, Movement::Straight),
-                (1, Movement::Right),
-            ] {
-                let y = -(F::from_usize(usize::from(lane)) + F::HALF) * wl;
-                let inlet = Segment::Line {
-                    start: Pose {
-                        x: -a - spec.inlet_length,
-                        y,
-                        theta: F::ZERO,
-                    },
-                    length: spec.inlet_length,
-                };
-                let (route, out_heading, end) = match movement {
-                    Movement::Straight => (
-                        Segment::Line {
-                            start: Pose {
-                                x: -a,
-                                y,
-                                theta: F::ZERO,
-                            },
-                            length: F::TWO * a,
-                        },
-                        0u8,
-                        Pose {
-                            x: a,
+            for lane in 0..spec.lanes {
+                for &movement in lane_movements(lane, spec.lanes) {
+                    let y = -(F::from_usize(usize::from(lane)) + F::HALF) * wl;
+                    let inlet = Segment::Line {
+                        start: Pose {
+                            x: -a - spec.inlet_length,
                             y,
                             theta: F::ZERO,
                         },
-                    ),
-                    Movement::Left => {
-                        // Quarter circle about (−a, a), radius a + Wl/2 (a pure arc).
-                        let r = a - y;
-                        (
-                            Segment::Arc {
-                                cx: -a,
-                                cy: a,
-                                radius: r,
-                                start_angle: -half_pi,
-                                sweep: half_pi,
-                            },
-                            1,
-                            Pose {
-                                x: -a + r,
-                                y: a,
-                                theta: half_pi,
-                            },
-                        )
-                    }
-                    Movement::Right => {
-                        // Quarter circle about (−a, −a), radius a − 1.5 Wl.
-                        let r = a + y;
-                        (
-                            Segment::Arc {
-                                cx: -a,
-                                cy: -a,
-                                radius: r,
-                                start_angle: half_pi,
-                                sweep: -half_pi,
-                            },
-                            3,
-                            Pose {
-                                x: -a + r,
-                                y: -a,
-                                theta: -half_pi,
-                            },
-                        )
-                    }
-                };
-                let outlet = Segment::Line {
-                    start: end,
-                    length: spec.outlet_length,
-                };
-                let i = Self::route_index(d, lane, movement);
-                if let Some(slot) = routes.get_mut(i) {
-                    *slot = Route {
+                        length: spec.inlet_length,
+                    };
+                    let (route, out_heading, end) = Self::turn(a, y, movement);
+                    let outlet = Segment::Line {
+                        start: end,
+                        length: spec.outlet_length,
+                    };
+                    let _ = routes.push(Route {
                         inlet: Track { heading: d, lane },
                         outlet: Track {
                             heading: (d + out_heading) % 4,
@@ -487,18 +450,81 @@ impl<F: Real> Layout<F> {
                         path: Path {
                             pieces: [inlet, route, outlet].map(|s| rotate_segment(s, d)),
                         },
-                    };
+                    });
                 }
             }
         }
         let mut layout = Self {
             spec,
             routes,
-            conflicts: [0; ROUTES],
-            zone_end: [[F::from_f64(-1.0); ROUTES]; ROUTES],
+            conflicts: [0; MAX_ROUTES],
+            zone_end: [[F::from_f64(-1.0); MAX_ROUTES]; MAX_ROUTES],
         };
         layout.compute_conflicts(p);
         Ok(layout)
+    }
+
+    /// The piece through A_S of a manoeuvre entering at (−a, y) heading east: the piece,
+    /// the outlet's heading relative to the inlet's, and the pose where it ends.
+    fn turn(a: F, y: F, movement: Movement) -> (Segment<F>, u8, Pose<F>) {
+        let half_pi = F::FRAC_PI_2;
+        match movement {
+            Movement::Straight => (
+                Segment::Line {
+                    start: Pose {
+                        x: -a,
+                        y,
+                        theta: F::ZERO,
+                    },
+                    length: F::TWO * a,
+                },
+                0u8,
+                Pose {
+                    x: a,
+                    y,
+                    theta: F::ZERO,
+                },
+            ),
+            Movement::Left => {
+                // Quarter circle about (−a, a), radius a − y (a + Wl/2 from the inner lane).
+                let r = a - y;
+                (
+                    Segment::Arc {
+                        cx: -a,
+                        cy: a,
+                        radius: r,
+                        start_angle: -half_pi,
+                        sweep: half_pi,
+                    },
+                    1,
+                    Pose {
+                        x: -a + r,
+                        y: a,
+                        theta: half_pi,
+                    },
+                )
+            }
+            Movement::Right => {
+                // Quarter circle about (−a, −a), radius a + y (a − (n − ½) Wl from the outer
+                // lane).
+                let r = a + y;
+                (
+                    Segment::Arc {
+                        cx: -a,
+                        cy: -a,
+                        radius: r,
+                        start_angle: half_pi,
+                        sweep: -half_pi,
+                    },
+                    3,
+                    Pose {
+                        x: -a + r,
+                        y: -a,
+                        theta: -half_pi,
+                    },
+                )
+            }
+        }
     }
 
     /// γ_i ⊗ γ_j from the swept areas (sampled L × W rectangles plus a margin), plus
@@ -519,8 +545,9 @@ impl<F: Real> Layout<F> {
             let _ = out.push((s1 - s0, r.path.pose_at(s1)));
             out
         };
-        for i in 0..ROUTES {
-            for j in 0..ROUTES {
+        let n = self.routes.len();
+        for i in 0..n {
+            for j in 0..n {
                 let (Some(ri), Some(rj)) = (self.routes.get(i), self.routes.get(j)) else {
                     continue;
                 };
@@ -548,7 +575,7 @@ impl<F: Real> Layout<F> {
 
     /// `true` if routes i and j conflict.
     pub fn conflict(&self, i: usize, j: usize) -> bool {
-        j < ROUTES && self.conflicts.get(i).is_some_and(|c| c >> j & 1 == 1)
+        j < MAX_ROUTES && self.conflicts.get(i).is_some_and(|c| c >> j & 1 == 1)
     }
 
     /// The route with index `i`.
@@ -571,7 +598,8 @@ mod tests {
     fn spec8_layout_conflicts_and_geometry() {
         let p = Params::<f64>::table_i();
         let l = Layout::new(&p, LayoutSpec::spec8(&p)).unwrap();
-        let idx = Layout::<f64>::route_index;
+        let idx = |h, lane, m| l.route_index(h, lane, m).unwrap();
+        assert_eq!(l.routes.len(), ROUTES);
         let ws = idx(0, 0, Movement::Straight); // from the west, straight, inner
         let es = idx(2, 0, Movement::Straight); // from the east, straight, inner
         let wl = idx(0, 0, Movement::Left);
@@ -591,7 +619,7 @@ mod tests {
         // The right turn from the west meets only what shares its lanes or pieces of road.
         assert!(!l.conflict(wr, es));
         for i in 0..ROUTES {
-            for j in 0..ROUTES {
+            for j in 0..MAX_ROUTES {
                 assert_eq!(l.conflict(i, j), l.conflict(j, i), "symmetric {i} {j}");
             }
         }
@@ -606,6 +634,52 @@ mod tests {
         // The north inlet (heading south) drives on the west half (x = −1.8 inner).
         let n = l.route(ns).unwrap().path.pose_at(50.0);
         assert!((n.x + 1.8).abs() < 1e-9 && n.y > 12.0);
+    }
+
+    /// SPEC §10: three lanes per approach: inner straight + left, middle straight,
+    /// outer straight + right; 20 routes; the right turn from the outer lane has radius
+    /// a − 2.5 Wl, so a must be at least 2.5 Wl + ρmin.
+    #[test]
+    fn three_lane_layout() {
+        let p = Params::<f64>::table_i();
+        let mut spec = LayoutSpec::spec8(&p);
+        spec.lanes = 3;
+        assert!(matches!(
+            Layout::new(&p, spec),
+            Err(LayoutError::TurnTooTight { .. })
+        ));
+        spec.half_size = 15.0;
+        let l = Layout::new(&p, spec).unwrap();
+        assert_eq!((l.routes_per_heading(), l.routes.len()), (5, 20));
+        assert_eq!(l.route_index(1, 1, Movement::Left), None);
+        assert_eq!(l.route_index(1, 2, Movement::Left), None);
+        let mid = l.route_index(1, 1, Movement::Straight).unwrap();
+        assert_eq!(mid, 5 + 2);
+        let r = l.route(mid).unwrap();
+        assert_eq!(
+            (r.inlet, r.outlet),
+            (
+                Track {
+                    heading: 1,
+                    lane: 1
+                },
+                Track {
+                    heading: 1,
+                    lane: 1
+                }
+            )
+        );
+        let right = l.route_index(0, 2, Movement::Right).unwrap();
+        let rr = l.route(right).unwrap();
+        assert!(
+            (rr.path.exit() - rr.path.entry() - (15.0 - 2.5 * 3.6) * core::f64::consts::FRAC_PI_2)
+                .abs()
+                < 1e-9
+        );
+        assert_eq!(l.inlet_index(rr.inlet), 2);
+        for i in 0..20 {
+            assert!(l.conflict(i, i));
+        }
     }
 
     #[test]

@@ -253,8 +253,8 @@ fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
 /// ranks the follower first.
 fn queue(l: &Layout<f64>) -> (CrossingReport<f64>, CrossingReport<f64>) {
     use planner_core::intersection::Movement;
-    let leader_route = Layout::<f64>::route_index(0, 0, Movement::Left) as u8;
-    let follower_route = Layout::<f64>::route_index(0, 0, Movement::Straight) as u8;
+    let leader_route = l.route_index(0, 0, Movement::Left).unwrap() as u8;
+    let follower_route = l.route_index(0, 0, Movement::Straight).unwrap() as u8;
     assert!(follower_route < leader_route, "Ψ puts the follower first");
     let leader = report(l, 1, leader_route, At::Waiting);
     let mut follower = report(l, 2, follower_route, At::Waiting);
