@@ -7,8 +7,8 @@
 use crate::crc;
 use crate::wire::{
     frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, CLOCK_ADDRESS,
-    HEADING_RES, MANAGER_ADDRESS, MAX_FRAMES, NO_LANE, POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES,
-    YAW_RATE_RES,
+    HEADING_RES, MANAGER_ADDRESS, MANAGER_LAST, MAX_FRAMES, NO_LANE, POS_RES, SPEED_LIMIT,
+    SPEED_RES, TIME_RES, YAW_RATE_RES,
 };
 use embedded_can::{ExtendedId, Frame, Id};
 use heapless::Vec;
@@ -112,6 +112,106 @@ fn time<F: Real>(t: F) -> Result<u32, EncodeError> {
     Ok(q(t, TIME_RES, 0.0, f64::from(u32::MAX), Field::Time)? as u32)
 }
 
+/// A track as its byte: heading in the low nibble, lane in the high one.
+fn track(t: TrackWire) -> Result<u8, EncodeError> {
+    if t.heading < 4 && t.lane < 16 {
+        Ok(t.heading | t.lane << 4)
+    } else {
+        Err(EncodeError::OutOfRange(Field::TrackHeading))
+    }
+}
+
+/// A position along a path, 0.01 m in 24 bits.
+fn path_position<F: Real>(s: F) -> Result<u32, EncodeError> {
+    Ok(q(
+        s,
+        POS_RES,
+        0.0,
+        f64::from(0xFF_FFFFu32),
+        Field::PathPosition,
+    )? as u32)
+}
+
+/// A state's fields, quantized (the same for [`Message::State`] and
+/// [`Message::Located`]; only their places differ).
+struct StateWire {
+    x: i32,
+    y: i16,
+    heading: i16,
+    speed: u16,
+    yaw: i16,
+    lanes: u8,
+    beta_flags: u8,
+    stamp: u32,
+}
+
+impl StateWire {
+    fn of<F: Real>(s: &VehicleState<F>) -> Result<Self, EncodeError> {
+        let pi = core::f64::consts::PI;
+        let th = s.theta.to_f64();
+        // Wrap into (−π, π] so any heading fits the i16 field.
+        let th = th - 2.0 * pi * libm_floor((th + pi) / (2.0 * pi));
+        // β in the low nibble; flags in the high one (bit 4: does not cooperate).
+        let flags = if s.cooperative { 0 } else { NOT_COOPERATIVE };
+        Ok(Self {
+            x: q(
+                s.x,
+                POS_RES,
+                f64::from(i32::MIN),
+                f64::from(i32::MAX),
+                Field::X,
+            )? as i32,
+            y: q(s.y, POS_RES, -32768.0, 32767.0, Field::Y)? as i16,
+            heading: q(
+                F::from_f64(th),
+                HEADING_RES,
+                -32768.0,
+                32767.0,
+                Field::Heading,
+            )? as i16,
+            speed: q(s.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16,
+            yaw: q(s.omega, YAW_RATE_RES, -32768.0, 32767.0, Field::YawRate)? as i16,
+            lanes: lane_nibble(Some(s.lane))? | lane_nibble(s.alpha)? << 4,
+            beta_flags: lane_nibble(s.beta)? | flags,
+            stamp: time(s.stamp)?,
+        })
+    }
+
+    /// The state of vehicle `id` from these fields, if plausible.
+    fn state<F: Real>(&self, id: u16) -> Result<VehicleState<F>, DecodeError> {
+        let f = |x: f64| F::from_f64(x);
+        let v = f64::from(self.speed) * SPEED_RES;
+        if v > SPEED_LIMIT {
+            return Err(DecodeError::OutOfRange(Field::Speed));
+        }
+        let own = self.lanes & 0x0F;
+        if own == NO_LANE {
+            return Err(DecodeError::OutOfRange(Field::Lane));
+        }
+        // Flags: only "does not cooperate" is defined; the rest must be clear.
+        if self.beta_flags & 0xF0 & !NOT_COOPERATIVE != 0 {
+            return Err(DecodeError::OutOfRange(Field::Flag));
+        }
+        let th = f64::from(self.heading) * HEADING_RES;
+        if th.abs() > core::f64::consts::PI + HEADING_RES {
+            return Err(DecodeError::OutOfRange(Field::Heading));
+        }
+        Ok(VehicleState {
+            id,
+            x: f(f64::from(self.x) * POS_RES),
+            y: f(f64::from(self.y) * POS_RES),
+            theta: f(th),
+            v: f(v),
+            omega: f(f64::from(self.yaw) * YAW_RATE_RES),
+            lane: own,
+            alpha: lane(self.lanes >> 4),
+            beta: lane(self.beta_flags & 0x0F),
+            stamp: f(f64::from(self.stamp) * TIME_RES),
+            cooperative: self.beta_flags & NOT_COOPERATIVE == 0,
+        })
+    }
+}
+
 /// The payload bytes of a message (without CRC), and their length.
 fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize), EncodeError> {
     let mut b = [0u8; MAX_FRAMES * CHUNK];
@@ -120,62 +220,63 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
         Message::State(s) => {
             // Frame 0: id, x, lanes; frame 1: y, heading, speed, β; frame 2: yaw rate,
             // stamp, CRC (no field straddles two frames).
+            let q = StateWire::of(s)?;
             w.put(&s.id.to_le_bytes());
+            w.put(&q.x.to_le_bytes());
+            w.put(&[q.lanes]);
+            w.put(&q.y.to_le_bytes());
+            w.put(&q.heading.to_le_bytes());
+            w.put(&q.speed.to_le_bytes());
+            w.put(&[q.beta_flags]);
+            w.put(&q.yaw.to_le_bytes());
+            w.put(&q.stamp.to_le_bytes());
+        }
+        Message::Located { segment, state: s } => {
+            // Frame 0: id, segment, lanes, β and flags | 1: x, y | 2: heading, speed, yaw
+            // rate | 3: stamp, CRC (padding keeps every field in one frame).
+            let q = StateWire::of(s)?;
+            w.put(&s.id.to_le_bytes());
+            w.put(&segment.to_le_bytes());
+            w.put(&[q.lanes, q.beta_flags, 0]);
+            w.put(&q.x.to_le_bytes());
+            w.put(&q.y.to_le_bytes());
+            w.put(&[0]);
+            w.put(&q.heading.to_le_bytes());
+            w.put(&q.speed.to_le_bytes());
+            w.put(&q.yaw.to_le_bytes());
+            w.put(&[0]);
+            w.put(&q.stamp.to_le_bytes());
+        }
+        Message::JunctionRequest { junction, request } => {
+            // Frame 0: id, junction, inlet, outlet, speed | 1: s, arrival | 2: CRC.
+            let r = request;
+            w.put(&r.id.to_le_bytes());
+            w.put(&[*junction, track(r.inlet)?, track(r.outlet)?]);
+            w.put(&(q(r.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16).to_le_bytes());
             w.put(
-                &(q(
-                    s.x,
-                    POS_RES,
-                    f64::from(i32::MIN),
-                    f64::from(i32::MAX),
-                    Field::X,
-                )? as i32)
-                    .to_le_bytes(),
+                path_position(r.s)?
+                    .to_le_bytes()
+                    .get(..3)
+                    .unwrap_or(&[0, 0, 0]),
             );
-            w.put(&[lane_nibble(Some(s.lane))? | lane_nibble(s.alpha)? << 4]);
-            w.put(&(q(s.y, POS_RES, -32768.0, 32767.0, Field::Y)? as i16).to_le_bytes());
-            let pi = core::f64::consts::PI;
-            let th = s.theta.to_f64();
-            // Wrap into (−π, π] so any heading fits the i16 field.
-            let th = th - 2.0 * pi * libm_floor((th + pi) / (2.0 * pi));
-            w.put(
-                &(q(
-                    F::from_f64(th),
-                    HEADING_RES,
-                    -32768.0,
-                    32767.0,
-                    Field::Heading,
-                )? as i16)
-                    .to_le_bytes(),
-            );
-            w.put(&(q(s.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16).to_le_bytes());
-            // β in the low nibble; flags in the high one (bit 4: does not cooperate).
-            let flags = if s.cooperative { 0 } else { NOT_COOPERATIVE };
-            w.put(&[lane_nibble(s.beta)? | flags]);
-            w.put(
-                &(q(s.omega, YAW_RATE_RES, -32768.0, 32767.0, Field::YawRate)? as i16)
-                    .to_le_bytes(),
-            );
-            w.put(&time(s.stamp)?.to_le_bytes());
+            w.put(&time(r.arrival)?.to_le_bytes());
+        }
+        Message::JunctionExit { junction, id, at } => {
+            // Frame 0: id, junction, time | 1: CRC.
+            w.put(&id.to_le_bytes());
+            w.put(&[*junction]);
+            w.put(&time(*at)?.to_le_bytes());
         }
         Message::Request(r) => {
-            let track = |t: TrackWire| {
-                if t.heading < 4 && t.lane < 16 {
-                    Ok(t.heading | t.lane << 4)
-                } else {
-                    Err(EncodeError::OutOfRange(Field::TrackHeading))
-                }
-            };
             // Frame 0: id, inlet, outlet, s; frame 1: arrival, speed, CRC.
             w.put(&r.id.to_le_bytes());
             w.put(&[track(r.inlet)?, track(r.outlet)?]);
-            let s = q(
-                r.s,
-                POS_RES,
-                0.0,
-                f64::from(0xFF_FFFFu32),
-                Field::PathPosition,
-            )? as u32;
-            w.put(s.to_le_bytes().get(..3).unwrap_or(&[0, 0, 0]));
+            w.put(
+                path_position(r.s)?
+                    .to_le_bytes()
+                    .get(..3)
+                    .unwrap_or(&[0, 0, 0]),
+            );
             w.put(&time(r.arrival)?.to_le_bytes());
             w.put(&(q(r.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16).to_le_bytes());
         }
@@ -360,12 +461,20 @@ impl<const CAP: usize> Reassembler<CAP> {
             }
             let msg = decode_body::<F>(kind, body)?;
             let sender_ok = match &msg {
-                Message::State(s) => s.id & 0xFF == u16::from(sa),
-                Message::Request(r) => r.id & 0xFF == u16::from(sa),
-                Message::Exit { id, .. } => id & 0xFF == u16::from(sa),
-                // Permissions come only from the intersection manager: a vehicle
-                // cannot grant itself (or another) entry to A_S.
-                Message::Grant { .. } | Message::Revoke { .. } => sa == MANAGER_ADDRESS,
+                Message::State(s) | Message::Located { state: s, .. } => {
+                    s.id & 0xFF == u16::from(sa)
+                }
+                Message::Request(r) | Message::JunctionRequest { request: r, .. } => {
+                    r.id & 0xFF == u16::from(sa)
+                }
+                Message::Exit { id, .. } | Message::JunctionExit { id, .. } => {
+                    id & 0xFF == u16::from(sa)
+                }
+                // Permissions come only from an intersection manager: a vehicle cannot
+                // grant itself (or another) entry to A_S.
+                Message::Grant { .. } | Message::Revoke { .. } => {
+                    (MANAGER_ADDRESS..=MANAGER_LAST).contains(&sa)
+                }
                 Message::Sync { .. } => sa == CLOCK_ADDRESS,
             };
             if !sender_ok {
@@ -374,6 +483,7 @@ impl<const CAP: usize> Reassembler<CAP> {
             // States must be newer than the last (by stamp), ticks later (by period).
             let ordinal = match kind {
                 MessageKind::State => Some(rd_u32(body, 16)),
+                MessageKind::Located => Some(rd_u32(body, 21)),
                 MessageKind::Sync => Some(rd_u32(body, 0)),
                 _ => None,
             };
@@ -398,64 +508,89 @@ fn lane(n: u8) -> Option<u8> {
     (n != NO_LANE).then_some(n)
 }
 
+/// A track from its byte, if its heading is one of the four.
+fn track_of(x: u8) -> Result<TrackWire, DecodeError> {
+    let t = TrackWire {
+        heading: x & 0x0F,
+        lane: x >> 4,
+    };
+    if t.heading > 3 {
+        return Err(DecodeError::OutOfRange(Field::TrackHeading));
+    }
+    Ok(t)
+}
+
+/// A speed from its field, if plausible.
+fn speed(raw: u16) -> Result<f64, DecodeError> {
+    let v = f64::from(raw) * SPEED_RES;
+    if v > SPEED_LIMIT {
+        return Err(DecodeError::OutOfRange(Field::Speed));
+    }
+    Ok(v)
+}
+
 /// Decodes a verified payload and checks plausibility.
 fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, DecodeError> {
     let f = |x: f64| F::from_f64(x);
     let byte = |i: usize| b.get(i).copied().unwrap_or(0);
     Ok(match kind {
-        MessageKind::State => {
-            let lanes = byte(6);
-            let v = f64::from(rd_u16(b, 11)) * SPEED_RES;
-            if v > SPEED_LIMIT {
-                return Err(DecodeError::OutOfRange(Field::Speed));
+        MessageKind::State => Message::State(
+            StateWire {
+                x: rd_u32(b, 2) as i32,
+                lanes: byte(6),
+                y: rd_u16(b, 7) as i16,
+                heading: rd_u16(b, 9) as i16,
+                speed: rd_u16(b, 11),
+                beta_flags: byte(13),
+                yaw: rd_u16(b, 14) as i16,
+                stamp: rd_u32(b, 16),
             }
-            let own = lanes & 0x0F;
-            if own == NO_LANE {
-                return Err(DecodeError::OutOfRange(Field::Lane));
+            .state(rd_u16(b, 0))?,
+        ),
+        MessageKind::Located => Message::Located {
+            segment: rd_u16(b, 2),
+            state: StateWire {
+                lanes: byte(4),
+                beta_flags: byte(5),
+                x: rd_u32(b, 7) as i32,
+                y: rd_u16(b, 11) as i16,
+                heading: rd_u16(b, 14) as i16,
+                speed: rd_u16(b, 16),
+                yaw: rd_u16(b, 18) as i16,
+                stamp: rd_u32(b, 21),
             }
-            // Flags: only "does not cooperate" is defined; the rest must be clear.
-            if byte(13) & 0xF0 & !NOT_COOPERATIVE != 0 {
-                return Err(DecodeError::OutOfRange(Field::Flag));
+            .state(rd_u16(b, 0))?,
+        },
+        MessageKind::JunctionRequest => {
+            let (inlet, outlet) = (track_of(byte(3))?, track_of(byte(4))?);
+            let s = u32::from(rd_u16(b, 7)) | u32::from(byte(9)) << 16;
+            Message::JunctionRequest {
+                junction: byte(2),
+                request: Request {
+                    id: rd_u16(b, 0),
+                    inlet,
+                    outlet,
+                    arrival: f(f64::from(rd_u32(b, 10)) * TIME_RES),
+                    s: f(f64::from(s) * POS_RES),
+                    v: f(speed(rd_u16(b, 5))?),
+                },
             }
-            let th = f64::from(rd_u16(b, 9) as i16) * HEADING_RES;
-            if th.abs() > core::f64::consts::PI + HEADING_RES {
-                return Err(DecodeError::OutOfRange(Field::Heading));
-            }
-            Message::State(VehicleState {
-                id: rd_u16(b, 0),
-                x: f(f64::from(rd_u32(b, 2) as i32) * POS_RES),
-                y: f(f64::from(rd_u16(b, 7) as i16) * POS_RES),
-                theta: f(th),
-                v: f(v),
-                omega: f(f64::from(rd_u16(b, 14) as i16) * YAW_RATE_RES),
-                lane: own,
-                alpha: lane(lanes >> 4),
-                beta: lane(byte(13) & 0x0F),
-                stamp: f(f64::from(rd_u32(b, 16)) * TIME_RES),
-                cooperative: byte(13) & NOT_COOPERATIVE == 0,
-            })
         }
+        MessageKind::JunctionExit => Message::JunctionExit {
+            junction: byte(2),
+            id: rd_u16(b, 0),
+            at: f(f64::from(rd_u32(b, 3)) * TIME_RES),
+        },
         MessageKind::Request => {
-            let track = |x: u8| TrackWire {
-                heading: x & 0x0F,
-                lane: x >> 4,
-            };
-            let (inlet, outlet) = (track(byte(2)), track(byte(3)));
-            if inlet.heading > 3 || outlet.heading > 3 {
-                return Err(DecodeError::OutOfRange(Field::TrackHeading));
-            }
+            let (inlet, outlet) = (track_of(byte(2))?, track_of(byte(3))?);
             let s = u32::from(rd_u16(b, 4)) | u32::from(byte(6)) << 16;
-            let v = f64::from(rd_u16(b, 11)) * SPEED_RES;
-            if v > SPEED_LIMIT {
-                return Err(DecodeError::OutOfRange(Field::Speed));
-            }
             Message::Request(Request {
                 id: rd_u16(b, 0),
                 inlet,
                 outlet,
                 arrival: f(f64::from(rd_u32(b, 7)) * TIME_RES),
                 s: f(f64::from(s) * POS_RES),
-                v: f(v),
+                v: f(speed(rd_u16(b, 11))?),
             })
         }
         MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit => {
@@ -684,9 +819,9 @@ mod tests {
         )
         .unwrap();
         assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::BadFrameIndex));
-        let raw = 6 << 26 | 0xFF << 16 | 0x90 << 8 | 1;
+        let raw = 6 << 26 | 0xFF << 16 | 0xC0 << 8 | 1;
         let f = TestFrame::new(ExtendedId::new(raw).unwrap(), &[0; 8]).unwrap();
-        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::UnknownKind(9)));
+        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::UnknownKind(12)));
         assert!(r.slots.is_empty());
     }
 }

@@ -17,6 +17,12 @@
 //! y 0.01 m (i16), position along an intersection path 0.01 m (u24); times 1 ms (u32, the
 //! sender's clock); lanes 4 bits, 15 = none. All little-endian.
 //!
+//! **Networks** add a state with its segment (kind 7, 4 frames: id, segment, lanes, β
+//! and flags | x, y | heading, speed, yaw rate | stamp, CRC), a request with its junction
+//! (kind 8, 3 frames: id, junction, inlet, outlet, speed | s, arrival | CRC) and an exit
+//! with its junction (kind 9, 2 frames); grants come from each junction manager's own
+//! address. No field straddles two frames, so a DBC describes every one.
+//!
 //! **Time master**: a simulated fleet runs in lock-step on one tick per period,
 //! [`Message::Sync`] from [`CLOCK_ADDRESS`] (period number u32, end flag u8), protected
 //! like every other message.
@@ -30,13 +36,24 @@ pub const PDU_FORMAT: u32 = 0xFF;
 /// Payload bytes per frame (byte 0 is the header).
 pub const CHUNK: usize = 7;
 /// The most frames a message spans.
-pub const MAX_FRAMES: usize = 3;
+pub const MAX_FRAMES: usize = 4;
 /// Source address of a fleet's time master (sends [`Message::Sync`]); vehicles use
 /// addresses below it.
 pub const CLOCK_ADDRESS: u8 = 0xF0;
-/// Source address of an intersection manager: the only sender whose [`Message::Grant`]
-/// and [`Message::Revoke`] a receiver accepts.
+/// Source address of an intersection manager (of the first junction of a network): the
+/// managers' addresses, [`MANAGER_ADDRESS`]..=[`MANAGER_LAST`], are the only senders whose
+/// [`Message::Grant`] and [`Message::Revoke`] a receiver accepts.
 pub const MANAGER_ADDRESS: u8 = 0xF1;
+/// The last manager address (13 junctions: 0xF1–0xFD; 0xFE is J1939's null address).
+pub const MANAGER_LAST: u8 = 0xFD;
+
+/// The source address of junction `j`'s manager, if it has one.
+pub fn manager_address(j: usize) -> Option<u8> {
+    u8::try_from(j)
+        .ok()
+        .and_then(|j| MANAGER_ADDRESS.checked_add(j))
+        .filter(|&a| a <= MANAGER_LAST)
+}
 /// "No lane" in a 4-bit lane field.
 pub const NO_LANE: u8 = 15;
 
@@ -68,14 +85,21 @@ pub enum MessageKind {
     Exit = 5,
     /// Time master's period tick, CANopen-SYNC-style (1 frame).
     Sync = 6,
+    /// V2V vehicle state on a network's segment (4 frames).
+    Located = 7,
+    /// V2I crossing request at a network's junction (3 frames).
+    JunctionRequest = 8,
+    /// V2I exit from a network's junction (2 frames).
+    JunctionExit = 9,
 }
 
 impl MessageKind {
     /// Frames a message of this kind spans.
     pub fn frames(self) -> usize {
         match self {
-            MessageKind::State => 3,
-            MessageKind::Request => 2,
+            MessageKind::Located => 4,
+            MessageKind::State | MessageKind::JunctionRequest => 3,
+            MessageKind::Request | MessageKind::JunctionExit => 2,
             MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit | MessageKind::Sync => 1,
         }
     }
@@ -88,6 +112,9 @@ impl MessageKind {
             4 => MessageKind::Revoke,
             5 => MessageKind::Exit,
             6 => MessageKind::Sync,
+            7 => MessageKind::Located,
+            8 => MessageKind::JunctionRequest,
+            9 => MessageKind::JunctionExit,
             _ => return None,
         })
     }
@@ -147,6 +174,29 @@ pub enum Message<F> {
         /// When (s).
         at: F,
     },
+    /// A vehicle state on segment `segment` of a network, in its frame (V2V).
+    Located {
+        /// The segment (scenario index).
+        segment: u16,
+        /// The state.
+        state: VehicleState<F>,
+    },
+    /// A crossing request at junction `junction` of a network (V2I).
+    JunctionRequest {
+        /// The junction (index; its manager sends from [`manager_address`]).
+        junction: u8,
+        /// The request.
+        request: Request<F>,
+    },
+    /// `id` left junction `junction` of a network at `at` (s).
+    JunctionExit {
+        /// The junction.
+        junction: u8,
+        /// The vehicle.
+        id: u16,
+        /// When (s).
+        at: F,
+    },
     /// The time master's tick: period `period` begins (a simulated fleet's clock, sent by
     /// [`CLOCK_ADDRESS`]; nodes act on it as CANopen nodes act on SYNC).
     Sync {
@@ -167,6 +217,9 @@ impl<F> Message<F> {
             Message::Revoke { .. } => MessageKind::Revoke,
             Message::Exit { .. } => MessageKind::Exit,
             Message::Sync { .. } => MessageKind::Sync,
+            Message::Located { .. } => MessageKind::Located,
+            Message::JunctionRequest { .. } => MessageKind::JunctionRequest,
+            Message::JunctionExit { .. } => MessageKind::JunctionExit,
         }
     }
 }

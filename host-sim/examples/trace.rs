@@ -1,6 +1,6 @@
 //! Prints our solver's iterations on one instance:
 //! `cargo run --release -p host-sim --example trace -- f32|f64 v_prev gap wx wv wd target v_ref`
-use host_sim::instances::InstanceSpec;
+use host_sim::reference::instances::InstanceSpec;
 use planner_core::{IpmSolver, Real};
 
 fn run<F: Real>(spec: &InstanceSpec) {

@@ -1,27 +1,25 @@
 //! # host-sim
 //!
-//! Host-side tools around planner-core: a simulator in which every vehicle is its own
-//! planner instance talking only over a bus, with independent monitors, scenario files,
-//! traces and plots; the Clarabel reference solver; the planner benchmark.
+//! Host-side tools around planner-core: one world of roads and intersections in which
+//! every vehicle is its own planner instance talking only over a bus, with independent
+//! monitors; the paper's experiments and the theorems' sweeps; scenario files, traces,
+//! plots and a viewer; the Clarabel reference solver and the planner benchmark.
+//!
+//! - [`scenario`]: the scenario file format (roads, intersections, networks), validated;
+//! - [`world`]: the network, vehicles, managers and the one simulation loop;
+//! - [`bus`]: the bus trait, the in-process bus with faults, CAN media, fleets of tasks;
+//! - [`monitor`]: ground-truth safety checks, liveness and the deadlock detector;
+//! - [`experiments`]: the paper's figures and the sweeps, each settings → result struct;
+//! - [`output`]: traces, plots and the viewer;
+//! - [`reference`]: the Clarabel reference, random instances, the planner benchmark.
 #![deny(missing_docs)]
 // `!(x > y)` is used on purpose: unlike `x <= y` it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-pub mod bench;
 pub mod bus;
-pub mod can;
-pub mod crossing_fleet;
-pub mod faulty;
-pub mod fleet;
-pub mod instances;
-pub mod intersection;
+pub mod experiments;
 pub mod monitor;
-pub mod multilane;
-pub mod par;
-pub mod platoon;
-pub mod plot;
+pub mod output;
 pub mod reference;
-pub mod scale;
 pub mod scenario;
-pub mod sim;
-pub mod trace;
+pub mod world;

@@ -5,25 +5,19 @@
 mod common;
 
 use can_gateway::PlainFrame;
-use common::{builtin, Failing};
+use common::{builtin, load as scenario, Failing};
 use embedded_can::{Frame, Id, StandardId};
+use host_sim::bus::can::{CanBus, CanPort, Hub, HubPort};
+use host_sim::bus::fleet::{self, FleetError, FleetSummary, Medium, Node, RESOLUTION};
 use host_sim::bus::Bus;
-use host_sim::can::{CanBus, CanPort, Hub, HubPort, RESOLUTION};
-use host_sim::fleet::{self, FleetError, FleetSummary, Medium};
-use host_sim::scenario::Scenario;
-use host_sim::sim::{RunSummary, Simulation, SolverChoice};
+use host_sim::world::summary::Summary;
+use host_sim::world::{SolverChoice, World};
 use std::collections::VecDeque;
 use std::io;
 use std::process::Command;
 use std::time::{Duration, SystemTime};
 
-fn scenario(name: &str) -> Scenario {
-    let path = builtin(name);
-    let text = std::fs::read_to_string(&path).expect("read");
-    Scenario::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn safe_and_complete(s: &RunSummary) {
+fn safe_and_complete(s: &Summary) {
     common::assert_safe(s);
     assert!(s.completed, "{s:?}");
 }
@@ -35,7 +29,6 @@ fn on_hub(name: &str) -> FleetSummary {
         None,
         &Medium::Hub,
         &mut |_| {},
-        &mut |_, _| {},
     )
     .unwrap_or_else(|e| panic!("{e}"))
 }
@@ -57,14 +50,7 @@ fn multilane_fleet_on_can_frames() {
     assert_eq!(f.state_latency.count, v * (v - 1) * (f.periods - 1));
     assert_eq!(f.run.lane_changes.changes, 8);
     // As on the in-process bus, to within a period (the planners see rounded states).
-    let exact = host_sim::sim::run_scenario(
-        scenario("multilane.toml"),
-        SolverChoice::Ours,
-        None,
-        &mut |_| {},
-        &mut |_, _| {},
-    )
-    .expect("runs");
+    let exact = common::run_world(scenario("multilane.toml"));
     let (a, b) = (
         exact.lane_changes.all_done_at_s.expect("done"),
         f.run.lane_changes.all_done_at_s.expect("done"),
@@ -79,8 +65,8 @@ fn can_bus_behind_the_bus_trait_equals_the_fleet() {
     let sc = scenario("dead-end.toml");
     let ids: Vec<u16> = sc.vehicles.iter().map(|v| v.id).collect();
     let hub = Hub::new();
-    let bus = CanBus::new(&ids, |_| Ok(hub.port())).expect("ports");
-    let mut sim = Simulation::<20, _>::with_bus(sc, SolverChoice::Ours, None, bus);
+    let bus = CanBus::new(&ids, &sc.network, |_| Ok(hub.port())).expect("ports");
+    let mut sim = World::<20, _>::with_bus(sc, SolverChoice::Ours, None, bus);
     sim.set_bus_resolution(RESOLUTION).expect("valid");
     let mut rows = Vec::new();
     while !sim.finished() {
@@ -95,7 +81,6 @@ fn can_bus_behind_the_bus_trait_equals_the_fleet() {
         None,
         &Medium::Hub,
         &mut |r| fleet_rows.push(*r),
-        &mut |_, _| {},
     )
     .expect("runs");
     assert_eq!(rows, fleet_rows);
@@ -154,7 +139,6 @@ fn duplicates_and_foreign_frames_change_nothing() {
             })
         },
         &mut |_| {},
-        &mut |_, _| {},
     )
     .expect("runs");
     let r = &noisy.can.rejected;
@@ -183,14 +167,13 @@ fn a_failing_node_ends_the_run_with_its_error() {
         SolverChoice::Ours,
         None,
         "failing hub",
-        |id| {
+        |n| {
             Ok(Failing {
                 inner: hub.port(),
-                left: if id == Some(4) { 30 } else { u32::MAX },
+                left: if n == Node::Vehicle(4) { 30 } else { u32::MAX },
             })
         },
         &mut |_| {},
-        &mut |_, _| {},
     );
     match r {
         Err(FleetError::Vehicle { id: 4, error }) => assert!(error.contains("bus-off"), "{error}"),
@@ -203,7 +186,8 @@ fn a_failing_node_ends_the_run_with_its_error() {
 #[test]
 fn can_bus_refuses_what_it_cannot_carry() {
     let hub = Hub::new();
-    let mut bus = CanBus::new(&[1, 2], |_| Ok(hub.port())).expect("ports");
+    let road = host_sim::world::network::Network::road(1, None, 27.8);
+    let mut bus = CanBus::new(&[1, 2], &road, |_| Ok(hub.port())).expect("ports");
     let report = planner_core::crossing::CrossingReport {
         id: 1,
         route: 0,
@@ -211,9 +195,18 @@ fn can_bus_refuses_what_it_cannot_carry() {
         v: 1.0,
         length: 4.5,
     };
-    let msg = host_sim::bus::Message::Crossing(report, 0.0);
+    // A road has no junction whose routes could carry a crossing report.
+    let msg = host_sim::bus::Message::Crossing {
+        report,
+        stamp: 0.0,
+        junction: 0,
+    };
     assert!(bus.send(1, &msg, 0.0).is_err());
-    let left = host_sim::bus::Message::Left { id: 1, at: 0.5 };
+    let left = host_sim::bus::Message::Left {
+        id: 1,
+        at: 0.5,
+        junction: 0,
+    };
     assert!(bus.send(3, &left, 0.0).is_err());
     bus.send(1, &left, 0.0).expect("sent");
     let mut out = Vec::new();
@@ -221,7 +214,7 @@ fn can_bus_refuses_what_it_cannot_carry() {
     assert_eq!(out.len(), 1);
     assert_eq!(out[0].msg, left);
     // Ids that are not CAN source addresses are refused.
-    assert!(CanBus::new(&[0xF0], |_| Ok(hub.port())).is_err());
+    assert!(CanBus::new(&[0xF0], &road, |_| Ok(hub.port())).is_err());
 }
 
 fn bin() -> Command {

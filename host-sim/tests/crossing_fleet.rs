@@ -7,17 +7,16 @@ mod common;
 use can_gateway::wire;
 use can_gateway::{encode, Frames, PlainFrame, Reassembler};
 use common::{assert_all_crossed_safely, builtin, Failing};
-use host_sim::can::{report_from_wire, report_to_wire, CanPort, Hub, HubPort};
-use host_sim::crossing_fleet::{self, CrossingFleetSummary};
-use host_sim::fleet::{FleetError, Medium, TIMEOUT};
-use host_sim::intersection::{CrossingScenario, MANAGER_NODE};
-use host_sim::sim::LENGTH_M;
+use host_sim::bus::can::{CanPort, Hub, HubPort, WireMap};
+use host_sim::bus::fleet::{self, FleetError, FleetSummary, Medium, Node, TIMEOUT};
+use host_sim::bus::Message;
+use host_sim::world::{SolverChoice, WorldSpec, LENGTH_M};
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::ROUTES;
 use std::io;
 use std::time::{Duration, SystemTime};
 
-fn scenario(name: &str, algorithm: Option<&str>) -> CrossingScenario {
+fn scenario(name: &str, algorithm: Option<&str>) -> WorldSpec {
     let path = builtin(name);
     let mut text = std::fs::read_to_string(&path).expect("read");
     if let Some(a) = algorithm {
@@ -28,12 +27,18 @@ fn scenario(name: &str, algorithm: Option<&str>) -> CrossingScenario {
             .to_string();
         text = text.replace(&line, &format!("algorithm = \"{a}\""));
     }
-    CrossingScenario::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+    common::parse(&text, name)
 }
 
-fn on_hub(sc: &CrossingScenario) -> CrossingFleetSummary {
-    crossing_fleet::run(sc, &Medium::Hub, &mut |_, _| {}, &mut |_, _| {})
-        .unwrap_or_else(|e| panic!("{e}"))
+fn on_hub(sc: &WorldSpec) -> FleetSummary {
+    fleet::run(
+        sc.clone(),
+        SolverChoice::Ours,
+        None,
+        &Medium::Hub,
+        &mut |_| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Queues at every stop line, under every algorithm, as fleets: safe, everyone crosses,
@@ -43,15 +48,15 @@ fn on_hub(sc: &CrossingScenario) -> CrossingFleetSummary {
 fn queued_intersection_fleets_on_can_frames() {
     for alg in ["stop", "fifo", "concurrent", "concurrent_fair", "pipelined"] {
         let sc = scenario("intersection-queues.toml", Some(alg));
-        let n = sc.placements.len();
+        let n = sc.vehicles.len();
         let f = on_hub(&sc);
         assert_all_crossed_safely(&f.run, n as u64);
-        let exact = sc.run(&mut |_, _| {});
+        let exact = common::run_world(sc.clone());
         assert_all_crossed_safely(&exact, n as u64);
         for (a, b) in [
             (exact.sim_seconds, f.run.sim_seconds),
-            (exact.crossing_time_mean_s, f.run.crossing_time_mean_s),
-            (exact.crossing_time_max_s, f.run.crossing_time_max_s),
+            (exact.crossing_time_mean_s(), f.run.crossing_time_mean_s()),
+            (exact.crossing_time_max_s(), f.run.crossing_time_max_s()),
         ] {
             assert!(
                 (a - b).abs() <= 0.02 + 1e-9,
@@ -59,14 +64,15 @@ fn queued_intersection_fleets_on_can_frames() {
             );
         }
         assert_eq!(f.tasks, n + 1);
-        assert_eq!(f.sync_ticks, 2 * f.periods + 1, "{alg}");
+        assert_eq!(f.sync_ticks, 2 * f.periods - 1, "{alg}");
         assert!(f.can.rejected.is_empty(), "{alg}: {:?}", f.can.rejected);
         let m = f.messages;
         // A request per vehicle and period in the system; every vehicle says it left for
         // 0.5 s (50 periods) unless the run ended first.
         assert!(m.requests >= n as u64 && m.grants > 0, "{alg}: {m:?}");
         assert!(m.exits > 0 && m.exits <= 50 * n as u64, "{alg}: {m:?}");
-        // Two frames per request, one per grant and exit.
+        // Two frames per request, one per grant and exit; no states at a lone junction.
+        assert_eq!(m.states, 0, "{alg}");
         assert_eq!(
             f.can.frames_sent,
             2 * m.requests + m.grants + m.exits,
@@ -87,7 +93,12 @@ fn queued_intersection_fleets_on_can_frames() {
 #[test]
 fn crossing_reports_map_onto_requests_and_back() {
     let sc = scenario("intersection.toml", None);
-    let l = &sc.layout;
+    let map = WireMap::new(&sc.network);
+    let report = |report: CrossingReport<f64>| Message::Crossing {
+        report,
+        stamp: 0.0,
+        junction: 0,
+    };
     let mut pairs = Vec::new();
     for route in 0..ROUTES as u8 {
         let r = CrossingReport {
@@ -97,7 +108,7 @@ fn crossing_reports_map_onto_requests_and_back() {
             v: 9.87,
             length: LENGTH_M,
         };
-        let m = report_to_wire(&r, 3.25, l).expect("maps");
+        let m = map.to_wire(&report(r), 3.25).expect("maps");
         let wire::Message::Request(q) = m else {
             panic!("a request: {m:?}")
         };
@@ -110,10 +121,10 @@ fn crossing_reports_map_onto_requests_and_back() {
         for f in &frames {
             got = rx.push::<f64, _>(f).expect("accepted");
         }
-        let Some(wire::Message::Request(q)) = got else {
+        let Some(Message::Crossing { report: back, .. }) = got.and_then(|g| map.from_wire(&g, 7))
+        else {
             panic!("a request back")
         };
-        let back = report_from_wire(&q, l).expect("a route");
         assert_eq!((back.id, back.route, back.length), (7, route, LENGTH_M));
         assert!((back.s - r.s).abs() <= 0.005 + 1e-9 && (back.v - r.v).abs() <= 0.01 + 1e-9);
     }
@@ -127,13 +138,13 @@ fn crossing_reports_map_onto_requests_and_back() {
         v: 1.0,
         length: LENGTH_M,
     };
-    assert!(report_to_wire(&bad_route, 0.0, l).is_err());
+    assert!(map.to_wire(&report(bad_route), 0.0).is_err());
     let long = CrossingReport {
         route: 0,
         length: LENGTH_M + 1.0,
         ..bad_route
     };
-    assert!(report_to_wire(&long, 0.0, l).is_err());
+    assert!(map.to_wire(&report(long), 0.0).is_err());
     // A pair that is no route (straight on from the inner lane into the outer one).
     let mut q = wire::Request {
         id: 7,
@@ -149,9 +160,13 @@ fn crossing_reports_map_onto_requests_and_back() {
         s: 1.0,
         v: 1.0,
     };
-    assert!(report_from_wire(&q, l).is_none());
+    let route_of = |q: &wire::Request<f64>| match map.from_wire(&wire::Message::Request(*q), 7) {
+        Some(Message::Crossing { report, .. }) => Some(report.route),
+        _ => None,
+    };
+    assert!(route_of(&q).is_none());
     q.outlet.lane = 0;
-    assert_eq!(report_from_wire(&q, l).map(|r| r.route), Some(0));
+    assert_eq!(route_of(&q), Some(0));
 }
 
 /// A port that, with every request its vehicle sends, forges a grant for that vehicle
@@ -199,27 +214,35 @@ fn forged_grants_are_refused_and_change_nothing() {
     let sc = scenario("intersection.toml", Some("fifo"));
     let clean = on_hub(&sc);
     let hub = Hub::new();
-    let forged = crossing_fleet::run_with_ports(
-        &sc,
+    let forged = fleet::run_with_ports(
+        sc.clone(),
+        SolverChoice::Ours,
+        None,
         "forging hub",
-        |id| {
+        |n| {
             Ok(Forger {
                 inner: hub.port(),
-                sa: id.filter(|&i| i != MANAGER_NODE).map(|i| i as u8),
+                sa: match n {
+                    Node::Vehicle(i) => Some(i as u8),
+                    _ => None,
+                },
                 forged: 0,
             })
         },
-        &mut |_, _| {},
-        &mut |_, _| {},
+        &mut |_| {},
     )
     .expect("runs");
     let rejected = forged.can.rejected.get("SenderMismatch").copied();
     assert!(rejected.unwrap_or(0) > 0, "{:?}", forged.can.rejected);
     assert_eq!(forged.can.rejected.len(), 1, "{:?}", forged.can.rejected);
-    assert_all_crossed_safely(&forged.run, sc.placements.len() as u64);
+    assert_all_crossed_safely(&forged.run, sc.vehicles.len() as u64);
+    let strip = |s: &host_sim::world::summary::Summary| host_sim::world::summary::Summary {
+        wall_seconds: 0.0,
+        ..s.clone()
+    };
     assert_eq!(
-        format!("{:?}", forged.run),
-        format!("{:?}", clean.run),
+        format!("{:?}", strip(&forged.run)),
+        format!("{:?}", strip(&clean.run)),
         "the forged grants changed the run"
     );
     assert_eq!(forged.messages, clean.messages);
@@ -230,29 +253,30 @@ fn forged_grants_are_refused_and_change_nothing() {
 #[test]
 fn a_failing_manager_or_vehicle_ends_the_run_with_its_error() {
     let sc = scenario("intersection.toml", None);
-    for (who, after) in [(MANAGER_NODE, 40), (3, 60)] {
+    for (who, after) in [(Node::Manager(0), 40), (Node::Vehicle(3), 60)] {
         let hub = Hub::new();
         let t0 = std::time::Instant::now();
-        let r = crossing_fleet::run_with_ports(
-            &sc,
+        let r = fleet::run_with_ports(
+            sc.clone(),
+            SolverChoice::Ours,
+            None,
             "failing hub",
-            |id| {
+            |n| {
                 Ok(Failing {
                     inner: hub.port(),
-                    left: if id == Some(who) { after } else { u32::MAX },
+                    left: if n == who { after } else { u32::MAX },
                 })
             },
-            &mut |_, _| {},
-            &mut |_, _| {},
+            &mut |_| {},
         );
         match (who, r) {
-            (MANAGER_NODE, Err(FleetError::Harness(e))) => {
+            (Node::Manager(0), Err(FleetError::Harness(e))) => {
                 assert!(e.contains("manager") && e.contains("bus-off"), "{e}")
             }
-            (3, Err(FleetError::Vehicle { id: 3, error })) => {
+            (Node::Vehicle(3), Err(FleetError::Vehicle { id: 3, error })) => {
                 assert!(error.contains("bus-off"), "{error}")
             }
-            (_, other) => panic!("expected node {who} to fail, got {other:?}"),
+            (_, other) => panic!("expected node {who:?} to fail, got {other:?}"),
         }
         assert!(t0.elapsed() < TIMEOUT / 2);
     }

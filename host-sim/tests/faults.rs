@@ -2,8 +2,7 @@
 //! reordering, a silent vehicle) — what the bus does, and that the planners stay safe.
 
 use host_sim::bus::{Bus, Faults, InProcessBus, Message, Received, Silent};
-use host_sim::scenario::Scenario;
-use host_sim::sim::{run_scenario, SolverChoice};
+use host_sim::world::SolverChoice;
 use planner_core::VehicleState;
 use std::path::Path;
 
@@ -11,7 +10,7 @@ mod common;
 use common::builtin;
 
 fn state(id: u16, stamp: f64) -> Message {
-    Message::State(VehicleState {
+    let state = VehicleState {
         id,
         x: stamp,
         y: 1.8,
@@ -23,7 +22,8 @@ fn state(id: u16, stamp: f64) -> Message {
         beta: None,
         stamp,
         cooperative: true,
-    })
+    };
+    Message::State { state, segment: 0 }
 }
 
 /// Sends a state from node 1 every 10 ms for `steps` steps and collects what node 2 gets.
@@ -116,7 +116,7 @@ fn bad_faults_in_a_scenario_are_rejected_with_file_and_line() {
         ("reorder = 0.05", "reorder_probability = 0.05"),
     ] {
         let text = base.replace(bad, what);
-        let e = Scenario::parse(&text, Path::new("f.toml")).expect_err(what);
+        let e = host_sim::scenario::parse(&text, Path::new("f.toml")).expect_err(what);
         assert!(e.line.is_some(), "{e}");
         assert!(e.to_string().starts_with("f.toml:"), "{e}");
     }
@@ -124,10 +124,13 @@ fn bad_faults_in_a_scenario_are_rejected_with_file_and_line() {
 
 #[test]
 fn multilane_scenario_over_a_faulty_bus_is_safe() {
-    let sc = Scenario::load(&builtin("multilane-faults.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let sc = common::load("multilane-faults.toml");
     assert!(sc.faults.loss > 0.0 && sc.faults.silent.is_some());
-    let s = run_scenario(sc, SolverChoice::Ours, None, &mut |_| {}, &mut |_, _| {})
-        .expect("in-process bus");
+    assert!(
+        sc.sensing.is_some(),
+        "a faulty bus comes with sensors by default"
+    );
+    let s = common::run_world(sc);
     assert_eq!(
         (
             s.collisions,
@@ -154,7 +157,7 @@ fn multilane_experiment_with_loss_and_delay_is_safe_and_completes() {
         delay_s: 0.05,
         ..Faults::NONE
     };
-    let r = host_sim::multilane::experiment(12, 1, SolverChoice::Ours, f, 0);
+    let r = host_sim::experiments::multilane::experiment(12, 1, SolverChoice::Ours, f, 0);
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
         (0, 0, 0),

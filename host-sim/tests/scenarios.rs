@@ -3,29 +3,32 @@
 
 use host_sim::bus::Faults;
 use host_sim::bus::{Bus, BusError, InProcessBus, Message, Received};
-use host_sim::scenario::Scenario;
-use host_sim::sim::{run_scenario, Simulation, SolverChoice};
+use host_sim::scenario::{load, parse};
+use host_sim::world::summary::Summary;
+use host_sim::world::{SolverChoice, TraceRow, World, WorldSpec};
 use std::path::Path;
 
 mod common;
 use common::builtin;
 
-fn run(path: &Path, seed: Option<u64>) -> (host_sim::sim::RunSummary, u64) {
-    let sc = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
+/// Runs `sc` on the in-process bus (horizon 20) with `seed`; `row` sees the trace.
+fn go(sc: WorldSpec, seed: Option<u64>, row: &mut dyn FnMut(&TraceRow)) -> Summary {
+    let mut w = World::<20>::new(sc, SolverChoice::Ours, seed);
+    while !w.finished() {
+        w.step(row).expect("in-process bus cannot fail");
+    }
+    w.summary(0.0)
+}
+
+fn run(path: &Path, seed: Option<u64>) -> (Summary, u64) {
+    let sc = load(path).unwrap_or_else(|e| panic!("{e}"));
     // A digest of the whole trace, to compare runs bit for bit.
     let mut digest = 0xcbf2_9ce4_8422_2325u64;
-    let summary = run_scenario(
-        sc,
-        SolverChoice::Ours,
-        seed,
-        &mut |r| {
-            for w in [r.t.to_bits(), u64::from(r.id), r.x.to_bits(), r.v.to_bits()] {
-                digest = (digest ^ w).wrapping_mul(0x100_0000_01b3);
-            }
-        },
-        &mut |_, _| {},
-    )
-    .expect("in-process bus cannot fail");
+    let summary = go(sc, seed, &mut |r| {
+        for w in [r.t.to_bits(), u64::from(r.id), r.x.to_bits(), r.v.to_bits()] {
+            digest = (digest ^ w).wrapping_mul(0x100_0000_01b3);
+        }
+    });
     (summary, digest)
 }
 
@@ -102,6 +105,9 @@ impl Bus for Deaf {
     fn receive(&mut self, node: u16, now: f64, out: &mut Vec<Received>) -> Result<(), BusError> {
         self.inner.receive(node, now, out)
     }
+    fn attach(&mut self, node: u16) -> Result<(), BusError> {
+        self.inner.attach(node)
+    }
 }
 
 #[test]
@@ -126,9 +132,9 @@ x = -30.0
 lane = 0
 v = 15.0
 "#;
-    let sc = Scenario::parse(text, Path::new("silent.toml")).expect("valid");
+    let sc = parse(text, Path::new("silent.toml")).expect("valid");
     let ids = [1u16, 2];
-    let mut deaf = Simulation::<20, Deaf>::with_bus(
+    let mut deaf = World::<20, Deaf>::with_bus(
         sc.clone(),
         SolverChoice::Ours,
         None,
@@ -144,7 +150,7 @@ v = 15.0
         deaf.summary(0.0).collisions > 0,
         "without messages the follower cannot know"
     );
-    let mut ok = Simulation::<20>::new(sc, SolverChoice::Ours, None);
+    let mut ok = World::<20>::new(sc, SolverChoice::Ours, None);
     while !ok.finished() {
         ok.step(&mut |_| {}).expect("bus");
     }
@@ -153,7 +159,7 @@ v = 15.0
 }
 
 fn parse_err(text: &str) -> (Option<usize>, String) {
-    let e = Scenario::parse(text, Path::new("bad.toml")).expect_err("must be rejected");
+    let e = parse(text, Path::new("bad.toml")).expect_err("must be rejected");
     assert_eq!(e.file, Path::new("bad.toml"));
     assert!(e.to_string().starts_with("bad.toml:"), "{e}");
     (e.line, e.problem)
@@ -233,7 +239,7 @@ fn bad_scenarios_are_rejected_with_file_line_and_problem() {
     let (line, _) = parse_err("name = \n");
     assert_eq!(line, Some(1));
     // Missing file.
-    let e = Scenario::load(Path::new("/nonexistent/x.toml")).expect_err("missing");
+    let e = load(Path::new("/nonexistent/x.toml")).expect_err("missing");
     assert!(e.to_string().contains("cannot read"), "{e}");
 }
 
@@ -241,25 +247,21 @@ fn bad_scenarios_are_rejected_with_file_line_and_problem() {
 /// their target lanes and stop before the end, without a collision or violation.
 #[test]
 fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
-    let sc = Scenario::load(&builtin("dead-end.toml")).unwrap_or_else(|e| panic!("{e}"));
-    let end = sc.road.end_x.expect("a dead end");
+    let sc = load(&builtin("dead-end.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let end = sc.network.segments[0].end.x().expect("a dead end");
     let needs: Vec<u8> = sc
         .vehicles
         .iter()
-        .map(|v| v.lane.abs_diff(v.target_lane.unwrap_or(v.lane)))
+        .map(|v| match v.at {
+            host_sim::world::vehicle::At::Lane { lane, .. } => lane.abs_diff(v.trip.target_lane),
+            _ => 0,
+        })
         .collect();
     assert!(needs.iter().all(|&m| m == 1 || m == 2) && needs.contains(&2));
     let mut last = std::collections::BTreeMap::new();
-    let s = run_scenario(
-        sc,
-        SolverChoice::Ours,
-        None,
-        &mut |r| {
-            last.insert(r.id, *r);
-        },
-        &mut |_, _| {},
-    )
-    .expect("in-process bus cannot fail");
+    let s = go(sc, None, &mut |r| {
+        last.insert(r.id, *r);
+    });
     common::assert_safe(&s);
     assert_eq!(s.lane_changes.in_target_lane, s.vehicles, "{s:?}");
     assert!(s.completed);
@@ -274,14 +276,15 @@ fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
 /// lane change completes, nothing collides.
 #[test]
 fn multilane_experiment_completes_with_either_solver() {
-    let r = host_sim::multilane::experiment(8, 1, SolverChoice::Ours, Faults::NONE, 0);
+    let r = host_sim::experiments::multilane::experiment(8, 1, SolverChoice::Ours, Faults::NONE, 0);
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
         (0, 0, 0)
     );
     assert_eq!(r.completed, r.runs, "{r:?}");
     assert!(r.max_lane_change_distance_m < r.bound_m, "{r:?}");
-    let c = host_sim::multilane::experiment(1, 1, SolverChoice::Clarabel, Faults::NONE, 0);
+    let c =
+        host_sim::experiments::multilane::experiment(1, 1, SolverChoice::Clarabel, Faults::NONE, 0);
     assert_eq!(
         (c.collisions, c.invariant_violations, c.completed),
         (0, 0, 1),
@@ -302,25 +305,24 @@ fn intersection_scenario_all_cross_under_every_algorithm() {
 /// rejected with file:line.
 #[test]
 fn bad_intersection_scenarios_are_rejected_with_file_line() {
-    use host_sim::intersection::CrossingScenario;
     let base = "name = \"x\"\nduration_s = 10.0\nalgorithm = \"fifo\"\n[intersection]\ncomm_margin = 10.0\n[[vehicle]]\nid = 1\nheading = \"east\"\nlane = 0\nmovement = \"straight\"\ns = 10.0\nv = 5.0\n";
-    let e = CrossingScenario::parse(base, Path::new("t.toml")).unwrap_err();
+    let e = parse(base, Path::new("t.toml")).unwrap_err();
     assert_eq!(e.line, Some(4), "{e}");
     assert!(e.problem.contains("Spaciousness Assumption (27)"), "{e}");
     let t = base.replace("comm_margin = 10.0", "half_size = 10.0");
-    let e = CrossingScenario::parse(&t, Path::new("t.toml")).unwrap_err();
+    let e = parse(&t, Path::new("t.toml")).unwrap_err();
     assert!(e.problem.contains("ρmin"), "{e}");
     let t = base
         .replace("comm_margin = 10.0\n", "")
         .replace("\"straight\"", "\"right\"");
-    let e = CrossingScenario::parse(&t, Path::new("t.toml")).unwrap_err();
+    let e = parse(&t, Path::new("t.toml")).unwrap_err();
     assert_eq!(e.line, Some(5), "{e}");
     assert!(e.problem.contains("not a route from lane 0"), "{e}");
     let t = base
         .replace("comm_margin = 10.0\n", "")
         .replace("s = 10.0", "s = 95.0")
         .replace("v = 5.0", "v = 13.0");
-    let e = CrossingScenario::parse(&t, Path::new("t.toml")).unwrap_err();
+    let e = parse(&t, Path::new("t.toml")).unwrap_err();
     assert!(
         e.problem.contains("cannot stop before the stop line"),
         "{e}"
@@ -331,7 +333,7 @@ fn bad_intersection_scenarios_are_rejected_with_file_line() {
 /// seed; all safe; the pipelined algorithm crosses the most.
 #[test]
 fn throughput_all_algorithms_safe_and_pipelined_fastest() {
-    let r = host_sim::intersection::throughput(1, 1, 120.0, Faults::NONE, 0);
+    let r = host_sim::experiments::throughput::throughput(1, 1, 120.0, Faults::NONE, 0);
     for row in &r.results {
         assert_eq!(
             (

@@ -509,6 +509,9 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     others: Vec<(u16, u8, F, F), CAP>,
     /// Sensor returns of this step: positions along this vehicle's path.
     sensed: Vec<F, CAP>,
+    /// Vehicles heard of in other frames this step (on the roads its inlet and outlet lie
+    /// on): positions along this vehicle's path, as heard.
+    mapped: Vec<F, CAP>,
     obstacles: Vec<crate::planner::Vehicle<F>, CAP>,
 }
 
@@ -526,6 +529,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             steps: 0,
             others: Vec::new(),
             sensed: Vec::new(),
+            mapped: Vec::new(),
             obstacles: Vec::new(),
             planner,
         }
@@ -553,6 +557,21 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             s.validate(self.planner.params())?;
         }
         self.sensing = sensing;
+        Ok(())
+    }
+
+    /// This step's vehicles known from messages sent in other frames — a road carrying
+    /// this vehicle's inlet or outlet, or the next junction — as positions along this
+    /// vehicle's path (replacing the last step's). Positions only grow (v ≥ 0), so stale
+    /// ones are conservative and are used as they are. `Err(Full)` past `CAP`.
+    pub fn hear_mapped(&mut self, positions: &[F]) -> Result<(), ManagerError> {
+        self.mapped.clear();
+        for &x in positions {
+            if !x.is_finite() {
+                return Err(ManagerError::BadValue);
+            }
+            self.mapped.push(x).map_err(|_| ManagerError::Full)?;
+        }
         Ok(())
     }
 
@@ -679,6 +698,12 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         }
         // Sensor returns, each taken at its nearest; space beyond the forward range (or,
         // without sensors, all space until reports can have arrived) is not free.
+        for &x in self.mapped.iter() {
+            let _ = self.obstacles.push(crate::planner::Vehicle {
+                x,
+                length: self.length + self.position_step,
+            });
+        }
         let e = self.sensing.map_or(F::ZERO, |x| x.position_error_m);
         for &x in self.sensed.iter() {
             let _ = self.obstacles.push(crate::planner::Vehicle {

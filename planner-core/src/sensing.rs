@@ -74,9 +74,12 @@ impl<F: Real> Sensing<F> {
             self.speed_error_mps,
         ];
         let errors_ok = |e: F| e >= F::ZERO && e < F::ONE;
-        if !all.iter().all(|x| x.is_finite())
-            || !(self.ahead_m >= Self::min_range(p) && self.behind_m >= Self::min_range(p))
-            || !(errors_ok(self.position_error_m) && errors_ok(self.speed_error_mps))
+        let ranges_ok = self.ahead_m >= Self::min_range(p) && self.behind_m >= Self::min_range(p);
+        let finite = all.iter().all(|x| x.is_finite());
+        if !(finite
+            && ranges_ok
+            && errors_ok(self.position_error_m)
+            && errors_ok(self.speed_error_mps))
         {
             return Err(ConfigError::InvalidSensing);
         }

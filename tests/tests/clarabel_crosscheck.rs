@@ -9,7 +9,7 @@
 //! cannot certify (its accuracy floor, ~1 %) are counted and ours must still be feasible
 //! on them.
 
-use host_sim::instances::random_instances;
+use host_sim::reference::instances::random_instances;
 use host_sim::reference::ClarabelSolver;
 use planner_core::{IpmSolver, MpcSolver};
 
@@ -128,12 +128,12 @@ fn matches_clarabel_n50() {
 /// ("AlmostSolved"); we require that ours converges, is feasible to 1e-9, and is never
 /// worse than Clarabel's answer when Clarabel has one.
 fn degenerate<const N: usize>(seed: u64) -> (usize, usize) {
-    let mut rng = host_sim::instances::rng(seed);
+    let mut rng = host_sim::reference::instances::rng(seed);
     let mut ours = IpmSolver::<f64, N>::default();
     let mut reference = ClarabelSolver::default();
     let (mut certified, mut total) = (0, 0);
     for i in 0..INSTANCES {
-        let spec = host_sim::instances::random_degenerate_instance(&mut rng, N);
+        let spec = host_sim::reference::instances::random_degenerate_instance(&mut rng, N);
         let pr = spec.build::<f64, N>().expect("feasible by construction");
         let o = ours
             .solve(&pr, None)

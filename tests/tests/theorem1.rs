@@ -6,7 +6,7 @@
 //!
 //! `THEOREM1_CASES` sets the number of cases (default 200; README gives the 10,000 run).
 
-use host_sim::platoon::run_cases;
+use host_sim::experiments::platoon::run_cases;
 
 #[test]
 fn theorem_1_random_platoons() {

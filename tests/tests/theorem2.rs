@@ -7,7 +7,7 @@
 //! `THEOREM2_CASES` sets the number of cases (default 100; README gives the 5,000 run,
 //! `host-sim traffic --cases 5000 --json`).
 
-use host_sim::multilane::traffic_sweep;
+use host_sim::experiments::multilane::traffic_sweep;
 
 #[test]
 fn theorem_2_random_multilane_traffic() {

@@ -1,6 +1,7 @@
-//! Scenario files (TOML): roads, vehicles, duration, seed. Parsed strictly: unknown keys,
-//! impossible layouts and initial states that violate the safety invariant are rejected
-//! with a message naming the file, the line and the problem; nothing runs.
+//! The `[road]` format: one straight multi-lane road (a network of one segment, heading
+//! east, its frame the world's), its vehicles by x and lane. Parsed strictly: unknown
+//! keys, impossible layouts and initial states that violate the safety invariant are
+//! rejected with a message naming the file, the line and the problem; nothing runs.
 //!
 //! ```toml
 //! name = "platoon-emergency"
@@ -24,45 +25,26 @@
 //! v_ref = 27.8        # optional: reference speed of a planner, default vmax
 //! ```
 
+use super::common::{coord_ok, Header, RawHeader, SensingToml, MAX_COORD_M};
+use super::error::{Errors, ScenarioError};
 use crate::bus::Faults;
 use crate::monitor::Limits;
-use serde::Deserialize;
-use std::fmt;
+use crate::world::network::Network;
+use crate::world::vehicle::{At, Trip};
+use crate::world::{Arrivals, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M};
+use planner_core::Sensing;
+use serde::{Deserialize, Serialize};
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use toml::Spanned;
 
 /// Most vehicles a scenario may hold (the size of each planner's world view).
-pub const MAX_VEHICLES: usize = 128;
+pub const MAX_VEHICLES: usize = crate::world::heard::VIEW_CAP;
 /// Most lanes a road may have.
 pub const MAX_LANES: u8 = 8;
-/// Longest scenario (s).
-pub const MAX_DURATION_S: f64 = 86_400.0;
-
-/// A scenario that failed to load: where, and what is wrong.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ScenarioError {
-    /// The file.
-    pub file: PathBuf,
-    /// 1-based line, when the problem has one.
-    pub line: Option<usize>,
-    /// What is wrong.
-    pub problem: String,
-}
-
-impl fmt::Display for ScenarioError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.line {
-            Some(l) => write!(f, "{}:{}: {}", self.file.display(), l, self.problem),
-            None => write!(f, "{}: {}", self.file.display(), self.problem),
-        }
-    }
-}
-
-impl std::error::Error for ScenarioError {}
 
 /// How a vehicle is driven.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum DriverKind {
     /// Its own planner-core instance.
@@ -75,7 +57,7 @@ pub enum DriverKind {
 }
 
 /// One phase of a scripted driver: hold `accel` until `until_s`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Phase {
     /// End of the phase (s).
@@ -85,20 +67,20 @@ pub struct Phase {
 }
 
 /// The road.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Road {
     /// Number of lanes (1–8).
     pub lanes: u8,
     /// Road end / stop line x_R (m), if any.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub end_x: Option<f64>,
 }
 
 /// One vehicle.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub struct VehicleSpec {
+pub struct RoadVehicle {
     /// Unique id.
     pub id: u16,
     /// Initial centre x (m).
@@ -108,19 +90,19 @@ pub struct VehicleSpec {
     /// Initial speed (m/s).
     pub v: f64,
     /// Lane it wants to end in (default: its lane).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_lane: Option<u8>,
     /// Driver.
     #[serde(default)]
     pub driver: DriverKind,
     /// Script, for `driver = "script"`.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub script: Vec<Phase>,
     /// Liveness goal: centre x to reach by the deadline.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub goal_x: Option<f64>,
     /// Reference speed of a planner (default vmax).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub v_ref: Option<f64>,
 }
 
@@ -135,94 +117,65 @@ struct RawScenario {
     horizon: Option<Spanned<usize>>,
     #[serde(default)]
     deadline_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    deadlock_s: Option<Spanned<f64>>,
     road: Spanned<Road>,
     #[serde(rename = "vehicle")]
-    vehicles: Vec<Spanned<VehicleSpec>>,
+    vehicles: Vec<Spanned<RoadVehicle>>,
     #[serde(default)]
     faults: Option<Spanned<Faults>>,
+    #[serde(default)]
+    sensing: Option<Spanned<SensingToml>>,
 }
 
-/// A validated scenario.
+/// A validated road scenario.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Scenario {
+pub struct RoadScenario {
     /// Name.
     pub name: String,
-    /// Simulated time (s).
-    pub duration_s: f64,
     /// Seed (random drivers).
     pub seed: u64,
-    /// MPC horizon N (20 or 50).
-    pub horizon: usize,
-    /// Liveness deadline (s).
-    pub deadline_s: f64,
+    /// Duration, horizon, deadline, faults, sensing, deadlock window.
+    pub header: Header,
     /// Road.
     pub road: Road,
     /// Vehicles, in file order.
-    pub vehicles: Vec<VehicleSpec>,
-    /// Faults the bus injects (`[faults]`; none by default).
-    pub faults: Faults,
+    pub vehicles: Vec<RoadVehicle>,
 }
 
-pub(crate) fn line_of(text: &str, span: Range<usize>) -> usize {
-    let end = span.start.min(text.len());
-    text.get(..end).map_or(1, |s| s.matches('\n').count() + 1)
+/// The file form of a road scenario (what a sweep prints for a failing case).
+#[derive(Debug, Clone, Serialize)]
+struct RoadFile<'a> {
+    name: &'a str,
+    duration_s: f64,
+    seed: u64,
+    horizon: usize,
+    deadline_s: f64,
+    road: &'a Road,
+    #[serde(skip_serializing_if = "Faults::is_none")]
+    faults: Faults,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sensing: Option<SensingToml>,
+    #[serde(rename = "vehicle")]
+    vehicles: &'a [RoadVehicle],
 }
 
-impl Scenario {
-    /// Reads and validates a scenario file.
-    pub fn load(path: &Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
-            file: path.to_path_buf(),
-            line: None,
-            problem: format!("cannot read: {e}"),
-        })?;
-        Self::parse(&text, path)
-    }
-
+impl RoadScenario {
     /// Parses and validates scenario text; `path` only names it in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ScenarioError> {
-        let err = |span: Option<Range<usize>>, problem: String| ScenarioError {
-            file: path.to_path_buf(),
-            line: span.map(|s| line_of(text, s)),
-            problem,
-        };
-        let raw: RawScenario =
-            toml::from_str(text).map_err(|e| err(e.span(), e.message().to_string()))?;
+        let e = Errors::new(text, path);
+        let err = |span: Option<Range<usize>>, problem: String| e.at(span, problem);
+        let raw: RawScenario = toml::from_str(text).map_err(|x| e.toml(&x))?;
         let lim = Limits::table_i();
-        let duration_s = *raw.duration_s.get_ref();
-        if !(duration_s > 0.0 && duration_s <= MAX_DURATION_S) {
-            return Err(err(
-                Some(raw.duration_s.span()),
-                format!("duration_s must be in (0, {MAX_DURATION_S}], got {duration_s}"),
-            ));
+        let header = RawHeader {
+            duration_s: Some(raw.duration_s.clone()),
+            horizon: raw.horizon.clone(),
+            deadline_s: raw.deadline_s.clone(),
+            faults: raw.faults.clone(),
+            sensing: raw.sensing.clone(),
+            deadlock_s: raw.deadlock_s.clone(),
         }
-        let horizon = match &raw.horizon {
-            None => 20,
-            Some(h) if matches!(*h.get_ref(), 20 | 50) => *h.get_ref(),
-            Some(h) => {
-                return Err(err(
-                    Some(h.span()),
-                    format!("horizon must be 20 or 50, got {}", h.get_ref()),
-                ))
-            }
-        };
-        let deadline_s = match &raw.deadline_s {
-            None => duration_s,
-            Some(d) if *d.get_ref() > 0.0 && *d.get_ref() <= duration_s => *d.get_ref(),
-            Some(d) => {
-                return Err(err(
-                    Some(d.span()),
-                    format!("deadline_s must be in (0, duration_s], got {}", d.get_ref()),
-                ))
-            }
-        };
-        let faults = match &raw.faults {
-            None => Faults::NONE,
-            Some(f) => {
-                f.get_ref().validate().map_err(|e| err(Some(f.span()), e))?;
-                *f.get_ref()
-            }
-        };
+        .validate(&e)?;
         let road_span = raw.road.span();
         let road = raw.road.into_inner();
         if road.lanes == 0 || road.lanes > MAX_LANES {
@@ -231,8 +184,11 @@ impl Scenario {
                 format!("road.lanes must be 1..={MAX_LANES}, got {}", road.lanes),
             ));
         }
-        if road.end_x.is_some_and(|x| !x.is_finite()) {
-            return Err(err(Some(road_span), "road.end_x must be finite".into()));
+        if road.end_x.is_some_and(|x| !coord_ok(x)) {
+            return Err(err(
+                Some(road_span),
+                format!("road.end_x must be finite and within ±{MAX_COORD_M} m"),
+            ));
         }
         if raw.vehicles.is_empty() {
             return Err(err(
@@ -249,7 +205,7 @@ impl Scenario {
                 ),
             ));
         }
-        let mut vehicles: Vec<(VehicleSpec, Range<usize>)> = Vec::new();
+        let mut vehicles: Vec<(RoadVehicle, Range<usize>)> = Vec::new();
         for sv in raw.vehicles {
             let span = sv.span();
             let v = sv.into_inner();
@@ -258,8 +214,12 @@ impl Scenario {
             if vehicles.iter().any(|(o, _)| o.id == v.id) {
                 return Err(bad("duplicate id".into()));
             }
-            if !v.x.is_finite() {
-                return Err(bad(format!("x must be finite, got {}", v.x)));
+            if !coord_ok(v.x) {
+                return Err(bad(format!(
+                    "x must be finite and within ±{MAX_COORD_M} m (where f64 keeps positions \
+                     far finer than the safety margins), got {}",
+                    v.x
+                )));
             }
             if !(v.v >= 0.0 && v.v <= lim.v_max) {
                 return Err(bad(format!("v must be in [0, {}], got {}", lim.v_max, v.v)));
@@ -281,8 +241,10 @@ impl Scenario {
                     )));
                 }
             }
-            if v.goal_x.is_some_and(|g| !g.is_finite()) {
-                return Err(bad("goal_x must be finite".into()));
+            if v.goal_x.is_some_and(|g| !coord_ok(g)) {
+                return Err(bad(format!(
+                    "goal_x must be finite and within ±{MAX_COORD_M} m"
+                )));
             }
             if v.v_ref.is_some_and(|r| !(r >= 0.0 && r <= lim.v_max)) {
                 return Err(bad(format!("v_ref must be in [0, {}]", lim.v_max)));
@@ -312,12 +274,12 @@ impl Scenario {
                 _ => {}
             }
             if let Some(end) = road.end_x {
-                if v.x + 0.5 * crate::sim::LENGTH_M >= end {
+                if v.x + 0.5 * LENGTH_M >= end {
                     return Err(bad(format!("starts beyond the road end x = {end}")));
                 }
                 if v.driver == DriverKind::Planner {
-                    let room = end - v.x - 0.5 * crate::sim::LENGTH_M - lim.d0;
-                    if !(room > lim.safe_distance(v.v) + crate::sim::START_MARGIN_M) {
+                    let room = end - v.x - 0.5 * LENGTH_M - lim.d0;
+                    if !(room > lim.safe_distance(v.v) + START_MARGIN_M) {
                         return Err(bad(format!(
                             "cannot stop before the road end: {room:.3} m of room, needs more than \
                              dS(v) = {:.3} m",
@@ -331,9 +293,10 @@ impl Scenario {
         // Theorem 3 / (23): on a dead-end road a vehicle needing M lane changes must have
         // M (dS(vmax) + dC(vmax)) of road left, or its changes are not guaranteed.
         if let Some(end) = road.end_x {
-            let specs: Vec<VehicleSpec> = vehicles.iter().map(|(v, _)| v.clone()).collect();
+            let specs: Vec<RoadVehicle> = vehicles.iter().map(|(v, _)| v.clone()).collect();
             for (i, (v, span)) in vehicles.iter().enumerate() {
-                let bound = crate::multilane::commitment_bound(&specs, &road, i, lim.v_max);
+                let bound =
+                    crate::experiments::multilane::commitment_bound(&specs, &road, i, lim.v_max);
                 if let Some(b) = bound {
                     let room = end - v.x;
                     if !(room >= b) {
@@ -354,12 +317,12 @@ impl Scenario {
         // follower, and scripted/random drivers only at the front of their lane (they do
         // not keep the invariant themselves).
         for lane in 0..road.lanes {
-            let mut in_lane: Vec<&(VehicleSpec, Range<usize>)> =
+            let mut in_lane: Vec<&(RoadVehicle, Range<usize>)> =
                 vehicles.iter().filter(|(v, _)| v.lane == lane).collect();
             in_lane.sort_by(|a, b| b.0.x.total_cmp(&a.0.x));
             for pair in in_lane.windows(2) {
                 let (lead, (follow, span)) = (&pair[0].0, (&pair[1].0, &pair[1].1));
-                let gap = lead.x - follow.x - crate::sim::LENGTH_M;
+                let gap = lead.x - follow.x - LENGTH_M;
                 if gap <= 0.0 {
                     return Err(err(
                         Some(span.clone()),
@@ -378,7 +341,7 @@ impl Scenario {
                         ),
                     ));
                 }
-                let need = lim.safe_distance(follow.v) + crate::sim::START_MARGIN_M;
+                let need = lim.safe_distance(follow.v) + START_MARGIN_M;
                 if !(gap - lim.d0 > need) {
                     return Err(err(
                         Some(span.clone()),
@@ -395,13 +358,103 @@ impl Scenario {
         }
         Ok(Self {
             name: raw.name,
-            duration_s,
             seed: raw.seed,
-            horizon,
-            deadline_s,
+            header,
             road,
             vehicles: vehicles.into_iter().map(|(v, _)| v).collect(),
-            faults,
         })
+    }
+
+    /// A scenario of `vehicles` on `road` in the paper's world (no faults, no sensors).
+    pub fn new(
+        name: String,
+        duration_s: f64,
+        seed: u64,
+        road: Road,
+        vehicles: Vec<RoadVehicle>,
+    ) -> Self {
+        Self {
+            name,
+            seed,
+            header: Header {
+                duration_s,
+                horizon: 20,
+                deadline_s: duration_s,
+                faults: Faults::NONE,
+                sensing: None,
+                deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
+            },
+            road,
+            vehicles,
+        }
+    }
+
+    /// The world it describes.
+    pub fn world(&self) -> WorldSpec {
+        let lim = Limits::table_i();
+        WorldSpec {
+            name: self.name.clone(),
+            duration_s: self.header.duration_s,
+            seed: self.seed,
+            horizon: self.header.horizon,
+            deadline_s: self.header.deadline_s,
+            network: Network::road(self.road.lanes, self.road.end_x, lim.v_max),
+            vehicles: self.vehicles.iter().map(|v| v.spec(lim.v_max)).collect(),
+            faults: self.header.faults,
+            sensing: self.header.sensing,
+            arrivals: Arrivals::None,
+            deadlock_window_s: self.header.deadlock_window_s,
+            stop_when_done: false,
+        }
+    }
+
+    /// The scenario as a file that `host-sim run` loads (a sweep's failing case).
+    pub fn to_toml(&self) -> String {
+        let sensing = self.header.sensing.map(|s: Sensing<f64>| SensingToml {
+            enabled: Some(true),
+            ahead_m: s.ahead_m,
+            behind_m: s.behind_m,
+            position_error_m: s.position_error_m,
+            speed_error_mps: s.speed_error_mps,
+        });
+        let file = RoadFile {
+            name: &self.name,
+            duration_s: self.header.duration_s,
+            seed: self.seed,
+            horizon: self.header.horizon,
+            deadline_s: self.header.deadline_s,
+            road: &self.road,
+            faults: self.header.faults,
+            sensing,
+            vehicles: &self.vehicles,
+        };
+        toml::to_string(&file).unwrap_or_else(|e| format!("# cannot write: {e}"))
+    }
+}
+
+impl RoadVehicle {
+    /// The world's vehicle: on segment 0 at (x, centre of its lane), straight.
+    pub fn spec(&self, v_max: f64) -> crate::world::VehicleSpec {
+        crate::world::VehicleSpec {
+            id: self.id,
+            at: At::Lane {
+                seg: 0,
+                x: self.x,
+                y: (f64::from(self.lane) + 0.5) * LANE_WIDTH_M,
+                theta: 0.0,
+                lane: self.lane,
+                alpha: None,
+                beta: None,
+            },
+            v: self.v,
+            driver: self.driver,
+            script: self.script.clone(),
+            trip: Trip {
+                target_lane: self.target_lane.unwrap_or(self.lane),
+                goal_x: self.goal_x,
+                v_ref: Some(self.v_ref.unwrap_or(v_max)),
+                movements: Vec::new(),
+            },
+        }
     }
 }

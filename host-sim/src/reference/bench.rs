@@ -1,7 +1,7 @@
 //! `bench-planner`: our solver and Clarabel on identical instances of (10), side by side.
 
-use crate::instances::{random_instances, rng};
-use crate::reference::{conic_data, ClarabelSolver};
+use super::clarabel::{conic_data, ClarabelSolver};
+use super::instances::{random_instances, rng};
 use planner_core::planner::free_road_gap;
 use planner_core::{CostWeights, IpmSolver, MpcSolver, Params, Real, SingleLaneProblem};
 use rand::Rng;

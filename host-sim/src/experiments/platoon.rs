@@ -104,7 +104,7 @@ impl Leader {
 
 /// A random platoon spec for case `i` of a Theorem 1 sweep.
 pub fn random_spec(i: u64, seed: u64) -> PlatoonSpec {
-    let mut rng = crate::instances::rng(seed.wrapping_mul(1_000_003).wrapping_add(i));
+    let mut rng = crate::reference::instances::rng(seed.wrapping_mul(1_000_003).wrapping_add(i));
     let profile = match rng.random_range(0..3) {
         0 => LeaderProfile::Random,
         1 => LeaderProfile::EmergencyStops,
@@ -132,7 +132,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     let lim = Limits::table_i();
     let params = Params::<F>::table_i();
     let pf64 = Params::<f64>::table_i();
-    let mut rng = crate::instances::rng(spec.seed);
+    let mut rng = crate::reference::instances::rng(spec.seed);
     let n = spec.vehicles.max(2);
     let length = pf64.length();
     // Initial state: leader at the front; each follower behind its predecessor by the
@@ -148,7 +148,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
         }
         cars.push(Truth {
             x,
-            y: 0.5 * crate::sim::LANE_WIDTH_M,
+            y: 0.5 * crate::world::LANE_WIDTH_M,
             theta: 0.0,
             length,
             width: pf64.width(),
@@ -156,6 +156,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
             keeps_invariant: i > 0,
             v,
             v_before: v,
+            mapped: false,
         });
     }
     let mut planners: Vec<Planner<F, HORIZON>> = (1..n)
@@ -276,7 +277,7 @@ pub struct SweepSummary {
 /// Runs `cases` random platoons of a sweep on all cores: (spec, outcome) per case, in
 /// case order.
 pub fn run_cases(cases: u64, seed: u64) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
-    crate::par::map_indexed(cases as usize, 0, |i| {
+    super::par::map_indexed(cases as usize, 0, |i| {
         let spec = random_spec(i as u64, seed);
         let out = run(&spec);
         (spec, out)

@@ -3,8 +3,10 @@
 //! range is local: vehicles on different roads do not hear each other).
 
 use crate::monitor::Limits;
-use crate::scenario::{DriverKind, Road, Scenario, VehicleSpec};
-use crate::sim::{Simulation, SolverChoice, LENGTH_M, START_MARGIN_M};
+use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
+use crate::scenario::DriverKind;
+use crate::world::summary::Summary;
+use crate::world::{SolverChoice, World, LENGTH_M, START_MARGIN_M};
 use rand::Rng;
 use serde::Serialize;
 
@@ -36,9 +38,9 @@ pub struct ScaleReport {
 }
 
 /// One road of the scale run: `n` vehicles, a random leader, planner followers.
-pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> Scenario {
+pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> RoadScenario {
     let lim = Limits::table_i();
-    let mut rng = crate::instances::rng(seed ^ (index as u64).wrapping_mul(0x9E37_79B9));
+    let mut rng = crate::reference::instances::rng(seed ^ (index as u64).wrapping_mul(0x9E37_79B9));
     let mut vehicles = Vec::with_capacity(n);
     let mut x = 0.0;
     for i in 0..n {
@@ -50,7 +52,7 @@ pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> Scenario {
                 + START_MARGIN_M
                 + rng.random_range(0.5..15.0);
         }
-        vehicles.push(VehicleSpec {
+        vehicles.push(RoadVehicle {
             id: i as u16 + 1,
             x,
             lane: 0,
@@ -66,19 +68,16 @@ pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> Scenario {
             v_ref: None,
         });
     }
-    Scenario {
-        name: format!("scale-road-{index}"),
+    RoadScenario::new(
+        format!("scale-road-{index}"),
         duration_s,
-        seed: seed.wrapping_add(index as u64),
-        horizon: 20,
-        deadline_s: duration_s,
-        road: Road {
+        seed.wrapping_add(index as u64),
+        Road {
             lanes: 1,
             end_x: None,
         },
         vehicles,
-        faults: crate::bus::Faults::NONE,
-    }
+    )
 }
 
 /// Runs `vehicles` vehicles for `duration_s` on `threads` threads (0 = all cores).
@@ -89,15 +88,16 @@ pub fn run(
     threads: usize,
     seed: u64,
 ) -> ScaleReport {
-    let platoon = platoon.clamp(2, crate::scenario::MAX_VEHICLES);
+    let platoon = platoon.clamp(2, crate::scenario::road::MAX_VEHICLES);
     let roads: Vec<usize> = (0..vehicles.div_ceil(platoon))
         .map(|r| platoon.min(vehicles - r * platoon))
         .collect();
-    let threads = crate::par::threads(threads);
+    let threads = super::par::threads(threads);
     let t0 = std::time::Instant::now();
-    let sums = crate::par::map_indexed(roads.len(), threads, |r| {
+    let sums = super::par::map_indexed(roads.len(), threads, |r| {
         let n = roads.get(r).copied().unwrap_or(0);
-        let mut sim = Simulation::<20>::new(road(r, n, duration_s, seed), SolverChoice::Ours, None);
+        let world = road(r, n, duration_s, seed).world();
+        let mut sim = World::<20>::new(world, SolverChoice::Ours, None);
         while !sim.finished() {
             if sim.step(&mut |_| {}).is_err() {
                 break;
@@ -106,7 +106,7 @@ pub fn run(
         sim.summary(0.0)
     });
     let wall = t0.elapsed().as_secs_f64();
-    let sum = |f: fn(&crate::sim::RunSummary) -> u64| sums.iter().map(f).sum::<u64>();
+    let sum = |f: fn(&Summary) -> u64| sums.iter().map(f).sum::<u64>();
     let (steps, col, inv, lim, fb) = (
         sum(|s| s.planner_steps),
         sum(|s| s.collisions),

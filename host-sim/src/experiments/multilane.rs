@@ -3,9 +3,11 @@
 
 use crate::bus::Faults;
 use crate::monitor::Limits;
-use crate::scenario::{DriverKind, Road, Scenario, VehicleSpec};
-use crate::sim::{
-    RunSummary, Simulation, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M, WIDTH_M,
+use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
+use crate::scenario::DriverKind;
+use crate::world::summary::Summary;
+use crate::world::{
+    SolverChoice, TraceRow, World, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M, WIDTH_M,
 };
 use planner_core::free_space::FreeSpace;
 use planner_core::lane_change::commitment_distance;
@@ -28,13 +30,13 @@ pub fn safe_spacing(v: f64) -> f64 {
 
 /// The paper's multi-lane experiment (SPEC §8): 3 lanes, 2 vehicles per lane spaced by
 /// the smallest safe gap, all at v0 = 15 m/s, each with a random target lane.
-pub fn paper_scenario(seed: u64) -> Scenario {
-    let mut rng = crate::instances::rng(seed ^ 0x6d75_6c74_696c_616e);
+pub fn paper_scenario(seed: u64) -> RoadScenario {
+    let mut rng = crate::reference::instances::rng(seed ^ 0x6d75_6c74_696c_616e);
     let spacing = safe_spacing(V0);
     let mut vehicles = Vec::new();
     for lane in 0..3u8 {
         for (i, x) in [spacing, 0.0].into_iter().enumerate() {
-            vehicles.push(VehicleSpec {
+            vehicles.push(RoadVehicle {
                 id: u16::from(lane) * 2 + i as u16 + 1,
                 x,
                 lane,
@@ -47,26 +49,23 @@ pub fn paper_scenario(seed: u64) -> Scenario {
             });
         }
     }
-    Scenario {
-        name: format!("multilane-{seed}"),
-        duration_s: EXPERIMENT_DURATION_S,
+    RoadScenario::new(
+        format!("multilane-{seed}"),
+        EXPERIMENT_DURATION_S,
         seed,
-        horizon: 20,
-        deadline_s: EXPERIMENT_DURATION_S,
-        road: Road {
+        Road {
             lanes: 3,
             end_x: None,
         },
         vehicles,
-        faults: crate::bus::Faults::NONE,
-    }
+    )
 }
 
 /// Random traffic for Theorem 2: 3–4 lanes, 5–`max_vehicles` planner-driven vehicles at
 /// random safe spacings and speeds, random reference speeds and random target lanes.
-pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> Scenario {
+pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> RoadScenario {
     let lim = Limits::table_i();
-    let mut rng = crate::instances::rng(seed ^ 0x7468_656f_7265_6d32);
+    let mut rng = crate::reference::instances::rng(seed ^ 0x7468_656f_7265_6d32);
     let lanes: u8 = rng.random_range(3..=4);
     let n = rng.random_range(5..=max_vehicles.max(5));
     // Per lane, the last placed vehicle (x, v): new ones go behind it.
@@ -81,7 +80,7 @@ pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> Scenar
             Some((xl, _)) => xl - safe_spacing(v) - rng.random_range(0.0..30.0),
         };
         *slot = Some((x, v));
-        vehicles.push(VehicleSpec {
+        vehicles.push(RoadVehicle {
             id: i as u16 + 1,
             x,
             lane,
@@ -93,23 +92,20 @@ pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> Scenar
             v_ref: Some(rng.random_range(3.0..lim.v_max)),
         });
     }
-    Scenario {
-        name: format!("random-traffic-{seed}"),
+    RoadScenario::new(
+        format!("random-traffic-{seed}"),
         duration_s,
         seed,
-        horizon: 20,
-        deadline_s: duration_s,
-        road: Road { lanes, end_x: None },
+        Road { lanes, end_x: None },
         vehicles,
-        faults: crate::bus::Faults::NONE,
-    }
+    )
 }
 
 /// The commitment distance (23) for vehicle `index` at its start: M lane changes
 /// times dS(v) + dC(v) at the paper's speed `v`, with ρ_t = max(ρ^{H+}, ρ^{H−}) of its
 /// free space toward the first lane it has to enter. `None` if it needs no change.
 pub fn commitment_bound(
-    vehicles: &[VehicleSpec],
+    vehicles: &[RoadVehicle],
     road: &Road,
     index: usize,
     v: f64,
@@ -186,21 +182,21 @@ pub struct MultilaneReport {
     pub wall_seconds: f64,
 }
 
-/// Runs one scenario to the end (horizon 20) and returns its summary.
+/// Runs one world to the end (horizon 20) on the in-process bus and returns its summary.
 pub fn run_one(
-    scenario: Scenario,
+    world: crate::world::WorldSpec,
     solver: SolverChoice,
     trace: &mut dyn FnMut(&TraceRow),
-) -> RunSummary {
+) -> Summary {
     let t0 = std::time::Instant::now();
-    let mut sim = Simulation::<20>::new(scenario, solver, None);
-    while !sim.finished() {
+    let mut w = World::<20>::new(world, solver, None);
+    while !w.finished() {
         // The in-process bus cannot fail.
-        if sim.step(trace).is_err() {
+        if w.step(trace).is_err() {
             break;
         }
     }
-    sim.summary(t0.elapsed().as_secs_f64())
+    w.summary(t0.elapsed().as_secs_f64())
 }
 
 /// `host-sim experiment multilane`: the paper's experiment on `seeds` seeds.
@@ -212,14 +208,16 @@ pub fn experiment(
     threads: usize,
 ) -> MultilaneReport {
     let t0 = std::time::Instant::now();
-    let results = crate::par::map_indexed(seeds as usize, threads, |i| {
+    let results = super::par::map_indexed(seeds as usize, threads, |i| {
         let seed = first_seed + i as u64;
-        let mut sc = paper_scenario(seed);
-        sc.faults = faults;
+        let sc = paper_scenario(seed);
         let bound = (0..sc.vehicles.len())
             .filter_map(|k| commitment_bound(&sc.vehicles, &sc.road, k, V0))
             .fold(0.0, f64::max);
-        (run_one(sc, solver, &mut |_| {}), bound)
+        let mut world = sc.world();
+        world.faults = faults;
+        world.sensing = (!faults.is_none()).then(planner_core::Sensing::radar);
+        (run_one(world, solver, &mut |_| {}), bound)
     });
     let times: Vec<f64> = results
         .iter()
@@ -291,18 +289,18 @@ pub fn traffic_sweep(
     threads: usize,
 ) -> TrafficReport {
     let t0 = std::time::Instant::now();
-    let results = crate::par::map_indexed(cases as usize, threads, |i| {
+    let results = super::par::map_indexed(cases as usize, threads, |i| {
         let seed = first_seed + i as u64;
         (
             seed,
             run_one(
-                random_traffic(seed, 30, duration_s),
+                random_traffic(seed, 30, duration_s).world(),
                 SolverChoice::Ours,
                 &mut |_| {},
             ),
         )
     });
-    let sum = |f: fn(&RunSummary) -> u64| results.iter().map(|(_, s)| f(s)).sum::<u64>();
+    let sum = |f: fn(&Summary) -> u64| results.iter().map(|(_, s)| f(s)).sum::<u64>();
     TrafficReport {
         cases,
         vehicles: sum(|s| s.vehicles as u64),

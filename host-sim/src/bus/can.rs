@@ -5,21 +5,25 @@
 //! - [`CanNode`]: one node's attachment (its port, alive counters, reassembler, counts);
 //! - [`CanBus`]: the message-level [`Bus`] over one node per vehicle, so that the
 //!   single-threaded simulator runs unchanged over CAN;
-//! - the fleet runner ([`crate::fleet`]) gives every vehicle its own task and node.
+//! - the fleet runner ([`crate::bus::fleet`]) gives every vehicle and every junction
+//!   manager its own task and node.
 //!
-//! Mapping of the simulator's messages onto can-gateway's: `State` ↔ `State`,
-//! `Left { id, at }` ↔ `Exit { id, at }`, `Grant { id, until }` ↔ `Grant` (sent by the
-//! intersection manager's address only). A crossing report ↔ `Request` needs the
-//! layout's route table on both sides (route ↔ inlet and outlet tracks) and the arrival
-//! time: [`report_to_wire`] and [`report_from_wire`].
+//! Mapping of the simulator's messages onto can-gateway's ([`WireMap`]): on a straight
+//! road or at a single junction the messages of the paper's protocols — `State` ↔
+//! `State`, `Left` ↔ `Exit`, `Grant` ↔ `Grant` (sent by the manager's address only), a
+//! crossing report ↔ `Request` (the route as its inlet and outlet tracks, through the
+//! layout's route table, and the arrival time); in a network, the kinds that also carry
+//! the place: `Located` (a state and its segment), `JunctionRequest` and `JunctionExit`
+//! (with their junction), and grants from each junction manager's own address.
 
 use crate::bus::{Bus, BusError, Message, Received};
-use crate::sim::LENGTH_M;
+use crate::world::network::Network;
+use crate::world::LENGTH_M;
 use can_gateway::codec::{DecodeError, EncodeError};
 use can_gateway::wire::{self, CLOCK_ADDRESS};
 use can_gateway::{encode, Frames, PlainFrame, Reassembler};
 use planner_core::crossing::CrossingReport;
-use planner_core::intersection::{Layout, Track};
+use planner_core::intersection::Track;
 use serde::Serialize;
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions};
 use std::collections::{BTreeMap, VecDeque};
@@ -305,8 +309,9 @@ pub enum Polled {
     Nothing,
     /// A frame that completed no message (a part, or rejected: counted in the stats).
     Frame,
-    /// A frame that completed a verified message, with the frame's receive time stamp.
-    Message(wire::Message<f64>, SystemTime),
+    /// A frame that completed a verified message, with the frame's receive time stamp and
+    /// its sender's source address.
+    Message(wire::Message<f64>, SystemTime, u8),
 }
 
 /// One node on a CAN medium: the sender address, a port, an alive counter per message
@@ -314,7 +319,7 @@ pub enum Polled {
 pub struct CanNode<P> {
     sa: u8,
     port: P,
-    counters: [u8; 8],
+    counters: [u8; 16],
     reassembler: Box<Reassembler<REASSEMBLY_SLOTS>>,
     stats: CanStats,
 }
@@ -334,7 +339,7 @@ impl<P: CanPort> CanNode<P> {
         Self {
             sa,
             port,
-            counters: [0; 8],
+            counters: [0; 16],
             reassembler: Box::default(),
             stats: CanStats::default(),
         }
@@ -365,19 +370,20 @@ impl<P: CanPort> CanNode<P> {
         Ok(())
     }
 
-    /// Transmits one of the simulator's messages.
-    pub fn send(&mut self, msg: &Message) -> Result<(), CanError> {
-        self.send_wire(&to_wire(msg)?)
+    /// Transmits one of the simulator's messages, mapped by `map` (a crossing report
+    /// with the vehicle's `arrival` in A_C).
+    pub fn send(&mut self, msg: &Message, map: &WireMap<'_>, arrival: f64) -> Result<(), CanError> {
+        self.send_wire(&map.to_wire(msg, arrival)?)
     }
 
     /// Reads every frame already queued (at most [`DRAIN_LIMIT`]), handing each verified
-    /// message to `each`.
-    pub fn drain(&mut self, mut each: impl FnMut(wire::Message<f64>)) -> Result<(), CanError> {
+    /// message and its sender's address to `each`.
+    pub fn drain(&mut self, mut each: impl FnMut(wire::Message<f64>, u8)) -> Result<(), CanError> {
         for _ in 0..DRAIN_LIMIT {
             match self.poll(Duration::ZERO)? {
                 Polled::Nothing => break,
                 Polled::Frame => {}
-                Polled::Message(m, _) => each(m),
+                Polled::Message(m, _, sa) => each(m, sa),
             }
         }
         Ok(())
@@ -392,7 +398,11 @@ impl<P: CanPort> CanNode<P> {
         match self.reassembler.push::<f64, _>(&frame) {
             Ok(Some(m)) => {
                 self.stats.messages_received += 1;
-                Ok(Polled::Message(m, at))
+                let sa = match frame.id() {
+                    embedded_can::Id::Extended(x) => (x.as_raw() & 0xFF) as u8,
+                    embedded_can::Id::Standard(_) => 0,
+                };
+                Ok(Polled::Message(m, at, sa))
             }
             Ok(None) => Ok(Polled::Frame),
             Err(e) => {
@@ -411,107 +421,228 @@ fn reason(e: DecodeError) -> String {
     }
 }
 
-/// A crossing report as can-gateway's `Request`: the route becomes its inlet and outlet
-/// tracks (the layout's route table), `arrival` is when the vehicle entered A_C by its
-/// own clock — or, before it has, the time of the report (the manager registers
-/// arrivals by its own clock either way, so no vehicle can move itself up the queue).
-/// The length is not carried (nor is it in a state message): every vehicle on this bus
-/// is of the class length [`LENGTH_M`], and a report of another length is refused.
-pub fn report_to_wire(
-    r: &CrossingReport<f64>,
-    arrival: f64,
-    layout: &Layout<f64>,
-) -> Result<wire::Message<f64>, CanError> {
-    let route = layout
-        .route(usize::from(r.route))
-        .ok_or(CanError::Unmapped("a route the layout does not have"))?;
-    if r.length != LENGTH_M {
-        return Err(CanError::Unmapped(
-            "a vehicle length other than the class length",
-        ));
+/// How the simulator's messages travel as can-gateway's in one world (see the module
+/// docs): the paper's kinds on a straight road or at a single junction, the kinds that
+/// carry the place in a network.
+#[derive(Debug, Clone, Copy)]
+pub struct WireMap<'a> {
+    net: &'a Network,
+    network: bool,
+}
+
+impl<'a> WireMap<'a> {
+    /// The mapping for `net`.
+    pub fn new(net: &'a Network) -> Self {
+        let single_road = net.junctions.is_empty() && net.segments.len() <= 1;
+        let single_junction = net.junctions.len() == 1 && net.segments.is_empty();
+        Self {
+            net,
+            network: !(single_road || single_junction),
+        }
     }
-    let track = |t: Track| wire::TrackWire {
-        heading: t.heading,
-        lane: t.lane,
-    };
-    Ok(wire::Message::Request(wire::Request {
-        id: r.id,
-        inlet: track(route.inlet),
-        outlet: track(route.outlet),
-        arrival,
-        s: r.s,
-        v: r.v,
-    }))
-}
 
-/// A `Request` heard on the bus as a crossing report, if its (inlet, outlet) is a route
-/// of `layout` (each route has its own pair).
-pub fn report_from_wire(
-    q: &wire::Request<f64>,
-    layout: &Layout<f64>,
-) -> Option<CrossingReport<f64>> {
-    let same = |a: Track, b: wire::TrackWire| a.heading == b.heading && a.lane == b.lane;
-    let route = layout
-        .routes
-        .iter()
-        .position(|r| same(r.inlet, q.inlet) && same(r.outlet, q.outlet))?;
-    Some(CrossingReport {
-        id: q.id,
-        route: u8::try_from(route).ok()?,
-        s: q.s,
-        v: q.v,
-        length: LENGTH_M,
-    })
-}
+    /// `true` if the world is a network (the kinds with places are used).
+    pub fn is_network(&self) -> bool {
+        self.network
+    }
 
-/// The simulator's message as can-gateway's.
-pub fn to_wire(msg: &Message) -> Result<wire::Message<f64>, CanError> {
-    Ok(match *msg {
-        Message::State(s) => wire::Message::State(s),
-        Message::Left { id, at } => wire::Message::Exit { id, at },
-        Message::Grant { id, until } => wire::Message::Grant { id, until },
-        Message::Crossing(..) => {
+    /// The source address of junction `j`'s manager.
+    pub fn manager_address(&self, j: usize) -> Result<u8, CanError> {
+        wire::manager_address(j).ok_or(CanError::Unmapped("more junctions than manager addresses"))
+    }
+
+    /// The simulator's message as can-gateway's; a crossing report carries the vehicle's
+    /// `arrival` in A_C by its clock (the manager registers arrivals by its own clock
+    /// either way, so no vehicle can move itself up the queue). The length is not carried
+    /// (nor is it in a state message): every vehicle on this bus is of the class length
+    /// [`LENGTH_M`], and a report of another length is refused.
+    pub fn to_wire(&self, msg: &Message, arrival: f64) -> Result<wire::Message<f64>, CanError> {
+        let junction = |j: usize| {
+            u8::try_from(j).map_err(|_| CanError::Unmapped("a junction index above 255"))
+        };
+        Ok(match *msg {
+            Message::State { state, segment } if self.network => wire::Message::Located {
+                segment: u16::try_from(segment)
+                    .map_err(|_| CanError::Unmapped("a segment index above 65,535"))?,
+                state,
+            },
+            Message::State { state, .. } => wire::Message::State(state),
+            Message::Crossing {
+                report,
+                junction: j,
+                ..
+            } => {
+                let request = self.request(&report, arrival, j)?;
+                if self.network {
+                    wire::Message::JunctionRequest {
+                        junction: junction(j)?,
+                        request,
+                    }
+                } else {
+                    wire::Message::Request(request)
+                }
+            }
+            Message::Left {
+                id,
+                at,
+                junction: j,
+            } if self.network => wire::Message::JunctionExit {
+                junction: junction(j)?,
+                id,
+                at,
+            },
+            Message::Left { id, at, .. } => wire::Message::Exit { id, at },
+            Message::Grant { id, until, .. } => wire::Message::Grant { id, until },
+        })
+    }
+
+    fn request(
+        &self,
+        r: &CrossingReport<f64>,
+        arrival: f64,
+        j: usize,
+    ) -> Result<wire::Request<f64>, CanError> {
+        let layout = &self
+            .net
+            .junctions
+            .get(j)
+            .ok_or(CanError::Unmapped("a junction the network does not have"))?
+            .layout;
+        let route = layout
+            .route(usize::from(r.route))
+            .ok_or(CanError::Unmapped("a route the layout does not have"))?;
+        if r.length != LENGTH_M {
             return Err(CanError::Unmapped(
-                "a crossing report without its layout (see report_to_wire)",
-            ))
+                "a vehicle length other than the class length",
+            ));
         }
-    })
-}
+        let track = |t: Track| wire::TrackWire {
+            heading: t.heading,
+            lane: t.lane,
+        };
+        Ok(wire::Request {
+            id: r.id,
+            inlet: track(route.inlet),
+            outlet: track(route.outlet),
+            arrival,
+            s: r.s,
+            v: r.v,
+        })
+    }
 
-/// can-gateway's message as the simulator's, if it is one the vehicles act on.
-pub fn from_wire(msg: &wire::Message<f64>) -> Option<Message> {
-    match *msg {
-        wire::Message::State(s) => Some(Message::State(s)),
-        wire::Message::Exit { id, at } => Some(Message::Left { id, at }),
-        wire::Message::Grant { id, until } => Some(Message::Grant { id, until }),
-        wire::Message::Request(_) | wire::Message::Revoke { .. } | wire::Message::Sync { .. } => {
-            None
+    /// can-gateway's message from source address `sa`, heard in the period that began at
+    /// `t`, as the simulator's, if it is one the vehicles and managers act on (a grant's
+    /// junction is its sender's). A request carries no send time of its own: in the
+    /// lock-step fleet every message of a period is sent at its start, so that is its
+    /// stamp.
+    pub fn heard(&self, msg: &wire::Message<f64>, sa: u8, t: f64) -> Option<Message> {
+        let m = self.from_wire(msg, sa)?;
+        Some(match m {
+            Message::Crossing {
+                report, junction, ..
+            } => Message::Crossing {
+                report,
+                stamp: t,
+                junction,
+            },
+            other => other,
+        })
+    }
+
+    /// can-gateway's message from source address `sa` as the simulator's, if it is one the
+    /// vehicles and managers act on (a grant's junction is its sender's); a crossing
+    /// report's stamp is the request's arrival time (see [`WireMap::heard`]).
+    pub fn from_wire(&self, msg: &wire::Message<f64>, sa: u8) -> Option<Message> {
+        match *msg {
+            wire::Message::State(state) => Some(Message::State { state, segment: 0 }),
+            wire::Message::Located { segment, state } => Some(Message::State {
+                state,
+                segment: usize::from(segment),
+            }),
+            wire::Message::Request(q) => self.report(&q, 0),
+            wire::Message::JunctionRequest { junction, request } => {
+                self.report(&request, usize::from(junction))
+            }
+            wire::Message::Exit { id, at } => Some(Message::Left {
+                id,
+                at,
+                junction: 0,
+            }),
+            wire::Message::JunctionExit { junction, id, at } => Some(Message::Left {
+                id,
+                at,
+                junction: usize::from(junction),
+            }),
+            wire::Message::Grant { id, until } => Some(Message::Grant {
+                junction: usize::from(sa.checked_sub(wire::MANAGER_ADDRESS)?),
+                id,
+                until,
+            }),
+            wire::Message::Revoke { .. } | wire::Message::Sync { .. } => None,
         }
+    }
+
+    /// A `Request` at junction `j` as a crossing report, if its (inlet, outlet) is a
+    /// route of the junction's layout (each route has its own pair).
+    fn report(&self, q: &wire::Request<f64>, j: usize) -> Option<Message> {
+        let layout = &self.net.junctions.get(j)?.layout;
+        let same = |a: Track, b: wire::TrackWire| a.heading == b.heading && a.lane == b.lane;
+        let route = layout
+            .routes
+            .iter()
+            .position(|r| same(r.inlet, q.inlet) && same(r.outlet, q.outlet))?;
+        Some(Message::Crossing {
+            report: CrossingReport {
+                id: q.id,
+                route: u8::try_from(route).ok()?,
+                s: q.s,
+                v: q.v,
+                length: LENGTH_M,
+            },
+            stamp: q.arrival.max(0.0),
+            junction: j,
+        })
     }
 }
 
 /// Frames one drain of a node reads at most (a bound on the loop; a period carries
 /// three frames per vehicle).
-pub const DRAIN_LIMIT: usize = 4 * 3 * crate::scenario::MAX_VEHICLES;
+pub const DRAIN_LIMIT: usize = 4 * 3 * crate::scenario::road::MAX_VEHICLES;
 
-/// The message-level [`Bus`] over CAN: one [`CanNode`] per vehicle, each on its own port
-/// (its own SocketCAN socket, or hub port). A message is delivered when its frames have
-/// reached the receiver's socket; the receive time given to the planner is the period's
-/// time (the simulator is in lock-step), the kernel's stamps measure the latency.
+/// The message-level [`Bus`] over CAN: one [`CanNode`] per vehicle and per junction
+/// manager, each on its own port (its own SocketCAN socket, or hub port). A message is
+/// delivered when its frames have reached the receiver's socket; the receive time given
+/// to the planner is the period's time (the simulator is in lock-step), the kernel's
+/// stamps measure the latency.
 #[derive(Debug)]
 pub struct CanBus<P> {
     nodes: Vec<(u16, CanNode<P>)>,
+    net: Network,
 }
 
 impl<P: CanPort> CanBus<P> {
-    /// A bus with a node for each of `ids`, on the port `open` gives it.
-    pub fn new(ids: &[u16], mut open: impl FnMut(u16) -> io::Result<P>) -> Result<Self, CanError> {
+    /// A bus for the world on `net` with a node for each of `ids` (vehicles; and
+    /// managers, whose nodes are `world::junction::manager_node(j)`), on the port `open`
+    /// gives it.
+    pub fn new(
+        ids: &[u16],
+        net: &Network,
+        mut open: impl FnMut(u16) -> io::Result<P>,
+    ) -> Result<Self, CanError> {
+        let map = WireMap::new(net);
         let mut nodes = Vec::with_capacity(ids.len());
         for &id in ids {
             let port = open(id)?;
-            nodes.push((id, CanNode::vehicle(id, port)?));
+            let node = match id.checked_sub(0xFF00) {
+                Some(j) => CanNode::new(map.manager_address(usize::from(j))?, port),
+                None => CanNode::vehicle(id, port)?,
+            };
+            nodes.push((id, node));
         }
-        Ok(Self { nodes })
+        Ok(Self {
+            nodes,
+            net: net.clone(),
+        })
     }
 
     /// Every node's traffic, summed.
@@ -522,27 +653,35 @@ impl<P: CanPort> CanBus<P> {
         }
         s
     }
-
-    fn node(&mut self, id: u16) -> Result<&mut CanNode<P>, BusError> {
-        self.nodes
-            .iter_mut()
-            .find(|(i, _)| *i == id)
-            .map(|(_, n)| n)
-            .ok_or(BusError::UnknownNode(id))
-    }
 }
 
 impl<P: CanPort> Bus for CanBus<P> {
-    fn send(&mut self, from: u16, msg: &Message, _now: f64) -> Result<(), BusError> {
-        Ok(self.node(from)?.send(msg)?)
+    fn send(&mut self, from: u16, msg: &Message, now: f64) -> Result<(), BusError> {
+        let map = WireMap::new(&self.net);
+        let node = node_mut(&mut self.nodes, from)?;
+        Ok(node.send(msg, &map, now)?)
+    }
+
+    fn attach(&mut self, node: u16) -> Result<(), BusError> {
+        // A CAN node needs a port of its own, opened before anyone transmits.
+        node_mut(&mut self.nodes, node).map(|_| ())
     }
 
     fn receive(&mut self, node: u16, now: f64, out: &mut Vec<Received>) -> Result<(), BusError> {
-        self.node(node)?.drain(|m| {
-            if let Some(msg) = from_wire(&m) {
+        let map = WireMap::new(&self.net);
+        node_mut(&mut self.nodes, node)?.drain(|m, sa| {
+            if let Some(msg) = map.heard(&m, sa, now) {
                 out.push(Received { msg, at: now });
             }
         })?;
         Ok(())
     }
+}
+
+fn node_mut<P>(nodes: &mut [(u16, CanNode<P>)], id: u16) -> Result<&mut CanNode<P>, BusError> {
+    nodes
+        .iter_mut()
+        .find(|(i, _)| *i == id)
+        .map(|(_, n)| n)
+        .ok_or(BusError::UnknownNode(id))
 }

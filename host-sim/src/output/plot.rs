@@ -1,7 +1,7 @@
 //! `--plot out.png|out.svg`: x–y trajectories with the vehicles' L × W rectangles at
 //! snapshots (in the style of the paper's Fig. 7/8), and speed over time.
 
-use crate::sim::{TraceRow, LANE_WIDTH_M, LENGTH_M, WIDTH_M};
+use crate::world::{TraceRow, LANE_WIDTH_M, LENGTH_M, WIDTH_M};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::collections::BTreeMap;
@@ -24,6 +24,19 @@ pub struct PlotData {
 }
 
 impl PlotData {
+    /// An empty record for a world on `net` (a straight road's lanes and end).
+    pub fn of(net: &crate::world::network::Network) -> Self {
+        let road = net.segments.first().filter(|_| net.junctions.is_empty());
+        Self {
+            lanes: road.map_or(0, |s| s.lanes),
+            end_x: road.and_then(|s| match s.end {
+                crate::world::network::End::DeadEnd(x) => Some(x),
+                _ => None,
+            }),
+            ..Self::default()
+        }
+    }
+
     /// Samples a trace row (keeps one row every 0.1 s).
     pub fn add(&mut self, r: &TraceRow) {
         // Rows come every h = 0.01 s; t is a multiple of h.
@@ -80,6 +93,21 @@ macro_rules! render {
             ))),
         }
     }};
+}
+
+/// The figure of any world: a straight road's (trajectories and speeds), a single
+/// junction's, or a network's.
+pub fn any(
+    data: &PlotData,
+    net: &crate::world::network::Network,
+    title: &str,
+    path: &Path,
+) -> Result<(), PlotError> {
+    match (net.junctions.as_slice(), net.segments.is_empty()) {
+        ([], _) => write(data, title, path),
+        ([j], true) => crossing(data, &j.layout, title, path),
+        _ => network(data, net, title, path),
+    }
 }
 
 /// Writes the figure to `path` (PNG or SVG by extension).
@@ -233,12 +261,15 @@ where
 }
 
 /// Fig. 9-style bars: vehicles crossed (mean ± std) and mean crossing time per algorithm.
-pub fn bars(r: &crate::intersection::ThroughputReport, path: &Path) -> Result<(), PlotError> {
+pub fn bars(
+    r: &crate::experiments::throughput::ThroughputReport,
+    path: &Path,
+) -> Result<(), PlotError> {
     render!(path, (1200, 520), |root| draw_bars(r, &root))
 }
 
 fn draw_bars<DB: DrawingBackend>(
-    r: &crate::intersection::ThroughputReport,
+    r: &crate::experiments::throughput::ThroughputReport,
     root: &DrawingArea<DB, Shift>,
 ) -> Result<(), PlotError>
 where
@@ -253,7 +284,7 @@ where
     let (left, right) = root.split_horizontally(600);
     let n = r.results.len();
     let names: Vec<&str> = r.results.iter().map(|x| x.algorithm).collect();
-    type Metric = Box<dyn Fn(&crate::intersection::ThroughputRow) -> (f64, f64)>;
+    type Metric = Box<dyn Fn(&crate::experiments::throughput::ThroughputRow) -> (f64, f64)>;
     let panels: [(&DrawingArea<DB, Shift>, &str, Metric); 2] = [
         (
             &left,
@@ -421,4 +452,141 @@ where
         .draw()
         .map_err(e)?;
     speed_panel(data, &right, t1, layout.spec.v_limit * 1.2)
+}
+
+/// A network's figure: its roads and intersections, every vehicle's path and its
+/// rectangle at snapshots, and speeds over time.
+pub fn network(
+    data: &PlotData,
+    net: &crate::world::network::Network,
+    title: &str,
+    path: &Path,
+) -> Result<(), PlotError> {
+    render!(path, (1600, 900), |root| draw_network(
+        data, net, title, &root
+    ))
+}
+
+/// The world rectangle a segment covers: (x0, y0, x1, y1).
+fn segment_box(s: &crate::world::network::Segment) -> [(f64, f64); 5] {
+    let len = s.end.x().unwrap_or(0.0);
+    let w = f64::from(s.lanes) * LANE_WIDTH_M;
+    let c = |x: f64, y: f64| {
+        let p = s.to_world(x, y, 0.0);
+        (p.x, p.y)
+    };
+    [c(0.0, 0.0), c(len, 0.0), c(len, w), c(0.0, w), c(0.0, 0.0)]
+}
+
+fn draw_network<DB: DrawingBackend>(
+    data: &PlotData,
+    net: &crate::world::network::Network,
+    title: &str,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(e)?;
+    let root = root.titled(title, ("sans-serif", 26)).map_err(e)?;
+    let (left, right) = root.split_horizontally(900);
+    let boxes: Vec<[(f64, f64); 5]> = net.segments.iter().map(segment_box).collect();
+    let pts = boxes.iter().flatten();
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for &(x, y) in pts {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    for j in &net.junctions {
+        let r = j.layout.spec.half_size + j.layout.spec.comm_margin;
+        x0 = x0.min(j.centre.0 - r);
+        x1 = x1.max(j.centre.0 + r);
+        y0 = y0.min(j.centre.1 - r);
+        y1 = y1.max(j.centre.1 + r);
+    }
+    if !x0.is_finite() {
+        return Err(PlotError("nothing to plot".into()));
+    }
+    // Equal scales: the longer side sets both.
+    let span = (x1 - x0).max(y1 - y0) + 20.0;
+    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let mut xy = ChartBuilder::on(&left)
+        .margin(15)
+        .x_label_area_size(35)
+        .y_label_area_size(50)
+        .caption(
+            "network: roads, A_S (red), A_C (grey), paths",
+            ("sans-serif", 18),
+        )
+        .build_cartesian_2d(
+            (cx - span / 2.0)..(cx + span / 2.0),
+            (cy - span / 2.0)..(cy + span / 2.0),
+        )
+        .map_err(e)?;
+    xy.configure_mesh()
+        .disable_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .draw()
+        .map_err(e)?;
+    for b in &boxes {
+        xy.draw_series(std::iter::once(Polygon::new(b.to_vec(), BLACK.mix(0.06))))
+            .map_err(e)?;
+        xy.draw_series(std::iter::once(PathElement::new(
+            b.to_vec(),
+            BLACK.mix(0.4),
+        )))
+        .map_err(e)?;
+    }
+    for j in &net.junctions {
+        let sq = |h: f64| {
+            vec![
+                (j.centre.0 - h, j.centre.1 - h),
+                (j.centre.0 + h, j.centre.1 - h),
+                (j.centre.0 + h, j.centre.1 + h),
+                (j.centre.0 - h, j.centre.1 + h),
+                (j.centre.0 - h, j.centre.1 - h),
+            ]
+        };
+        let a = j.layout.spec.half_size;
+        xy.draw_series(std::iter::once(PathElement::new(
+            sq(a + j.layout.spec.comm_margin),
+            BLACK.mix(0.25),
+        )))
+        .map_err(e)?;
+        xy.draw_series(std::iter::once(PathElement::new(
+            sq(a),
+            RED.stroke_width(2),
+        )))
+        .map_err(e)?;
+    }
+    let t1 = data
+        .series
+        .values()
+        .flatten()
+        .map(|p| p.0)
+        .fold(0.0, f64::max);
+    for (i, (_, s)) in data.series.iter().enumerate() {
+        let col = palette(i);
+        xy.draw_series(LineSeries::new(s.iter().map(|p| (p.1, p.2)), col.mix(0.6)))
+            .map_err(e)?;
+        for p in s.iter().step_by(50) {
+            let pts = footprint(p);
+            xy.draw_series(std::iter::once(Polygon::new(pts, col.mix(0.5))))
+                .map_err(e)?;
+        }
+    }
+    let vmax = net
+        .junctions
+        .iter()
+        .map(|j| j.layout.spec.v_limit)
+        .fold(0.0, f64::max);
+    speed_panel(data, &right, t1, vmax * 1.2)
 }

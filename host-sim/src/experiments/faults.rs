@@ -2,10 +2,10 @@
 //! complete on a faulty bus? Both are run on the same seeds over a perfect bus and over
 //! one injecting the given faults, in one command, and compared.
 
+use super::multilane::{experiment, MultilaneReport};
+use super::throughput::{throughput, ThroughputReport};
 use crate::bus::Faults;
-use crate::intersection::{throughput, ThroughputReport};
-use crate::multilane::{experiment, MultilaneReport};
-use crate::sim::SolverChoice;
+use crate::world::SolverChoice;
 use serde::Serialize;
 
 /// One algorithm's throughput, perfect vs faulty bus.

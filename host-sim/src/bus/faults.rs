@@ -1,0 +1,129 @@
+//! Faults the in-process bus injects (scenario `[faults]`, experiment flags).
+
+use serde::{Deserialize, Serialize};
+
+/// Faults the in-process bus injects, per message and receiver (scenario `[faults]`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Faults {
+    /// Probability that a receiver loses a message.
+    pub loss: f64,
+    /// Delivery delay (s).
+    pub delay_s: f64,
+    /// Extra delay drawn uniformly from [0, jitter_s] (s).
+    pub jitter_s: f64,
+    /// Probability that a receiver gets a message twice (the copy up to `jitter_s` + one
+    /// period later).
+    pub duplicate: f64,
+    /// Probability that a message is held back by `reorder_s`, so later ones overtake it.
+    pub reorder: f64,
+    /// How long a reordered message is held back (s).
+    pub reorder_s: f64,
+    /// A vehicle whose transmitter goes silent from a time on (it still receives).
+    pub silent: Option<Silent>,
+}
+
+/// A vehicle going silent.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Silent {
+    /// The vehicle.
+    pub id: u16,
+    /// From when (s).
+    pub from_s: f64,
+}
+
+impl Default for Faults {
+    fn default() -> Self {
+        Self::NONE
+    }
+}
+
+impl Faults {
+    /// A perfect bus.
+    pub const NONE: Faults = Faults {
+        loss: 0.0,
+        delay_s: 0.0,
+        jitter_s: 0.0,
+        duplicate: 0.0,
+        reorder: 0.0,
+        reorder_s: 0.02,
+        silent: None,
+    };
+
+    /// Checks the values: probabilities in [0, 1) (a bus that loses everything carries
+    /// nothing), times finite, ≥ 0 and below 1 s.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, p) in [
+            ("loss", self.loss),
+            ("duplicate", self.duplicate),
+            ("reorder", self.reorder),
+        ] {
+            if !(0.0..1.0).contains(&p) {
+                return Err(format!("faults.{name} = {p}: must be in [0, 1)"));
+            }
+        }
+        for (name, t) in [
+            ("delay_s", self.delay_s),
+            ("jitter_s", self.jitter_s),
+            ("reorder_s", self.reorder_s),
+        ] {
+            if !(0.0..1.0).contains(&t) {
+                return Err(format!("faults.{name} = {t}: must be in [0, 1) s"));
+            }
+        }
+        if let Some(s) = self.silent {
+            if !(s.from_s.is_finite() && s.from_s >= 0.0) {
+                return Err(format!("faults.silent.from_s = {}: must be ≥ 0", s.from_s));
+            }
+        }
+        Ok(())
+    }
+
+    /// `true` when nothing is injected.
+    pub fn is_none(&self) -> bool {
+        self.loss == 0.0
+            && self.delay_s == 0.0
+            && self.jitter_s == 0.0
+            && self.duplicate == 0.0
+            && self.reorder == 0.0
+            && self.silent.is_none()
+    }
+
+    /// A bound on the time until a receiver has a message sent now, given period `h`:
+    /// delay, jitter and reordering, plus `LOSS_PERIODS` periods of consecutive losses
+    /// (the sender repeats its state every period). The lane-change protocol waits this
+    /// long after declaring β and inflates (17) by it.
+    pub fn notify_bound(&self, h: f64) -> f64 {
+        let lost = if self.loss > 0.0 {
+            LOSS_PERIODS as f64 * h
+        } else {
+            0.0
+        };
+        let held = if self.reorder > 0.0 {
+            self.reorder_s
+        } else {
+            0.0
+        };
+        h + self.delay_s + self.jitter_s + held + lost
+    }
+}
+
+/// Consecutive losses of a repeated message the notification bound covers: at 20 % loss,
+/// 12 in a row has probability 0.2^12 ≈ 4·10⁻⁹ per message and receiver.
+pub const LOSS_PERIODS: u32 = 12;
+
+/// What the injected faults did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct FaultStats {
+    /// Deliveries lost.
+    pub lost: u64,
+    /// Messages a silent vehicle did not send.
+    pub silenced: u64,
+    /// Extra copies delivered.
+    pub duplicated: u64,
+    /// Deliveries held back for reordering.
+    pub reordered: u64,
+    /// Deliveries dropped by receivers as duplicate or overtaken.
+    pub dropped_old: u64,
+}

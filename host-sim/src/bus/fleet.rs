@@ -1,0 +1,1076 @@
+//! A world as a fleet on a CAN medium: every vehicle's planners run in a task of their own
+//! (a thread with its own CAN node), and so does every junction's manager (its node at its
+//! own source address, 0xF1 + its index); they hear each other only through can-gateway
+//! frames on that medium — a SocketCAN interface such as `vcan0`, or the in-process
+//! frame [`Hub`]. It differs from the in-process world only in the medium: the vehicles,
+//! managers, monitors and summary are the world's own.
+//!
+//! Time is kept by a time master on the bus, in the manner of CANopen SYNC. Per period k
+//! (time kh):
+//!
+//! 1. every vehicle publishes its message for kh (its state on a segment, its crossing
+//!    request at a junction; and, for a while after leaving a junction, its exit), then
+//!    reports its true state to the harness, which runs the monitors — ground truth never
+//!    reaches a planner;
+//! 2. with junctions, the master sends SYNC(2k): each manager takes what preceded it,
+//!    decides, publishes its grants and tells the harness;
+//! 3. the harness hands each vehicle its sensor returns (computed from ground truth, as
+//!    in the in-process world), and the master sends SYNC(2k + 1) (without junctions,
+//!    SYNC(k)): each vehicle takes what preceded it, plans, and moves one period.
+//!
+//! The run is lock-step and as repeatable as the in-process one (each period's messages
+//! are taken in the in-process bus's order, whatever order the tasks' frames interleaved
+//! in); what differs is that every message went through the codec (0.01 m, 0.02 m/s),
+//! which the planners and managers allow for, and the kernel's CAN stack. The kernel's
+//! receive time stamps measure the latency from publication to reception.
+
+use super::can::{CanError, CanNode, CanPort, CanStats, Hub, Polled, SocketCanPort, WireMap};
+use super::{Message, Received, Silent};
+use crate::monitor::liveness::DeadlockDetector;
+use crate::monitor::Limits;
+use crate::world::junction::ManagerNode;
+use crate::world::network::Network;
+use crate::world::sensor::{sense, Seen, Sensed};
+use crate::world::step::{build_vehicle, step_place, Moved, WorldMonitor};
+use crate::world::summary::{summarize, Outcome, Summary};
+use crate::world::vehicle::{Counters, PlannerSetup, StepCtx, Vehicle, VehicleTruth};
+use crate::world::{SolverChoice, TraceRow, WorldSpec};
+use can_gateway::wire::{self, CLOCK_ADDRESS};
+use serde::Serialize;
+use std::fmt;
+use std::io;
+use std::sync::mpsc;
+use std::time::{Duration, Instant, SystemTime};
+
+/// How long a task waits for the next SYNC, and the master for a report, before the run
+/// fails: far above a period's work even under full-system emulation.
+pub const TIMEOUT: Duration = Duration::from_secs(60);
+/// Steps to which the codec rounds positions and speeds (m, m/s).
+pub const RESOLUTION: (f64, f64) = (wire::POS_RES, wire::SPEED_RES);
+
+/// Where the fleet's frames travel.
+#[derive(Debug, Clone)]
+pub enum Medium {
+    /// A SocketCAN interface (e.g. `vcan0`).
+    SocketCan(String),
+    /// The in-process frame hub.
+    Hub,
+}
+
+impl fmt::Display for Medium {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::SocketCan(i) => write!(f, "socketcan:{i}"),
+            Self::Hub => write!(f, "can-hub"),
+        }
+    }
+}
+
+/// A node of the fleet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Node {
+    /// The time master.
+    Clock,
+    /// Vehicle id.
+    Vehicle(u16),
+    /// Junction (index)'s manager.
+    Manager(usize),
+}
+
+/// Latency percentiles (µs) from publication to reception, by receive time stamps.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Latency {
+    /// Messages measured.
+    pub count: u64,
+    /// Median (µs).
+    pub p50_us: f64,
+    /// 99th percentile (µs).
+    pub p99_us: f64,
+    /// Largest (µs).
+    pub max_us: f64,
+}
+
+impl Latency {
+    /// Percentiles of `v` (µs).
+    pub fn of(mut v: Vec<f64>) -> Self {
+        if v.is_empty() {
+            return Self::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| {
+            let i = ((v.len() - 1) as f64 * q).round() as usize;
+            v.get(i).copied().unwrap_or(0.0)
+        };
+        Self {
+            count: v.len() as u64,
+            p50_us: at(0.5),
+            p99_us: at(0.99),
+            max_us: v.last().copied().unwrap_or(0.0),
+        }
+    }
+}
+
+/// Messages of a fleet run, by kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct Messages {
+    /// Vehicles' states.
+    pub states: u64,
+    /// Vehicles' crossing requests.
+    pub requests: u64,
+    /// Managers' grants.
+    pub grants: u64,
+    /// Vehicles' exits.
+    pub exits: u64,
+}
+
+/// What a fleet run produced (the `--json` summary of `run --bus`).
+#[derive(Debug, Clone, Serialize)]
+pub struct FleetSummary {
+    /// The run, as the in-process world reports it.
+    #[serde(flatten)]
+    pub run: Summary,
+    /// The medium (`socketcan:vcan0`, `can-hub`).
+    pub medium: String,
+    /// Tasks: one per vehicle and per junction manager.
+    pub tasks: usize,
+    /// Periods run (0 to the last, inclusive).
+    pub periods: u64,
+    /// SYNC ticks sent.
+    pub sync_ticks: u64,
+    /// Messages the vehicles and managers sent.
+    pub messages: Messages,
+    /// Every node's CAN traffic, summed.
+    pub can: CanStats,
+    /// States: publication (before the first frame is written) to the receiving socket's
+    /// time stamp of the last frame.
+    pub state_latency: Latency,
+    /// Crossing requests, likewise (at managers and vehicles).
+    pub request_latency: Latency,
+    /// Grants, likewise.
+    pub grant_latency: Latency,
+    /// SYNC: written by the master to received by the node that acts on it.
+    pub sync_latency: Latency,
+}
+
+impl FleetSummary {
+    /// One line for a terminal.
+    pub fn line(&self) -> String {
+        format!(
+            "{}: {} tasks, {} periods ({} SYNC ticks); {} states, {} requests, {} grants, {} exits; \
+             frames sent {}, received {}, rejected {}; state latency p50 {:.0} µs, p99 {:.0} µs; \
+             request latency p50 {:.0} µs, p99 {:.0} µs",
+            self.medium,
+            self.tasks,
+            self.periods,
+            self.sync_ticks,
+            self.messages.states,
+            self.messages.requests,
+            self.messages.grants,
+            self.messages.exits,
+            self.can.frames_sent,
+            self.can.frames_received,
+            self.can.rejected_total(),
+            self.state_latency.p50_us,
+            self.state_latency.p99_us,
+            self.request_latency.p50_us,
+            self.request_latency.p99_us,
+        )
+    }
+}
+
+/// Why a fleet run failed.
+#[derive(Debug)]
+pub enum FleetError {
+    /// Opening a node's port, or the master's traffic.
+    Can(CanError),
+    /// A vehicle task failed.
+    Vehicle {
+        /// The vehicle.
+        id: u16,
+        /// What failed.
+        error: String,
+    },
+    /// The tasks broke the period protocol (a report out of turn, a panicked task).
+    Harness(String),
+    /// A task did not report within [`TIMEOUT`].
+    Timeout {
+        /// The period waited for.
+        period: u64,
+    },
+    /// The world cannot run as a fleet (see `host-sim run --bus`).
+    Unsupported(String),
+}
+
+impl fmt::Display for FleetError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Can(e) => write!(f, "{e}"),
+            Self::Vehicle { id, error } => write!(f, "vehicle {id}: {error}"),
+            Self::Harness(e) => write!(f, "{e}"),
+            Self::Timeout { period } => write!(
+                f,
+                "no report from every task for period {period} within {} s",
+                TIMEOUT.as_secs()
+            ),
+            Self::Unsupported(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for FleetError {}
+
+impl From<CanError> for FleetError {
+    fn from(e: CanError) -> Self {
+        Self::Can(e)
+    }
+}
+
+/// Why `spec` cannot run as a fleet, if it cannot: the bus carries frames as they are
+/// (no injected faults); no vehicle enters during the run (every node's socket is open
+/// before anyone transmits); every vehicle id a CAN source address; at most as many
+/// junctions as manager addresses.
+pub fn unsupported(spec: &WorldSpec) -> Option<String> {
+    if !spec.faults.is_none() {
+        return Some(
+            "[faults] are injected by the in-process bus; a fleet carries frames as they are"
+                .into(),
+        );
+    }
+    if spec.arrivals != crate::world::Arrivals::None {
+        return Some("vehicles that enter while the run goes on need the in-process bus".into());
+    }
+    if let Some(e) = spec
+        .vehicles
+        .iter()
+        .find_map(|v| super::can::vehicle_address(v.id).err())
+    {
+        return Some(e.to_string());
+    }
+    (0..spec.network.junctions.len())
+        .find(|&j| wire::manager_address(j).is_none())
+        .map(|_| "more junctions than CAN manager addresses (13)".into())
+}
+
+/// A task's report to the harness.
+enum Report {
+    /// A vehicle published what it had to for `period`.
+    Vehicle {
+        index: usize,
+        period: u64,
+        /// Its true state at the period's start; `None` once it has left the world.
+        truth: Option<VehicleTruth>,
+        /// The row of the decision that led here (none at period 0).
+        row: Option<TraceRow>,
+        /// When its message for `period` was published, and of which kind.
+        published: Option<(SystemTime, Kind)>,
+        /// Messages heard in the previous period: (kind, sender id, receive stamp).
+        heard: Vec<(Kind, u16, SystemTime)>,
+        /// Receive stamp of the SYNC it planned on.
+        sync_rx: Option<SystemTime>,
+        /// It published an exit this period.
+        exit: bool,
+    },
+    /// Junction `junction`'s manager granted `granted` for `period`.
+    Manager {
+        junction: usize,
+        period: u64,
+        granted: Vec<u16>,
+        holders: Vec<(u16, u8)>,
+        published: SystemTime,
+        heard: Vec<(Kind, u16, SystemTime)>,
+        sync_rx: SystemTime,
+    },
+    Failed {
+        id: u16,
+        error: String,
+    },
+}
+
+/// A message's kind, for the latencies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    State,
+    Request,
+    Grant,
+    Other,
+}
+
+fn kind_of(m: &Message) -> Kind {
+    match m {
+        Message::State { .. } => Kind::State,
+        Message::Crossing { .. } => Kind::Request,
+        Message::Grant { .. } => Kind::Grant,
+        Message::Left { .. } => Kind::Other,
+    }
+}
+
+/// What the harness tells a vehicle task before its planning tick.
+struct Go {
+    sensed: Sensed,
+}
+
+/// What a vehicle task hands back.
+type VehicleResult<const N: usize> = (Vehicle<N>, Counters, CanStats, Messages);
+
+/// Runs `spec` as a fleet on `medium`; `trace` sees a row per vehicle and period.
+pub fn run(
+    spec: WorldSpec,
+    solver: SolverChoice,
+    seed: Option<u64>,
+    medium: &Medium,
+    trace: &mut dyn FnMut(&TraceRow),
+) -> Result<FleetSummary, FleetError> {
+    let name = medium.to_string();
+    match medium {
+        Medium::SocketCan(iface) => {
+            let iface = iface.clone();
+            let open = move |n: Node| match n {
+                Node::Clock => SocketCanPort::open_transmit_only(&iface),
+                _ => SocketCanPort::open(&iface),
+            };
+            run_with_ports(spec, solver, seed, &name, open, trace)
+        }
+        Medium::Hub => {
+            let hub = Hub::new();
+            run_with_ports(spec, solver, seed, &name, move |_| Ok(hub.port()), trace)
+        }
+    }
+}
+
+/// [`run`] on ports from `open` (one per node, the master's included); `medium` names
+/// them in the summary.
+pub fn run_with_ports<P: CanPort + 'static>(
+    spec: WorldSpec,
+    solver: SolverChoice,
+    seed: Option<u64>,
+    medium: &str,
+    open: impl FnMut(Node) -> io::Result<P>,
+    trace: &mut dyn FnMut(&TraceRow),
+) -> Result<FleetSummary, FleetError> {
+    if let Some(why) = unsupported(&spec) {
+        return Err(FleetError::Unsupported(why));
+    }
+    match spec.horizon {
+        50 => Harness::<50>::new(spec, solver, seed).run(medium, open, trace),
+        _ => Harness::<20>::new(spec, solver, seed).run(medium, open, trace),
+    }
+}
+
+/// The fleet's harness: the time master, the monitors, the summary.
+struct Harness<const N: usize> {
+    spec: WorldSpec,
+    solver: SolverChoice,
+    seed: u64,
+    lim: Limits,
+}
+
+/// The latencies and counts the harness gathers.
+#[derive(Default)]
+struct Tally {
+    state: Vec<f64>,
+    request: Vec<f64>,
+    grant: Vec<f64>,
+    sync: Vec<f64>,
+    grants: u64,
+    exits: u64,
+    ticks: u64,
+}
+
+impl Tally {
+    fn heard(
+        &mut self,
+        heard: Vec<(Kind, u16, SystemTime)>,
+        sent: &[(u16, SystemTime, Kind)],
+        grants_at: Option<SystemTime>,
+    ) {
+        for (k, sender, at) in heard {
+            match k {
+                Kind::Grant => {
+                    if let Some(g) = grants_at {
+                        self.grant.push(micros(g, at));
+                    }
+                }
+                Kind::State | Kind::Request => {
+                    if let Some((_, s, _)) =
+                        sent.iter().find(|(id, _, kk)| *id == sender && *kk == k)
+                    {
+                        let v = if k == Kind::State {
+                            &mut self.state
+                        } else {
+                            &mut self.request
+                        };
+                        v.push(micros(*s, at));
+                    }
+                }
+                Kind::Other => {}
+            }
+        }
+    }
+}
+
+impl<const N: usize> Harness<N> {
+    fn new(spec: WorldSpec, solver: SolverChoice, seed: Option<u64>) -> Self {
+        Self {
+            seed: seed.unwrap_or(spec.seed),
+            spec,
+            solver,
+            lim: Limits::table_i(),
+        }
+    }
+
+    fn setup(&self) -> PlannerSetup {
+        PlannerSetup {
+            solver: self.solver,
+            // Lock-step: every message of period k is heard in period k.
+            notify: self.lim.h,
+            resolution: RESOLUTION,
+            sensing: self.spec.sensing,
+        }
+    }
+
+    fn run<P: CanPort + 'static>(
+        self,
+        medium: &str,
+        mut open: impl FnMut(Node) -> io::Result<P>,
+        trace: &mut dyn FnMut(&TraceRow),
+    ) -> Result<FleetSummary, FleetError> {
+        let t0 = Instant::now();
+        let net = self.spec.network.clone();
+        let map = WireMap::new(&net);
+        let vehicles: Vec<Vehicle<N>> = self
+            .spec
+            .vehicles
+            .iter()
+            .map(|v| build_vehicle::<N>(v, self.setup(), self.seed, &net))
+            .collect();
+        let mut managers: Vec<ManagerNode> = net
+            .junctions
+            .iter()
+            .enumerate()
+            .map(|(j, jn)| ManagerNode::new(j, jn.layout.clone(), jn.algorithm))
+            .collect();
+        for m in &mut managers {
+            m.manager
+                .set_position_resolution(RESOLUTION.0)
+                .map_err(|e| FleetError::Harness(format!("bus resolution: {e:?}")))?;
+        }
+        // Every socket is open before anyone transmits, so that no node misses a frame.
+        let mut clock = CanNode::new(CLOCK_ADDRESS, open(Node::Clock).map_err(CanError::Io)?);
+        let mut vnodes = Vec::with_capacity(vehicles.len());
+        for v in &vehicles {
+            let port = open(Node::Vehicle(v.id)).map_err(CanError::Io)?;
+            vnodes.push(CanNode::vehicle(v.id, port)?);
+        }
+        let mut mnodes = Vec::with_capacity(managers.len());
+        for m in &managers {
+            let port = open(Node::Manager(m.junction)).map_err(CanError::Io)?;
+            mnodes.push(CanNode::new(map.manager_address(m.junction)?, port));
+        }
+        let total = (self.spec.duration_s / self.lim.h).round() as u64;
+        let order: Vec<u16> = vehicles.iter().map(|v| v.id).collect();
+        let with_managers = !managers.is_empty();
+        let (tx, rx) = mpsc::channel::<Report>();
+        let n = vehicles.len();
+        let m = managers.len();
+        let mut tally = Tally::default();
+        let mut monitor = WorldMonitor::new(&net);
+        let mut detector = DeadlockDetector::new(self.spec.deadlock_window_s);
+        let mut deadlock = None;
+        let mut periods = 0u64;
+        let (net_ref, map_ref, order_ref, lim) = (&net, &map, &order, self.lim);
+        let faults_silent = self.spec.faults.silent;
+        let outcome = std::thread::scope(|sc| -> Result<_, FleetError> {
+            let mut vhandles = Vec::with_capacity(n);
+            let mut go_tx = Vec::with_capacity(n);
+            for (index, (car, node)) in vehicles.into_iter().zip(vnodes).enumerate() {
+                let task_tx = tx.clone();
+                let (gtx, grx) = mpsc::channel::<Go>();
+                go_tx.push(gtx);
+                let id = car.id;
+                let ctx = TaskCtx {
+                    net: net_ref,
+                    map: map_ref,
+                    order: order_ref,
+                    total,
+                    with_managers,
+                    lim,
+                    silent: faults_silent,
+                };
+                vhandles.push(spawn(
+                    sc,
+                    &mut clock,
+                    &format!("vehicle-{id}"),
+                    move || vehicle_task(index, car, node, &ctx, &task_tx, &grx),
+                )?);
+            }
+            let mut mhandles = Vec::with_capacity(m);
+            for (mgr, node) in managers.into_iter().zip(mnodes) {
+                let task_tx = tx.clone();
+                let ctx = TaskCtx {
+                    net: net_ref,
+                    map: map_ref,
+                    order: order_ref,
+                    total,
+                    with_managers,
+                    lim,
+                    silent: faults_silent,
+                };
+                let j = mgr.junction;
+                mhandles.push(spawn(sc, &mut clock, &format!("manager-{j}"), move || {
+                    manager_task(mgr, node, &ctx, &task_tx)
+                })?);
+            }
+            drop(tx);
+            let mut sent: Vec<(u16, SystemTime, Kind)> = Vec::new();
+            let mut grants_at: Option<SystemTime> = None;
+            let mut last_tick: Option<SystemTime> = None;
+            let mut holders: Vec<Vec<(u16, u8)>> = vec![Vec::new(); m];
+            let mut result: Result<(), FleetError> = Ok(());
+            'periods: for k in 0..=total {
+                let t = k as f64 * lim.h;
+                let mut truths: Vec<Option<VehicleTruth>> = vec![None; n];
+                let mut rows: Vec<Option<TraceRow>> = vec![None; n];
+                let mut next_sent = Vec::with_capacity(n);
+                for _ in 0..n {
+                    match rx.recv_timeout(TIMEOUT) {
+                        Ok(Report::Vehicle {
+                            index,
+                            period,
+                            truth,
+                            row,
+                            published,
+                            heard,
+                            sync_rx,
+                            exit,
+                        }) if period == k => {
+                            if let Some(slot) = truths.get_mut(index) {
+                                *slot = truth;
+                            }
+                            if let Some(slot) = rows.get_mut(index) {
+                                *slot = row;
+                            }
+                            if let (Some((at, kind)), Some(id)) = (published, order_ref.get(index))
+                            {
+                                next_sent.push((*id, at, kind));
+                            }
+                            tally.heard(heard, &sent, grants_at);
+                            tally.exits += u64::from(exit);
+                            if let (Some(s), Some(r)) = (last_tick, sync_rx) {
+                                tally.sync.push(micros(s, r));
+                            }
+                        }
+                        Ok(Report::Failed { id, error }) => {
+                            result = Err(FleetError::Vehicle { id, error });
+                            break 'periods;
+                        }
+                        Ok(_) => {
+                            result = Err(FleetError::Harness(format!(
+                                "a report out of turn in period {k}"
+                            )));
+                            break 'periods;
+                        }
+                        Err(_) => {
+                            result = Err(FleetError::Timeout { period: k });
+                            break 'periods;
+                        }
+                    }
+                }
+                sent = next_sent;
+                let present: Vec<VehicleTruth> = truths.iter().flatten().copied().collect();
+                if k > 0 {
+                    for r in rows.iter().flatten() {
+                        trace(r);
+                    }
+                    monitor.check(&lim, net_ref, &present);
+                    let held = |j: usize| holders.get(j).cloned().unwrap_or_default();
+                    if let Some(d) = crate::world::wait::watch(
+                        &mut detector,
+                        t,
+                        &present,
+                        false,
+                        net_ref,
+                        &held,
+                        &lim,
+                    ) {
+                        eprintln!("{}: {d}", self.spec.name);
+                        deadlock = Some(d);
+                    }
+                }
+                periods = k + 1;
+                let gone = present.is_empty() && !net_ref.junctions.is_empty();
+                let last = k == total || deadlock.is_some() || gone;
+                if with_managers {
+                    let at = match tick(&mut clock, 2 * k, last) {
+                        Ok(at) => at,
+                        Err(e) => {
+                            result = Err(e);
+                            break;
+                        }
+                    };
+                    tally.ticks += 1;
+                    if last {
+                        break;
+                    }
+                    grants_at = None;
+                    for _ in 0..m {
+                        match rx.recv_timeout(TIMEOUT) {
+                            Ok(Report::Manager {
+                                junction,
+                                period,
+                                granted,
+                                holders: h,
+                                published,
+                                heard,
+                                sync_rx,
+                            }) if period == k => {
+                                monitor.granted(junction, &granted);
+                                tally.grants += granted.len() as u64;
+                                if !granted.is_empty() {
+                                    grants_at = Some(published);
+                                }
+                                if let Some(slot) = holders.get_mut(junction) {
+                                    *slot = h;
+                                }
+                                tally.heard(heard, &sent, None);
+                                tally.sync.push(micros(at, sync_rx));
+                            }
+                            Ok(Report::Failed { id, error }) => {
+                                result = Err(FleetError::Harness(format!("manager {id}: {error}")));
+                                break 'periods;
+                            }
+                            Ok(_) => {
+                                result = Err(FleetError::Harness(format!("a report out of turn while waiting for the managers' period {k}")));
+                                break 'periods;
+                            }
+                            Err(_) => {
+                                result = Err(FleetError::Timeout { period: k });
+                                break 'periods;
+                            }
+                        }
+                    }
+                }
+                // Sensor returns from ground truth at kh, as in the in-process world.
+                let seen = sense_all(
+                    net_ref,
+                    &present,
+                    &truths,
+                    self.spec.sensing.as_ref(),
+                    self.seed,
+                    k,
+                );
+                for (g, s) in go_tx.iter().zip(seen) {
+                    let _ = g.send(Go { sensed: s });
+                }
+                let plan = if with_managers { 2 * k + 1 } else { k };
+                match tick(&mut clock, plan, !with_managers && last) {
+                    Ok(at) => last_tick = Some(at),
+                    Err(e) => {
+                        result = Err(e);
+                        break;
+                    }
+                }
+                tally.ticks += 1;
+                if !with_managers && last {
+                    break;
+                }
+            }
+            if result.is_err() {
+                let _ = end(&mut clock, tally.ticks as u32);
+            }
+            let mut can = CanStats::default();
+            let mut counters = Counters::default();
+            let mut msgs = Messages::default();
+            let mut cars = Vec::with_capacity(n);
+            for (car, c, s, mm) in join(vhandles, &mut result) {
+                counters.add(&c);
+                can.add(&s);
+                msgs.states += mm.states;
+                msgs.requests += mm.requests;
+                cars.push(car);
+            }
+            for s in join(mhandles, &mut result) {
+                can.add(&s);
+            }
+            result.map(|()| (cars, counters, can, msgs))
+        })?;
+        let (cars, counters, can, mut msgs) = outcome;
+        msgs.grants = tally.grants;
+        msgs.exits = tally.exits;
+        let in_world = cars.iter().filter(|v| v.log.left_at.is_none()).count();
+        let unfinished = cars
+            .iter()
+            .filter(|v| v.log.left_at.is_none() && crate::world::step::unmet(v, &net))
+            .count();
+        let run = summarize(
+            cars.iter(),
+            &Outcome {
+                spec: &self.spec,
+                in_world,
+                unfinished,
+                findings: &monitor.findings,
+                counters: &counters,
+                deadlock: deadlock.as_ref(),
+                t: periods.saturating_sub(1) as f64 * self.lim.h,
+                messages_sent: msgs.states + msgs.requests,
+                bus_faults: Default::default(),
+                solver: self.solver,
+                seed: self.seed,
+                wall_seconds: t0.elapsed().as_secs_f64(),
+            },
+        );
+        Ok(FleetSummary {
+            run,
+            medium: medium.to_string(),
+            tasks: n + m,
+            periods,
+            sync_ticks: tally.ticks,
+            messages: msgs,
+            can,
+            state_latency: Latency::of(tally.state),
+            request_latency: Latency::of(tally.request),
+            grant_latency: Latency::of(tally.grant),
+            sync_latency: Latency::of(tally.sync),
+        })
+    }
+}
+
+/// Sensor returns for every vehicle task (in index order) from the truths at period k;
+/// a vehicle gone gets none. The noise is drawn per period from the seed, so the run is
+/// repeatable.
+fn sense_all(
+    net: &Network,
+    present: &[VehicleTruth],
+    truths: &[Option<VehicleTruth>],
+    sensing: Option<&planner_core::Sensing<f64>>,
+    seed: u64,
+    k: u64,
+) -> Vec<Sensed> {
+    let all: Vec<Seen> = present
+        .iter()
+        .map(|v| Seen {
+            id: v.id,
+            at: v.at,
+            v: v.v,
+        })
+        .collect();
+    let mut rng = crate::reference::instances::rng(seed ^ 0x5e15 ^ k.wrapping_mul(0x9E37_79B9));
+    truths
+        .iter()
+        .map(|t| match t {
+            Some(v) if v.planner && sensing.is_none() => Sensed::default(),
+            Some(v) => {
+                let me = Seen {
+                    id: v.id,
+                    at: v.at,
+                    v: v.v,
+                };
+                sense(
+                    net,
+                    &me,
+                    &all,
+                    if v.planner { sensing } else { None },
+                    &mut rng,
+                )
+            }
+            None => Sensed::default(),
+        })
+        .collect()
+}
+
+/// What every task knows of the run.
+struct TaskCtx<'a> {
+    net: &'a Network,
+    map: &'a WireMap<'a>,
+    order: &'a [u16],
+    total: u64,
+    with_managers: bool,
+    lim: Limits,
+    silent: Option<Silent>,
+}
+
+/// One vehicle: publish, report, wait for SYNC, plan, move — until the last SYNC.
+fn vehicle_task<const N: usize, P: CanPort>(
+    index: usize,
+    mut car: Vehicle<N>,
+    mut node: CanNode<P>,
+    ctx: &TaskCtx<'_>,
+    tx: &mpsc::Sender<Report>,
+    go: &mpsc::Receiver<Go>,
+) -> Result<VehicleResult<N>, FleetError> {
+    let id = car.id;
+    let fail = |error: String| {
+        let _ = tx.send(Report::Failed {
+            id,
+            error: error.clone(),
+        });
+        FleetError::Vehicle { id, error }
+    };
+    let h = ctx.lim.h;
+    let mut counters = Counters::default();
+    let mut msgs = Messages::default();
+    let mut inbox: Vec<(Received, u8)> = Vec::new();
+    let mut row = None;
+    let mut heard = Vec::new();
+    let mut sync_rx = None;
+    let mut departing: Option<(usize, f64)> = None;
+    for k in 0..=ctx.total {
+        let t = k as f64 * h;
+        let published = SystemTime::now();
+        let mut exit = false;
+        if let Some((j, at)) =
+            departing.filter(|&(_, at)| t < at + crate::world::junction::LEFT_REPEAT_S)
+        {
+            node.send(
+                &Message::Left {
+                    id,
+                    at,
+                    junction: j,
+                },
+                ctx.map,
+                at,
+            )
+            .map_err(|e| fail(e.to_string()))?;
+            exit = true;
+        }
+        let in_world = car.log.left_at.is_none();
+        let mut kind = None;
+        if in_world {
+            let m = car.message(t);
+            kind = Some(kind_of(&m));
+            node.send(&m, ctx.map, car.log.arrived_at.unwrap_or(t))
+                .map_err(|e| fail(e.to_string()))?;
+            match kind {
+                Some(Kind::State) => msgs.states += 1,
+                _ => msgs.requests += 1,
+            }
+        }
+        let report = Report::Vehicle {
+            index,
+            period: k,
+            truth: in_world.then(|| car.truth(ctx.net)),
+            row: row.take(),
+            published: kind.map(|k| (published, k)),
+            heard: std::mem::take(&mut heard),
+            sync_rx: sync_rx.take(),
+            exit,
+        };
+        if tx.send(report).is_err() {
+            return Err(fail("the harness is gone".into()));
+        }
+        let plan = if ctx.with_managers { 2 * k + 1 } else { k };
+        inbox.clear();
+        let Some(at) =
+            await_tick(&mut node, plan, ctx.map, t, &mut inbox, &mut heard).map_err(fail)?
+        else {
+            break;
+        };
+        sync_rx = Some(at);
+        let Ok(Go { sensed }) = go.recv_timeout(TIMEOUT) else {
+            return Err(fail(format!("no sensor returns for period {k}")));
+        };
+        if k == ctx.total || !in_world {
+            continue;
+        }
+        let received = in_order(&mut inbox, ctx.order, t);
+        let step = StepCtx {
+            t,
+            steps_done: k,
+            net: ctx.net,
+            lim: ctx.lim,
+            silent: ctx.silent,
+            returns: &sensed,
+        };
+        let ((v, w), r) = car.decide(&step, &received, &mut counters);
+        car.advance(v, w, h);
+        let now = (k + 1) as f64 * h;
+        car.check_goal(now);
+        if let Moved::LeftJunction(j) = step_place(&mut car, ctx.net, now) {
+            departing = Some((j, now));
+        }
+        row = Some(r);
+    }
+    Ok((car, counters, node.stats().clone(), msgs))
+}
+
+/// A junction's manager: wait for SYNC(2k), decide on what preceded it, grant — until the
+/// last SYNC.
+fn manager_task<P: CanPort>(
+    mut mgr: ManagerNode,
+    mut node: CanNode<P>,
+    ctx: &TaskCtx<'_>,
+    tx: &mpsc::Sender<Report>,
+) -> Result<CanStats, FleetError> {
+    let j = mgr.junction;
+    let fail = |error: String| {
+        let _ = tx.send(Report::Failed {
+            id: j as u16,
+            error: error.clone(),
+        });
+        FleetError::Harness(format!("manager of junction {j}: {error}"))
+    };
+    let mut inbox: Vec<(Received, u8)> = Vec::new();
+    let mut heard = Vec::new();
+    for k in 0..=ctx.total {
+        let t = k as f64 * ctx.lim.h;
+        inbox.clear();
+        let Some(sync_rx) =
+            await_tick(&mut node, 2 * k, ctx.map, t, &mut inbox, &mut heard).map_err(fail)?
+        else {
+            break;
+        };
+        let received = in_order(&mut inbox, ctx.order, t);
+        let granted = mgr.manage(&received, t);
+        let published = SystemTime::now();
+        for &id in &granted {
+            let g = mgr.grant(id, t, ctx.lim.h, ctx.lim.h);
+            node.send(&g, ctx.map, t).map_err(|e| fail(e.to_string()))?;
+        }
+        let holders = crate::world::wait::holders(std::slice::from_ref(&mgr), j);
+        let report = Report::Manager {
+            junction: j,
+            period: k,
+            granted,
+            holders,
+            published,
+            heard: std::mem::take(&mut heard),
+            sync_rx,
+        };
+        if tx.send(report).is_err() {
+            return Err(fail("the harness is gone".into()));
+        }
+    }
+    Ok(node.stats().clone())
+}
+
+/// Reads frames until SYNC(`tick`), keeping every message before it (sent in the period
+/// that began at `t`, with its sender's address) and what was heard when; `None` on the
+/// last SYNC.
+fn await_tick<P: CanPort>(
+    node: &mut CanNode<P>,
+    tick: u64,
+    map: &WireMap<'_>,
+    t: f64,
+    inbox: &mut Vec<(Received, u8)>,
+    heard: &mut Vec<(Kind, u16, SystemTime)>,
+) -> Result<Option<SystemTime>, String> {
+    let deadline = Instant::now() + TIMEOUT;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(format!("no SYNC {tick} within {TIMEOUT:?}"));
+        }
+        match node.poll(left).map_err(|e| e.to_string())? {
+            Polled::Nothing | Polled::Frame => {}
+            Polled::Message(wire::Message::Sync { period, last }, at, _) => {
+                if last {
+                    return Ok(None);
+                }
+                // Every node hears every tick: the managers' and the vehicles' alternate.
+                match u64::from(period).cmp(&tick) {
+                    std::cmp::Ordering::Less => {}
+                    std::cmp::Ordering::Equal => return Ok(Some(at)),
+                    std::cmp::Ordering::Greater => {
+                        return Err(format!("SYNC {period} while waiting for {tick}"))
+                    }
+                }
+            }
+            Polled::Message(m, at, sa) => {
+                if let Some(msg) = map.heard(&m, sa, t) {
+                    heard.push((kind_of(&msg), msg.sender(), at));
+                    inbox.push((Received { msg, at: 0.0 }, sa));
+                }
+            }
+        }
+    }
+}
+
+/// A period's messages in the in-process bus's order, whatever order the tasks' frames
+/// interleaved in: exits first, then states and requests by sender in the world's order,
+/// then grants by junction; received at `t`.
+fn in_order(inbox: &mut [(Received, u8)], order: &[u16], t: f64) -> Vec<Received> {
+    let rank = |r: &Received| -> (u8, usize) {
+        let pos = |id: u16| order.iter().position(|&o| o == id).unwrap_or(usize::MAX);
+        match r.msg {
+            Message::Left { id, .. } => (0, pos(id)),
+            Message::State { .. } | Message::Crossing { .. } => (1, pos(r.msg.subject().0)),
+            Message::Grant { junction, id, .. } => (2, junction * 65536 + pos(id).min(65535)),
+        }
+    };
+    inbox.sort_by_key(|(r, _)| rank(r));
+    inbox
+        .iter()
+        .map(|(r, _)| Received { msg: r.msg, at: t })
+        .collect()
+}
+
+/// Starts a task named `name` in `scope`; if the system refuses a thread, tells the tasks
+/// already started to stop (a last SYNC) and answers the error.
+fn spawn<'scope, T: Send + 'scope, P: CanPort>(
+    scope: &'scope std::thread::Scope<'scope, '_>,
+    clock: &mut CanNode<P>,
+    name: &str,
+    task: impl FnOnce() -> T + Send + 'scope,
+) -> Result<std::thread::ScopedJoinHandle<'scope, T>, FleetError> {
+    std::thread::Builder::new()
+        .name(name.to_string())
+        .spawn_scoped(scope, task)
+        .map_err(|e| {
+            let _ = end(clock, 0);
+            FleetError::Harness(format!("{name}: cannot start its task: {e}"))
+        })
+}
+
+/// Waits for every task; their results, and the first failure in `result` (unless it
+/// already holds one).
+fn join<T>(
+    handles: Vec<std::thread::ScopedJoinHandle<'_, Result<T, FleetError>>>,
+    result: &mut Result<(), FleetError>,
+) -> Vec<T> {
+    let mut done = Vec::with_capacity(handles.len());
+    for h in handles {
+        let failure = match h.join() {
+            Ok(Ok(r)) => {
+                done.push(r);
+                continue;
+            }
+            Ok(Err(e)) => e,
+            Err(_) => FleetError::Harness("a task panicked".into()),
+        };
+        if result.is_ok() {
+            *result = Err(failure);
+        }
+    }
+    done
+}
+
+/// The time master's tick `period` (`last`: the run ends); when it was written.
+fn tick<P: CanPort>(
+    clock: &mut CanNode<P>,
+    period: u64,
+    last: bool,
+) -> Result<SystemTime, FleetError> {
+    // The master's own port hears the fleet on a hub; nothing else reads it (a failed
+    // read only leaves frames queued there).
+    let _ = clock.drain(|_, _| {});
+    let at = SystemTime::now();
+    let m = wire::Message::Sync {
+        period: period as u32,
+        last,
+    };
+    clock.send_wire(&m).map_err(FleetError::Can)?;
+    Ok(at)
+}
+
+/// Tells every task to stop (a last SYNC after `period`).
+fn end<P: CanPort>(clock: &mut CanNode<P>, period: u32) -> Result<(), CanError> {
+    clock.send_wire(&wire::Message::Sync {
+        period: period.saturating_add(1),
+        last: true,
+    })
+}
+
+/// Microseconds from `from` to `to` (0 if `to` is earlier).
+pub fn micros(from: SystemTime, to: SystemTime) -> f64 {
+    to.duration_since(from)
+        .map_or(0.0, |d| d.as_secs_f64() * 1e6)
+}

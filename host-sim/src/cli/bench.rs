@@ -1,0 +1,108 @@
+//! Benchmarks: `scale` (vehicles in real time) and `bench-planner` (our solver vs
+//! Clarabel).
+
+use super::output::{bad_input, finish, print_json};
+use std::process::ExitCode;
+
+/// `host-sim scale`.
+#[derive(clap::Args)]
+pub struct ScaleArgs {
+    /// Number of vehicles.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    vehicles: u64,
+    /// Simulated seconds.
+    #[arg(long, default_value_t = 10.0)]
+    duration: f64,
+    /// Vehicles per road (platoon).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..=128))]
+    platoon: u64,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `host-sim bench-planner`.
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Problems per row (cold: random instances; warm: steps of a simulated drive).
+    #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    problems: u64,
+    /// Repetitions per problem; the fastest is kept.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    reps: u64,
+    /// Seed of the instances.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+}
+
+/// `scale`.
+pub fn scale(a: ScaleArgs) -> ExitCode {
+    if !(a.duration > 0.0 && a.duration <= 86_400.0) {
+        return bad_input(format!(
+            "--duration must be in (0, 86400], got {}",
+            a.duration
+        ));
+    }
+    let r = host_sim::experiments::scale::run(
+        a.vehicles as usize,
+        a.duration,
+        a.platoon as usize,
+        a.threads,
+        a.seed,
+    );
+    finish(
+        &r,
+        a.json,
+        r.collisions + r.invariant_violations + r.limit_violations == 0,
+        true,
+    )
+}
+
+/// `bench-planner`.
+pub fn bench(a: BenchArgs) -> ExitCode {
+    let report = host_sim::reference::bench::run(a.problems as usize, a.seed, a.reps as usize);
+    if a.json {
+        if let Err(code) = print_json(&report) {
+            return code;
+        }
+        return ExitCode::SUCCESS;
+    }
+    println!(
+        "{:>3} {:>5} {:>8} {:>12} {:>10} {:>14} {:>8} {:>10} {:>10} {:>6}",
+        "N",
+        "mode",
+        "problems",
+        "ours med µs",
+        "ours p99",
+        "clarabel med",
+        "speedup",
+        "max gap",
+        "max viol",
+        "iters"
+    );
+    for r in &report.results {
+        println!(
+            "{:>3} {:>5} {:>8} {:>12.2} {:>10.2} {:>14.1} {:>8.1} {:>10.1e} {:>10.1e} {:>6}",
+            r.horizon,
+            r.mode,
+            r.problems,
+            r.planner_median_us,
+            r.planner_p99_us,
+            r.clarabel_median_us,
+            r.speedup,
+            r.max_rel_objective_gap,
+            r.max_constraint_violation,
+            r.planner_median_iterations
+        );
+    }
+    ExitCode::SUCCESS
+}

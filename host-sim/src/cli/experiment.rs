@@ -1,0 +1,248 @@
+//! `host-sim experiment …`: the paper's figures and the fault experiment.
+
+use super::output::{bad_input, check_duration, check_plot, finish};
+use super::SolverArg;
+use host_sim::bus::Faults;
+use host_sim::output::plot::PlotData;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// The experiments.
+#[derive(clap::Subcommand)]
+pub enum Experiment {
+    /// Fig. 9: closed system of 8 vehicles at the SPEC §8 intersection; STOP, FIFO, CON,
+    /// the starvation-free CON and the pipelined algorithm on identical seeds.
+    Throughput {
+        /// Simulated seconds per run.
+        #[arg(long, default_value_t = 300.0)]
+        duration: f64,
+        /// Runs per algorithm (seeds from --seed).
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Draw a Fig. 9-style bar chart to a .png or .svg file.
+        #[arg(long, value_name = "out.png|out.svg")]
+        plot: Option<PathBuf>,
+        #[command(flatten)]
+        faults: FaultArgs,
+    },
+    /// The multi-lane and throughput experiments on a perfect bus and on a faulty one
+    /// (default 20 % loss, 50 ms delay), same seeds, compared.
+    Faults {
+        /// Multi-lane runs (seeds 1..=K).
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// Throughput runs per algorithm (seeds 1..=K).
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..))]
+        throughput_seeds: u64,
+        /// Simulated seconds per throughput run.
+        #[arg(long, default_value_t = 300.0)]
+        duration: f64,
+        /// Probability that a receiver loses a message.
+        #[arg(long, default_value_t = 0.2)]
+        loss: f64,
+        /// Delivery delay (s).
+        #[arg(long, default_value_t = 0.05)]
+        delay: f64,
+        /// Extra delay drawn uniformly from [0, jitter] (s).
+        #[arg(long, default_value_t = 0.0)]
+        jitter: f64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
+    Multilane {
+        /// Number of runs (seeds 1..=K, or from --seed).
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Draw the first run's trajectories (Fig. 7 style) to a .png or .svg file.
+        #[arg(long, value_name = "out.png|out.svg")]
+        plot: Option<PathBuf>,
+        /// The planners' solver.
+        #[arg(long, value_enum, default_value = "ours")]
+        solver: SolverArg,
+        #[command(flatten)]
+        faults: FaultArgs,
+    },
+}
+
+/// Faults for an experiment's bus (none by default).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct FaultArgs {
+    /// Probability that a receiver loses a message.
+    #[arg(long, default_value_t = 0.0)]
+    loss: f64,
+    /// Delivery delay (s).
+    #[arg(long, default_value_t = 0.0)]
+    delay: f64,
+    /// Extra delay drawn uniformly from [0, jitter] (s).
+    #[arg(long, default_value_t = 0.0)]
+    jitter: f64,
+    /// Probability that a receiver gets a message twice.
+    #[arg(long, default_value_t = 0.0)]
+    duplicate: f64,
+    /// Probability that a message is held back 20 ms (later ones overtake it).
+    #[arg(long, default_value_t = 0.0)]
+    reorder: f64,
+}
+
+impl FaultArgs {
+    fn faults(&self) -> Result<Faults, String> {
+        let f = Faults {
+            loss: self.loss,
+            delay_s: self.delay,
+            jitter_s: self.jitter,
+            duplicate: self.duplicate,
+            reorder: self.reorder,
+            ..Faults::NONE
+        };
+        f.validate().map(|()| f).map_err(|e| {
+            // Name the flags, not the scenario keys.
+            e.replace("faults.", "--").replace("_s ", " ")
+        })
+    }
+}
+
+/// Runs an experiment.
+pub fn run(e: Experiment) -> ExitCode {
+    match e {
+        Experiment::Multilane {
+            seeds,
+            seed,
+            json,
+            plot,
+            solver,
+            faults,
+        } => multilane(seeds, seed, json, plot, solver, faults),
+        Experiment::Faults {
+            seeds,
+            throughput_seeds,
+            duration,
+            loss,
+            delay,
+            jitter,
+            json,
+        } => {
+            let args = FaultArgs {
+                loss,
+                delay,
+                jitter,
+                duplicate: 0.0,
+                reorder: 0.0,
+            };
+            let faults = match args.faults() {
+                Ok(f) => f,
+                Err(e) => return bad_input(e),
+            };
+            if let Err(code) = check_duration(duration, 3600.0) {
+                return code;
+            }
+            let r = host_sim::experiments::faults::compare(
+                faults,
+                seeds,
+                throughput_seeds,
+                duration,
+                0,
+            );
+            let live = r.multilane_faulty.completed == r.multilane_faulty.runs;
+            finish(&r, json, r.faulty_unsafe_events == 0, live)
+        }
+        Experiment::Throughput {
+            duration,
+            seeds,
+            seed,
+            json,
+            plot,
+            faults,
+        } => throughput(duration, seeds, seed, json, plot, faults),
+    }
+}
+
+fn multilane(
+    seeds: u64,
+    seed: u64,
+    json: bool,
+    plot: Option<PathBuf>,
+    solver: SolverArg,
+    faults: FaultArgs,
+) -> ExitCode {
+    let faults = match faults.faults() {
+        Ok(f) => f,
+        Err(e) => return bad_input(e),
+    };
+    if let Some(p) = &plot {
+        if let Err(code) = check_plot(p) {
+            return code;
+        }
+    }
+    let solver = solver.choice();
+    let r = host_sim::experiments::multilane::experiment(seeds, seed, solver, faults, 0);
+    if let Some(path) = plot {
+        let sc = host_sim::experiments::multilane::paper_scenario(seed);
+        let name = format!("{} (Fig. 7 style)", sc.name);
+        let world = sc.world();
+        // The manoeuvres are over well within 12 s (Fig. 7 shows the same window).
+        let mut data = PlotData {
+            until_s: Some(12.0),
+            ..PlotData::of(&world.network)
+        };
+        host_sim::experiments::multilane::run_one(world, solver, &mut |r| data.add(r));
+        if let Err(e) = host_sim::output::plot::write(&data, &name, &path) {
+            return bad_input(e);
+        }
+    }
+    finish(
+        &r,
+        json,
+        r.collisions + r.invariant_violations + r.limit_violations == 0,
+        r.completed == r.runs,
+    )
+}
+
+fn throughput(
+    duration: f64,
+    seeds: u64,
+    seed: u64,
+    json: bool,
+    plot: Option<PathBuf>,
+    faults: FaultArgs,
+) -> ExitCode {
+    let faults = match faults.faults() {
+        Ok(f) => f,
+        Err(e) => return bad_input(e),
+    };
+    if let Err(code) = check_duration(duration, 3600.0) {
+        return code;
+    }
+    if let Some(p) = &plot {
+        if let Err(code) = check_plot(p) {
+            return code;
+        }
+    }
+    let r = host_sim::experiments::throughput::throughput(seeds, seed, duration, faults, 0);
+    if let Some(path) = plot {
+        if let Err(e) = host_sim::output::plot::bars(&r, &path) {
+            return bad_input(e);
+        }
+    }
+    finish(
+        &r,
+        json,
+        r.results.iter().all(|x| {
+            x.collisions + x.invariant_violations + x.limit_violations + x.unpermitted_entries == 0
+        }),
+        true,
+    )
+}

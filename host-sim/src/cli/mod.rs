@@ -1,0 +1,121 @@
+//! The command line: one file per subcommand.
+
+pub mod bench;
+pub mod experiment;
+pub mod fleet;
+pub mod output;
+pub mod run;
+pub mod sweep;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use host_sim::world::SolverChoice;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "host-sim",
+    version,
+    about = "Runs planner-core instances on the host: traffic on roads and intersections, every \
+             vehicle its own planner talking only over a bus; the paper's experiments; sweeps; \
+             benchmarks",
+    after_help = "Start here: host-sim run scenarios/corridor.toml --html corridor.html\n\n\
+                  Exit codes: 0 ok, 1 collision or violation, 2 bad input, 3 liveness goal \
+                  missed or deadlock, 4 CAN bus failure (--bus)."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The planners' solver.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum SolverArg {
+    /// planner-core's interior-point solver.
+    Ours,
+    /// Clarabel, the reference solver.
+    Clarabel,
+}
+
+impl SolverArg {
+    fn choice(self) -> SolverChoice {
+        match self {
+            SolverArg::Ours => SolverChoice::Ours,
+            SolverArg::Clarabel => SolverChoice::Clarabel,
+        }
+    }
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// The main job: runs a scenario file — a road, an intersection or a network of
+    /// them — every vehicle its own planner, talking only over the bus.
+    Run {
+        /// Scenario file (TOML).
+        file: PathBuf,
+        /// Overrides the scenario's seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Print one JSON summary object.
+        #[arg(long)]
+        json: bool,
+        /// Write a CSV trace (t,id,x,y,theta,v,omega,lane,target_lane,mode,place).
+        #[arg(long, value_name = "out.csv")]
+        trace: Option<PathBuf>,
+        /// Draw trajectories and speeds to a .png or .svg file.
+        #[arg(long, value_name = "out.png|out.svg")]
+        plot: Option<PathBuf>,
+        /// The planners' solver.
+        #[arg(long, value_enum, default_value = "ours")]
+        solver: SolverArg,
+        /// The bus: `in-process` (messages, one task), `can-hub` (CAN frames on an
+        /// in-process hub, a task per vehicle and per intersection manager), or a
+        /// SocketCAN interface such as `vcan0` (a task and a socket each).
+        #[arg(
+            long,
+            default_value = "in-process",
+            value_name = "in-process|can-hub|IFACE"
+        )]
+        bus: String,
+    },
+    /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
+    Platoons(sweep::PlatoonsArgs),
+    /// Theorem 2 sweep: random multi-lane traffic (3–4 lanes, up to 30 vehicles, random
+    /// target lanes), every vehicle its own planner.
+    Traffic(sweep::TrafficArgs),
+    /// The paper's experiments.
+    #[command(subcommand)]
+    Experiment(experiment::Experiment),
+    /// Many vehicles (parallel single-lane platoons) at h = 0.01 on all cores.
+    Scale(bench::ScaleArgs),
+    /// Our solver and Clarabel on identical instances of (10), N = 20 and 50, cold and warm.
+    BenchPlanner(bench::BenchArgs),
+}
+
+/// Parses the command line and runs it.
+pub fn main() -> ExitCode {
+    match Cli::parse().command {
+        Command::Run {
+            file,
+            seed,
+            json,
+            trace,
+            plot,
+            solver,
+            bus,
+        } => run::run(run::RunArgs {
+            file,
+            seed,
+            json,
+            trace,
+            plot,
+            solver: solver.choice(),
+            bus,
+        }),
+        Command::Platoons(a) => sweep::platoons(a),
+        Command::Traffic(a) => sweep::traffic(a),
+        Command::Experiment(e) => experiment::run(e),
+        Command::Scale(a) => bench::scale(a),
+        Command::BenchPlanner(a) => bench::bench(a),
+    }
+}

@@ -1,0 +1,95 @@
+//! How the CLI answers: one JSON object (`--json`) or a short human summary, and an exit
+//! code — 0 ok, 1 unsafe (a collision or a violation), 2 bad input, 3 a liveness goal
+//! missed (or a deadlock), 4 a CAN bus failure.
+
+use std::process::ExitCode;
+
+/// A collision or a safety or limit violation was seen.
+pub const EXIT_UNSAFE: u8 = 1;
+/// Bad input: arguments, a scenario file, an output file (checked before anything runs).
+pub const EXIT_BAD_INPUT: u8 = 2;
+/// A liveness goal was missed, or the run deadlocked.
+pub const EXIT_NOT_LIVE: u8 = 3;
+/// The CAN bus failed (`--bus`).
+pub const EXIT_BUS: u8 = 4;
+
+/// Prints `value` as one line of JSON.
+pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
+    match serde_json::to_string(value) {
+        Ok(s) => {
+            println!("{s}");
+            Ok(())
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            Err(ExitCode::from(EXIT_BAD_INPUT))
+        }
+    }
+}
+
+/// Exit 2 with `msg` on stderr.
+pub fn bad_input(msg: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {msg}");
+    ExitCode::from(EXIT_BAD_INPUT)
+}
+
+/// The exit code of a run that was `safe` and `live`.
+pub fn code(safe: bool, live: bool) -> ExitCode {
+    if !safe {
+        ExitCode::from(EXIT_UNSAFE)
+    } else if !live {
+        ExitCode::from(EXIT_NOT_LIVE)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
+/// Prints a result (one JSON object, or its debug form) and picks the exit code.
+pub fn finish<T: serde::Serialize + std::fmt::Debug>(
+    r: &T,
+    json: bool,
+    safe: bool,
+    live: bool,
+) -> ExitCode {
+    if json {
+        if let Err(code) = print_json(r) {
+            return code;
+        }
+    } else {
+        println!("{r:#?}");
+    }
+    code(safe, live)
+}
+
+/// `--duration` within (0, `max`] s, or why not.
+pub fn check_duration(duration: f64, max: f64) -> Result<(), ExitCode> {
+    if duration > 0.0 && duration <= max {
+        Ok(())
+    } else {
+        Err(bad_input(format!(
+            "--duration must be in (0, {max}], got {duration}"
+        )))
+    }
+}
+
+/// A `--plot` path must end in .png or .svg and be creatable now (so that a long run is
+/// not wasted on an output it cannot write).
+pub fn check_plot(path: &std::path::Path) -> Result<(), ExitCode> {
+    if !matches!(
+        path.extension().and_then(|e| e.to_str()),
+        Some("png" | "svg")
+    ) {
+        return Err(bad_input(format!(
+            "--plot {}: must end in .png or .svg",
+            path.display()
+        )));
+    }
+    creatable(path, "--plot")
+}
+
+/// `path` can be created (it is, empty; the run writes it at the end).
+pub fn creatable(path: &std::path::Path, flag: &str) -> Result<(), ExitCode> {
+    std::fs::File::create(path)
+        .map(|_| ())
+        .map_err(|e| bad_input(format!("{flag} {}: {e}", path.display())))
+}

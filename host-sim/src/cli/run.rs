@@ -1,0 +1,213 @@
+//! `host-sim run FILE`: a scenario — a road, an intersection or a network — every vehicle
+//! its own planner, talking only over the bus; its trace, plot and viewer page.
+
+use super::output::{bad_input, check_plot, code, creatable, print_json, EXIT_BUS};
+use host_sim::output::plot::PlotData;
+use host_sim::output::trace::TraceWriter;
+use host_sim::world::summary::Summary;
+use host_sim::world::{SolverChoice, TraceRow, World, WorldSpec};
+use std::io::{BufWriter, IsTerminal};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// What `run` was asked.
+pub struct RunArgs {
+    /// The scenario file.
+    pub file: PathBuf,
+    /// Overrides the scenario's seed.
+    pub seed: Option<u64>,
+    /// One JSON object instead of the human summary.
+    pub json: bool,
+    /// CSV trace.
+    pub trace: Option<PathBuf>,
+    /// PNG/SVG plot.
+    pub plot: Option<PathBuf>,
+    /// The multi-lane planners' solver.
+    pub solver: SolverChoice,
+    /// `in-process`, `can-hub`, or an interface.
+    pub bus: String,
+}
+
+/// Where a run's rows go.
+struct Sinks {
+    trace: Option<TraceWriter<BufWriter<std::fs::File>>>,
+    plot: Option<PlotData>,
+}
+
+impl Sinks {
+    fn row(&mut self, r: &TraceRow) {
+        if let Some(w) = self.trace.as_mut() {
+            w.row(r);
+        }
+        if let Some(p) = self.plot.as_mut() {
+            p.add(r);
+        }
+    }
+}
+
+/// `host-sim run`.
+pub fn run(a: RunArgs) -> ExitCode {
+    match prepare(&a) {
+        Ok((spec, sinks)) => execute(&a, spec, sinks),
+        Err(code) => code,
+    }
+}
+
+/// Every input and output checked before anything runs.
+fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
+    if a.bus != "in-process" {
+        super::fleet::check_bus(&a.bus)?;
+    }
+    if let Some(p) = &a.plot {
+        check_plot(p)?;
+    }
+    let spec = host_sim::scenario::load(&a.file).map_err(bad_input)?;
+    if a.bus != "in-process" {
+        super::fleet::fits_the_bus(&a.file, &spec)?;
+    }
+    let trace = match &a.trace {
+        Some(p) => {
+            creatable(p, "--trace")?;
+            let f = std::fs::File::create(p)
+                .map_err(|e| bad_input(format!("--trace {}: {e}", p.display())))?;
+            Some(
+                TraceWriter::new(BufWriter::new(f), &spec.network)
+                    .map_err(|e| bad_input(format!("--trace {}: {e}", p.display())))?,
+            )
+        }
+        None => None,
+    };
+    let plot = a.plot.as_ref().map(|_| PlotData::of(&spec.network));
+    Ok((spec, Sinks { trace, plot }))
+}
+
+fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
+    let name = spec.name.clone();
+    let net = spec.network.clone();
+    let outcome = if a.bus == "in-process" {
+        match spec.horizon {
+            50 => in_process::<50>(spec, a.solver, a.seed, &mut sinks),
+            _ => in_process::<20>(spec, a.solver, a.seed, &mut sinks),
+        }
+        .map(|s| (s, None))
+        .map_err(|e| bad_input(format!("bus: {e}")))
+    } else {
+        super::fleet::run(&a.bus, spec, a.solver, a.seed, &mut |r| sinks.row(r))
+            .map(|f| (f.run.clone(), Some(f)))
+            .map_err(|e| {
+                eprintln!("error: --bus {}: {e}", a.bus);
+                ExitCode::from(EXIT_BUS)
+            })
+    };
+    let (summary, fleet) = match outcome {
+        Ok(x) => x,
+        Err(code) => return code,
+    };
+    if let Some(w) = sinks.trace {
+        if let Err(e) = w.finish() {
+            return bad_input(format!("--trace: {e}"));
+        }
+    }
+    let mut written: Vec<String> = a.trace.iter().map(|p| p.display().to_string()).collect();
+    if let (Some(p), Some(data)) = (&a.plot, &sinks.plot) {
+        if let Err(e) = host_sim::output::plot::any(data, &net, &name, p) {
+            return bad_input(e);
+        }
+        written.push(p.display().to_string());
+    }
+    if a.json {
+        let printed = match &fleet {
+            Some(f) => print_json(f),
+            None => print_json(&summary),
+        };
+        if let Err(code) = printed {
+            return code;
+        }
+    } else {
+        if let Some(f) = &fleet {
+            println!("{}", f.line());
+        }
+        println!("{}", human(&summary, &written));
+    }
+    code(summary.unsafe_events() == 0, summary.completed)
+}
+
+/// Runs a world in one task on the in-process bus.
+fn in_process<const N: usize>(
+    spec: WorldSpec,
+    solver: SolverChoice,
+    seed: Option<u64>,
+    sinks: &mut Sinks,
+) -> Result<Summary, host_sim::bus::BusError> {
+    let t0 = std::time::Instant::now();
+    let mut w = World::<N>::new(spec, solver, seed);
+    let bar = progress_bar();
+    let total = w.total_steps().max(1);
+    let every = (total / 200).max(1);
+    while !w.finished() {
+        w.step(&mut |r| sinks.row(r))?;
+        if w.steps_done() % every == 0 {
+            if let Some(b) = &bar {
+                b.set_position(w.steps_done() * 1000 / total);
+            }
+        }
+    }
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    Ok(w.summary(t0.elapsed().as_secs_f64()))
+}
+
+/// A progress bar on a terminal.
+fn progress_bar() -> Option<indicatif::ProgressBar> {
+    std::io::stderr().is_terminal().then(|| {
+        let b = indicatif::ProgressBar::new(1000);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% {elapsed} / ~{eta}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    })
+}
+
+/// The human summary: what ran, safe or not, goals met, where the outputs went.
+pub fn human(s: &Summary, written: &[String]) -> String {
+    let safe = if s.unsafe_events() == 0 {
+        "SAFE: no collision, no invariant or limit violation".to_string()
+    } else {
+        format!(
+            "UNSAFE: {} collisions, {} invariant violations, {} limit violations, {} road-end \
+             overruns, {} entries without permission",
+            s.collisions,
+            s.invariant_violations,
+            s.limit_violations,
+            s.road_end_overruns,
+            s.unpermitted_entries()
+        )
+    };
+    let live = match (&s.deadlock, s.completed) {
+        (Some(d), _) => format!("DEADLOCK at t = {:.2} s (see above)", d.at_s),
+        (None, true) => "every goal met".to_string(),
+        (None, false) => format!("NOT every goal met: {} vehicles unfinished", s.unfinished),
+    };
+    let mut out = format!(
+        "{}: {} vehicles, {:.2} s simulated in {:.2} s\n  {safe}\n  {live}",
+        s.scenario, s.vehicles, s.sim_seconds, s.wall_seconds
+    );
+    if s.lane_changes.changes > 0 {
+        out += &format!(
+            "\n  lane changes: {} ({} of {} vehicles in their target lane)",
+            s.lane_changes.changes, s.lane_changes.in_target_lane, s.lane_changes.vehicles
+        );
+    }
+    if let Some(c) = &s.crossing {
+        out += &format!(
+            "\n  crossings ({}): {}, mean {:.1} s from entering A_C to leaving it",
+            c.algorithm, c.crossed, c.crossing_time_mean_s
+        );
+    }
+    for w in written {
+        out += &format!("\n  wrote {w}");
+    }
+    out
+}

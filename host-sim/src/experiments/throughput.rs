@@ -1,0 +1,203 @@
+//! Fig. 9 (Sec. VII-B, SPEC §8): a closed system of 8 vehicles at the SPEC §8
+//! intersection — whenever one leaves, it comes back at the start of an inlet with a
+//! random route — for 300 s under every algorithm, on the same seeds: vehicles crossed
+//! and the mean time from entering A_C to leaving it.
+
+use crate::bus::Faults;
+use crate::scenario::junction::{placed, Placement};
+use crate::world::network::{Junction, Network};
+use crate::world::summary::Summary;
+use crate::world::{Arrivals, SolverChoice, World, WorldSpec, LENGTH_M};
+use planner_core::crossing::Algorithm;
+use planner_core::intersection::{Layout, LayoutSpec};
+use planner_core::Params;
+use rand::Rng;
+use serde::Serialize;
+
+/// The Fig. 8 start: one vehicle on each of the 8 inlets, random routes, at vImax,
+/// staggered along their inlets.
+pub fn fig8_placements(layout: &Layout<f64>, seed: u64) -> Vec<Placement> {
+    let mut rng = crate::reference::instances::rng(seed ^ 0xf18);
+    let mut out = Vec::new();
+    for heading in 0..4u8 {
+        for lane in 0..2u8 {
+            let movement = if rng.random_bool(0.5) {
+                planner_core::intersection::Movement::Straight
+            } else if lane == 0 {
+                planner_core::intersection::Movement::Left
+            } else {
+                planner_core::intersection::Movement::Right
+            };
+            let route = layout.route_index(heading, lane, movement).unwrap_or(0) as u8;
+            out.push(Placement {
+                id: out.len() as u16 + 1,
+                route,
+                s: 0.5 * LENGTH_M + rng.random_range(0.0..30.0),
+                v: layout.spec.v_limit,
+            });
+        }
+    }
+    out
+}
+
+/// The SPEC §8 layout.
+pub fn spec8_layout() -> Layout<f64> {
+    let p = Params::<f64>::table_i();
+    // The SPEC §8 values satisfy every check (tested).
+    Layout::new(&p, LayoutSpec::spec8(&p))
+        .unwrap_or_else(|_| unreachable!("SPEC §8 layout is valid"))
+}
+
+/// The world of a Fig. 9 run: the SPEC §8 junction under `algorithm`, the Fig. 8 start
+/// of `seed`, a closed system.
+pub fn closed_world(algorithm: Algorithm, seed: u64, duration: f64, faults: Faults) -> WorldSpec {
+    let layout = spec8_layout();
+    let placements = fig8_placements(&layout, seed);
+    WorldSpec {
+        name: format!("throughput-{}-{seed}", algorithm.name()),
+        duration_s: duration,
+        seed,
+        horizon: 20,
+        deadline_s: duration,
+        vehicles: placements.iter().map(|p| placed(&layout, p)).collect(),
+        network: Network {
+            segments: Vec::new(),
+            junctions: vec![Junction {
+                id: 0,
+                centre: (0.0, 0.0),
+                layout,
+                algorithm,
+                inlets: [None; 4],
+                outlets: [None; 4],
+            }],
+        },
+        faults,
+        sensing: (!faults.is_none()).then(planner_core::Sensing::radar),
+        arrivals: Arrivals::Closed,
+        deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
+        stop_when_done: false,
+    }
+}
+
+/// Runs a closed system of 8 vehicles for `duration` s under `algorithm` (Fig. 9).
+pub fn throughput_run(algorithm: Algorithm, seed: u64, duration: f64, faults: Faults) -> Summary {
+    let mut w = World::<20>::new(
+        closed_world(algorithm, seed, duration, faults),
+        SolverChoice::Ours,
+        Some(seed),
+    );
+    while !w.finished() {
+        // The in-process bus cannot fail.
+        if w.step(&mut |_| {}).is_err() {
+            break;
+        }
+    }
+    w.summary(0.0)
+}
+
+/// One algorithm's row of the throughput experiment.
+#[derive(Debug, Clone, Serialize)]
+pub struct ThroughputRow {
+    /// Algorithm.
+    pub algorithm: &'static str,
+    /// Mean over seeds of vehicles crossed.
+    pub crossed_mean: f64,
+    /// Standard deviation over seeds of vehicles crossed.
+    pub crossed_std: f64,
+    /// Mean time from arrival to leaving A_C (s), over all vehicles of all seeds.
+    pub crossing_time_mean_s: f64,
+    /// Longest such time (s).
+    pub crossing_time_max_s: f64,
+    /// Collisions over all seeds.
+    pub collisions: u64,
+    /// Invariant violations over all seeds.
+    pub invariant_violations: u64,
+    /// Limit violations over all seeds.
+    pub limit_violations: u64,
+    /// Entries into A_S without a permission.
+    pub unpermitted_entries: u64,
+    /// Certified-fallback steps.
+    pub fallback_steps: u64,
+}
+
+/// The `experiment throughput` result.
+#[derive(Debug, Clone, Serialize)]
+pub struct ThroughputReport {
+    /// Rows, one per algorithm.
+    pub results: Vec<ThroughputRow>,
+    /// Seeds.
+    pub seeds: u64,
+    /// Duration of each run (s).
+    pub duration_s: f64,
+    /// Faults the bus injected.
+    pub faults: Faults,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// Fig. 9: every algorithm on the same seeds.
+pub fn throughput(
+    seeds: u64,
+    first_seed: u64,
+    duration: f64,
+    faults: Faults,
+    threads: usize,
+) -> ThroughputReport {
+    let t0 = std::time::Instant::now();
+    let jobs: Vec<(Algorithm, u64)> = Algorithm::ALL
+        .iter()
+        .flat_map(|&a| (0..seeds).map(move |k| (a, first_seed + k)))
+        .collect();
+    let runs = super::par::map_indexed(jobs.len(), threads, |i| {
+        let (a, s) = jobs[i];
+        (a, throughput_run(a, s, duration, faults))
+    });
+    let results = Algorithm::ALL
+        .iter()
+        .map(|&a| {
+            let mine: Vec<&Summary> = runs
+                .iter()
+                .filter(|(b, _)| *b == a)
+                .map(|(_, s)| s)
+                .collect();
+            let n = mine.len().max(1) as f64;
+            let mean = mine.iter().map(|s| s.crossed() as f64).sum::<f64>() / n;
+            let var = mine
+                .iter()
+                .map(|s| (s.crossed() as f64 - mean).powi(2))
+                .sum::<f64>()
+                / (n - 1.0).max(1.0);
+            let total: f64 = mine
+                .iter()
+                .map(|s| s.crossed() as f64)
+                .sum::<f64>()
+                .max(1.0);
+            ThroughputRow {
+                algorithm: a.name(),
+                crossed_mean: mean,
+                crossed_std: var.sqrt(),
+                crossing_time_mean_s: mine
+                    .iter()
+                    .map(|s| s.crossing_time_mean_s() * s.crossed() as f64)
+                    .sum::<f64>()
+                    / total,
+                crossing_time_max_s: mine
+                    .iter()
+                    .map(|s| s.crossing_time_max_s())
+                    .fold(0.0, f64::max),
+                collisions: mine.iter().map(|s| s.collisions).sum(),
+                invariant_violations: mine.iter().map(|s| s.invariant_violations).sum(),
+                limit_violations: mine.iter().map(|s| s.limit_violations).sum(),
+                unpermitted_entries: mine.iter().map(|s| s.unpermitted_entries()).sum(),
+                fallback_steps: mine.iter().map(|s| s.fallback_steps).sum(),
+            }
+        })
+        .collect();
+    ThroughputReport {
+        results,
+        seeds,
+        duration_s: duration,
+        faults,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    }
+}

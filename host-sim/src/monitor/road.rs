@@ -1,0 +1,88 @@
+//! A straight road's checks at one instant (SPEC §1, §5): collisions of oriented
+//! rectangles; per lane, the invariant of Lemma 3 between consecutive vehicles — a vehicle
+//! is in every lane its rectangle overlaps, whatever it says — and toward the road end
+//! (22); overruns of the end; rectangles leaving the road; speed, acceleration and
+//! heading limits.
+
+use super::{lateral_span, rectangles_overlap, Findings, Limits, Truth, LIMIT_TOL};
+
+/// Pairs of `all` whose rectangles overlap (touching counts).
+pub fn collisions(all: &[Truth]) -> u64 {
+    let mut n = 0;
+    for (i, a) in all.iter().enumerate() {
+        for b in all.iter().skip(i + 1) {
+            if rectangles_overlap(a, b) {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// The lanes of a road of `lanes` lanes ending at `end_x` (if it does), with its
+/// vehicles `all` in its frame: the invariant between consecutive vehicles of each lane
+/// (unless both are `mapped`: the junction's monitor judges those), the smallest gap,
+/// the invariant of each lane's front vehicle toward the end, overruns of the end and
+/// departures from the road.
+pub fn lanes(f: &mut Findings, lim: &Limits, all: &[Truth], end_x: Option<f64>, lanes: u8) {
+    let road_top = f64::from(lanes) * lim.lane_width;
+    for lane in 0..lanes {
+        let (lo, hi) = (
+            f64::from(lane) * lim.lane_width,
+            f64::from(lane + 1) * lim.lane_width,
+        );
+        let mut order: Vec<&Truth> = all
+            .iter()
+            .filter(|c| {
+                let (bottom, top) = lateral_span(c);
+                top > lo && bottom < hi
+            })
+            .collect();
+        order.sort_by(|a, b| a.x.total_cmp(&b.x));
+        for pair in order.windows(2) {
+            let (b, a) = (pair[0], pair[1]);
+            if b.mapped && a.mapped {
+                continue;
+            }
+            let gap = a.x - b.x - 0.5 * (a.length + b.length);
+            f.min_gap_m = f.min_gap_m.min(gap);
+            // Lemma 3's invariant, extent-adjusted (SPEC §1): x_f < x̄ − dS(v_{t−h}(f)).
+            if b.keeps_invariant && gap - lim.d0 <= lim.safe_distance(b.v) {
+                f.invariant_violations += 1;
+            }
+        }
+        if let (Some(end), Some(c)) = (end_x, order.last()) {
+            let room = end - c.x - 0.5 * c.length;
+            if c.keeps_invariant && room - lim.d0 <= lim.safe_distance(c.v) {
+                f.invariant_violations += 1;
+            }
+        }
+    }
+    for c in all.iter().filter(|c| !c.mapped) {
+        if let Some(end) = end_x {
+            if end - c.x - 0.5 * c.length < 0.0 {
+                f.road_end_overruns += 1;
+            }
+        }
+        let (bottom, top) = lateral_span(c);
+        if bottom < 0.0 || top > road_top {
+            f.off_road += 1;
+        }
+    }
+}
+
+/// One vehicle's limits: heading within ±θmax of the road, speed in [0, vmax],
+/// acceleration in [amin, amax] (to [`LIMIT_TOL`]).
+pub fn limits(f: &mut Findings, lim: &Limits, c: &Truth) {
+    if c.theta.abs() > lim.theta_max + 1e-12 {
+        f.limit_violations += 1;
+    }
+    let dv = c.v - c.v_before;
+    if c.v < -LIMIT_TOL
+        || c.v > lim.v_max + LIMIT_TOL
+        || dv > lim.a_max * lim.h + LIMIT_TOL
+        || dv < -lim.brake * lim.h - LIMIT_TOL
+    {
+        f.limit_violations += 1;
+    }
+}

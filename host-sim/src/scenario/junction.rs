@@ -1,0 +1,543 @@
+//! The single `[intersection]` format: one junction (the SPEC §8 layout or a configured
+//! one) with its own inlet and outlet tracks, its vehicles by inlet, lane, movement and
+//! position along the inlet; a network of one junction and no segment.
+
+use super::common::{Header, RawHeader, SensingToml};
+use super::error::{Errors, ScenarioError};
+use crate::bus::Faults;
+use crate::monitor::Limits;
+use crate::world::junction::MANAGER_CAP;
+use crate::world::network::{Junction, Network};
+use crate::world::vehicle::{At, Trip};
+use crate::world::{Arrivals, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M};
+use planner_core::crossing::Algorithm;
+use planner_core::intersection::{Layout, LayoutError, LayoutSpec, Movement};
+use planner_core::{Params, Sensing};
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use std::path::Path;
+use toml::Spanned;
+
+/// An intersection's layout as written (SPEC §8 defaults).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayoutToml {
+    /// Half-size a of A_S (m).
+    #[serde(default = "d_half")]
+    pub half_size: f64,
+    /// A_C = A_S grown by this (m).
+    #[serde(default = "d_comm")]
+    pub comm_margin: f64,
+    /// Inlet length before the stop line (m).
+    #[serde(default = "d_inlet")]
+    pub inlet_length: f64,
+    /// Outlet length past A_S (m).
+    #[serde(default = "d_outlet")]
+    pub outlet_length: f64,
+    /// Speed limit vImax (m/s).
+    #[serde(default = "d_limit")]
+    pub v_limit: f64,
+    /// Inlet (and outlet) lanes per approach.
+    #[serde(default = "d_lanes")]
+    pub lanes: u8,
+}
+
+impl Default for LayoutToml {
+    fn default() -> Self {
+        Self {
+            half_size: d_half(),
+            comm_margin: d_comm(),
+            inlet_length: d_inlet(),
+            outlet_length: d_outlet(),
+            v_limit: d_limit(),
+            lanes: d_lanes(),
+        }
+    }
+}
+
+fn d_half() -> f64 {
+    12.0
+}
+fn d_comm() -> f64 {
+    50.0
+}
+fn d_inlet() -> f64 {
+    100.0
+}
+fn d_outlet() -> f64 {
+    60.0
+}
+fn d_limit() -> f64 {
+    13.9
+}
+fn d_lanes() -> u8 {
+    2
+}
+
+/// Heading of travel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Heading {
+    /// From the west.
+    East,
+    /// From the south.
+    North,
+    /// From the east.
+    West,
+    /// From the north.
+    South,
+}
+
+impl Heading {
+    /// planner-core's heading index.
+    pub fn index(self) -> u8 {
+        match self {
+            Heading::East => 0,
+            Heading::North => 1,
+            Heading::West => 2,
+            Heading::South => 3,
+        }
+    }
+
+    /// From planner-core's heading index.
+    pub fn of(i: u8) -> Self {
+        match i % 4 {
+            0 => Heading::East,
+            1 => Heading::North,
+            2 => Heading::West,
+            _ => Heading::South,
+        }
+    }
+}
+
+/// A manoeuvre.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MovementToml {
+    /// Straight on.
+    Straight,
+    /// Left turn.
+    Left,
+    /// Right turn.
+    Right,
+}
+
+impl MovementToml {
+    /// planner-core's movement.
+    pub fn movement(self) -> Movement {
+        match self {
+            MovementToml::Straight => Movement::Straight,
+            MovementToml::Left => Movement::Left,
+            MovementToml::Right => Movement::Right,
+        }
+    }
+
+    /// From planner-core's movement.
+    pub fn of(m: Movement) -> Self {
+        match m {
+            Movement::Straight => MovementToml::Straight,
+            Movement::Left => MovementToml::Left,
+            Movement::Right => MovementToml::Right,
+        }
+    }
+}
+
+/// The crossing algorithm, as written in a scenario file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlgorithmToml {
+    /// All-Way STOP.
+    Stop,
+    /// FIFO Crossing.
+    Fifo,
+    /// Concurrent Crossing as written in the paper (not live; see SPEC §7).
+    Concurrent,
+    /// Starvation-free Concurrent Crossing.
+    ConcurrentFair,
+    /// Pipelined (ours).
+    Pipelined,
+}
+
+impl AlgorithmToml {
+    /// planner-core's algorithm.
+    pub fn algorithm(self) -> Algorithm {
+        match self {
+            AlgorithmToml::Stop => Algorithm::AllWayStop,
+            AlgorithmToml::Fifo => Algorithm::Fifo,
+            AlgorithmToml::Concurrent => Algorithm::Concurrent,
+            AlgorithmToml::ConcurrentFair => Algorithm::ConcurrentFair,
+            AlgorithmToml::Pipelined => Algorithm::Pipelined,
+        }
+    }
+
+    /// From planner-core's algorithm.
+    pub fn of(a: Algorithm) -> Self {
+        match a {
+            Algorithm::AllWayStop => AlgorithmToml::Stop,
+            Algorithm::Fifo => AlgorithmToml::Fifo,
+            Algorithm::Concurrent => AlgorithmToml::Concurrent,
+            Algorithm::ConcurrentFair => AlgorithmToml::ConcurrentFair,
+            Algorithm::Pipelined => AlgorithmToml::Pipelined,
+        }
+    }
+}
+
+/// A vehicle of an intersection scenario.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct JunctionVehicle {
+    /// Id (1 to 65,279; above is the managers').
+    pub id: u16,
+    /// Inlet: the heading of travel.
+    pub heading: Heading,
+    /// Inlet lane: 0 inner … lanes − 1 outer.
+    pub lane: u8,
+    /// What it does at the junction (left: inner lane, right: outer lane).
+    pub movement: MovementToml,
+    /// Centre distance from the start of the inlet track (m).
+    pub s: f64,
+    /// Speed (m/s).
+    pub v: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawJunction {
+    name: String,
+    duration_s: Spanned<f64>,
+    #[serde(default)]
+    seed: u64,
+    algorithm: AlgorithmToml,
+    intersection: Spanned<LayoutToml>,
+    #[serde(rename = "vehicle")]
+    vehicles: Vec<Spanned<JunctionVehicle>>,
+    #[serde(default)]
+    faults: Option<Spanned<Faults>>,
+    #[serde(default)]
+    sensing: Option<Spanned<SensingToml>>,
+    #[serde(default)]
+    deadlock_s: Option<Spanned<f64>>,
+}
+
+/// A vehicle placed on a route.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// Id.
+    pub id: u16,
+    /// Route index.
+    pub route: u8,
+    /// Centre distance along the route's path (m).
+    pub s: f64,
+    /// Speed (m/s).
+    pub v: f64,
+}
+
+/// A validated intersection scenario.
+#[derive(Debug, Clone)]
+pub struct JunctionScenario {
+    /// Name.
+    pub name: String,
+    /// Seed (recorded; faults and sensor noise draw from it).
+    pub seed: u64,
+    /// Duration, faults, sensing, deadlock window.
+    pub header: Header,
+    /// Algorithm.
+    pub algorithm: Algorithm,
+    /// The layout as written.
+    pub layout_toml: LayoutToml,
+    /// Layout.
+    pub layout: Layout<f64>,
+    /// Vehicles.
+    pub placements: Vec<Placement>,
+}
+
+/// Why a layout is refused, in words.
+pub fn layout_error_text(e: LayoutError<f64>, p: &Params<f64>) -> String {
+    match e {
+        LayoutError::NotPositive => "every length must be positive and finite".to_string(),
+        LayoutError::LanesDoNotFit => format!(
+            "half_size must hold the inlet lanes (lanes × {LANE_WIDTH_M} m), and lanes be 1 to {}",
+            planner_core::intersection::MAX_LANES
+        ),
+        LayoutError::TurnTooTight { radius } => format!(
+            "the right turn's radius a − (lanes − ½) Wl = {radius:.2} m is below ρmin = {} m",
+            p.rho_min()
+        ),
+        LayoutError::NotSpacious { margin, needed } => format!(
+            "violates the Spaciousness Assumption (27): A_C is {margin:.2} m from A_S, needs \
+             at least dS(vImax) + vImax h = {needed:.2} m"
+        ),
+        LayoutError::InletShorterThanCommRegion => {
+            "inlet_length must reach back to the edge of A_C (≥ comm_margin)".to_string()
+        }
+        LayoutError::OutletShorterThanCommRegion { length, needed } => format!(
+            "outlet_length {length} m ends inside A_C: vehicles leave the intersection once \
+             they are on their outlet outside A_C, so it must be at least comm_margin + L = \
+             {needed:.2} m"
+        ),
+    }
+}
+
+/// The layout of `lt`, or why not.
+pub fn build_layout(lt: &LayoutToml) -> Result<Layout<f64>, String> {
+    let p = Params::<f64>::table_i();
+    if !(lt.v_limit > 0.0 && lt.v_limit <= p.v_max()) {
+        return Err(format!(
+            "v_limit must be in (0, {}], got {}",
+            p.v_max(),
+            lt.v_limit
+        ));
+    }
+    let lengths = [
+        lt.half_size,
+        lt.comm_margin,
+        lt.inlet_length,
+        lt.outlet_length,
+    ];
+    if !lengths.iter().all(|&x| super::common::coord_ok(x)) {
+        return Err(format!(
+            "lengths must be finite and within {} m",
+            super::common::MAX_COORD_M
+        ));
+    }
+    let spec = LayoutSpec {
+        half_size: lt.half_size,
+        comm_margin: lt.comm_margin,
+        inlet_length: lt.inlet_length,
+        outlet_length: lt.outlet_length,
+        lane_width: LANE_WIDTH_M,
+        v_limit: lt.v_limit,
+        lanes: lt.lanes,
+    };
+    Layout::new(&p, spec).map_err(|e| layout_error_text(e, &p))
+}
+
+impl JunctionScenario {
+    /// Parses and validates; `path` only names the file in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ScenarioError> {
+        let e = Errors::new(text, path);
+        let raw: RawJunction = toml::from_str(text).map_err(|x| e.toml(&x))?;
+        let header = RawHeader {
+            duration_s: Some(raw.duration_s.clone()),
+            faults: raw.faults.clone(),
+            sensing: raw.sensing.clone(),
+            deadlock_s: raw.deadlock_s.clone(),
+            ..RawHeader::default()
+        }
+        .validate(&e)?;
+        let span = raw.intersection.span();
+        let lt = raw.intersection.into_inner();
+        let layout =
+            build_layout(&lt).map_err(|m| e.at(Some(span), format!("intersection: {m}")))?;
+        if raw.vehicles.is_empty() || raw.vehicles.len() > MANAGER_CAP {
+            return Err(e.at(
+                None,
+                format!("1 to {MANAGER_CAP} vehicles, got {}", raw.vehicles.len()),
+            ));
+        }
+        let mut placements: Vec<(Placement, Range<usize>)> = Vec::new();
+        for sv in raw.vehicles {
+            let span = sv.span();
+            let v = sv.into_inner();
+            if placements.iter().any(|(o, _)| o.id == v.id) {
+                return Err(e.at(Some(span), format!("vehicle {}: duplicate id", v.id)));
+            }
+            let p = place(&v, &layout, &lt)
+                .map_err(|m| e.at(Some(span.clone()), format!("vehicle {}: {m}", v.id)))?;
+            placements.push((p, span));
+        }
+        check_spacing(&placements, &layout, &e)?;
+        Ok(Self {
+            name: raw.name,
+            seed: raw.seed,
+            header,
+            algorithm: raw.algorithm.algorithm(),
+            layout_toml: lt,
+            layout,
+            placements: placements.into_iter().map(|(p, _)| p).collect(),
+        })
+    }
+
+    /// The world it describes: one junction at the origin, its own inlet and outlet
+    /// tracks, every vehicle crossing from the start.
+    pub fn world(&self) -> WorldSpec {
+        let jn = Junction {
+            id: 0,
+            centre: (0.0, 0.0),
+            layout: self.layout.clone(),
+            algorithm: self.algorithm,
+            inlets: [None; 4],
+            outlets: [None; 4],
+        };
+        WorldSpec {
+            name: self.name.clone(),
+            duration_s: self.header.duration_s,
+            seed: self.seed,
+            horizon: 20,
+            deadline_s: self.header.duration_s,
+            network: Network {
+                segments: Vec::new(),
+                junctions: vec![jn],
+            },
+            vehicles: self
+                .placements
+                .iter()
+                .map(|p| placed(&self.layout, p))
+                .collect(),
+            faults: self.header.faults,
+            sensing: self.header.sensing,
+            arrivals: Arrivals::None,
+            deadlock_window_s: self.header.deadlock_window_s,
+            stop_when_done: false,
+        }
+    }
+
+    /// The scenario as a file that `host-sim run` loads (a sweep's failing case).
+    pub fn to_toml(&self) -> String {
+        #[derive(Serialize)]
+        struct File<'a> {
+            name: &'a str,
+            duration_s: f64,
+            seed: u64,
+            algorithm: AlgorithmToml,
+            intersection: LayoutToml,
+            #[serde(skip_serializing_if = "Faults::is_none")]
+            faults: Faults,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            sensing: Option<SensingToml>,
+            #[serde(rename = "vehicle")]
+            vehicles: Vec<JunctionVehicle>,
+        }
+        let vehicles = self
+            .placements
+            .iter()
+            .filter_map(|p| {
+                let r = self.layout.route(usize::from(p.route))?;
+                Some(JunctionVehicle {
+                    id: p.id,
+                    heading: Heading::of(r.inlet.heading),
+                    lane: r.inlet.lane,
+                    movement: MovementToml::of(r.movement),
+                    s: p.s,
+                    v: p.v,
+                })
+            })
+            .collect();
+        let file = File {
+            name: &self.name,
+            duration_s: self.header.duration_s,
+            seed: self.seed,
+            algorithm: AlgorithmToml::of(self.algorithm),
+            intersection: self.layout_toml,
+            faults: self.header.faults,
+            sensing: self.header.sensing.map(|s: Sensing<f64>| SensingToml {
+                enabled: Some(true),
+                ahead_m: s.ahead_m,
+                behind_m: s.behind_m,
+                position_error_m: s.position_error_m,
+                speed_error_mps: s.speed_error_mps,
+            }),
+            vehicles,
+        };
+        toml::to_string(&file).unwrap_or_else(|e| format!("# cannot write: {e}"))
+    }
+}
+
+/// The world's vehicle of a placement at junction 0.
+pub fn placed(layout: &Layout<f64>, p: &Placement) -> VehicleSpec {
+    let r = layout.route(usize::from(p.route));
+    VehicleSpec {
+        id: p.id,
+        at: At::Crossing {
+            junction: 0,
+            route: p.route,
+            s: p.s,
+        },
+        v: p.v,
+        driver: super::DriverKind::Planner,
+        script: Vec::new(),
+        trip: Trip {
+            target_lane: r.map_or(0, |r| r.inlet.lane),
+            goal_x: None,
+            v_ref: None,
+            movements: r.map_or(Vec::new(), |r| vec![r.movement]),
+        },
+    }
+}
+
+/// The placement of vehicle `v`, or why it is refused: an id the managers do not use, a
+/// movement its lane serves, on its inlet before the line, a speed within the limit,
+/// room to stop before the line.
+fn place(v: &JunctionVehicle, layout: &Layout<f64>, lt: &LayoutToml) -> Result<Placement, String> {
+    let lim = Limits::table_i();
+    if v.id == 0 || v.id >= 0xFF00 {
+        return Err("ids are 1 to 65,279 (above are the junction managers')".into());
+    }
+    let route = layout
+        .route_index(v.heading.index(), v.lane, v.movement.movement())
+        .ok_or_else(|| {
+            format!(
+                "{:?} is not a route from lane {} of {} (left: inner lane 0, right: outer lane {})",
+                v.movement,
+                v.lane,
+                lt.lanes,
+                lt.lanes.saturating_sub(1)
+            )
+        })?;
+    let entry = lt.inlet_length;
+    if !(v.s >= 0.5 * LENGTH_M && v.s + 0.5 * LENGTH_M + lim.d0 < entry) {
+        return Err(format!(
+            "s must put the vehicle on its inlet before the stop line, got {}",
+            v.s
+        ));
+    }
+    if !(v.v >= 0.0 && v.v <= lt.v_limit) {
+        return Err(format!("v must be in [0, {}], got {}", lt.v_limit, v.v));
+    }
+    let room = entry - v.s - 0.5 * LENGTH_M - lim.d0;
+    if !(room > lim.safe_distance(v.v) + START_MARGIN_M) {
+        return Err(format!(
+            "cannot stop before the stop line: {room:.2} m of room, needs more than dS(v) = {:.2} m",
+            lim.safe_distance(v.v)
+        ));
+    }
+    Ok(Placement {
+        id: v.id,
+        route: route as u8,
+        s: v.s,
+        v: v.v,
+    })
+}
+
+/// Same inlet: no overlap, and the invariant for every follower.
+fn check_spacing(
+    placements: &[(Placement, Range<usize>)],
+    layout: &Layout<f64>,
+    e: &Errors<'_>,
+) -> Result<(), ScenarioError> {
+    let lim = Limits::table_i();
+    for (a, span) in placements {
+        for (b, _) in placements {
+            let (Some(ra), Some(rb)) = (
+                layout.route(usize::from(a.route)),
+                layout.route(usize::from(b.route)),
+            ) else {
+                continue;
+            };
+            if a.id != b.id && ra.inlet == rb.inlet && a.s <= b.s {
+                let gap = b.s - a.s - LENGTH_M;
+                if !(gap - lim.d0 > lim.safe_distance(a.v) + START_MARGIN_M) {
+                    return Err(e.at(
+                        Some(span.clone()),
+                        format!(
+                            "vehicle {} violates the safety invariant behind vehicle {} on its \
+                             inlet (bumper gap {gap:.2} m)",
+                            a.id, b.id
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,211 @@
+//! What one vehicle has heard of the others: the latest message from each, in whichever
+//! frame it was sent (a state on a segment, or a crossing report at a junction), and the
+//! others as its planner of the moment needs them (messages → world view → planner).
+//!
+//! Same rules as planner-core's `WorldView`, so that a straight road plans exactly as
+//! before: records in the order first heard; a message not newer than the record, not
+//! finite, with a negative speed, from itself or beyond the capacity is rejected and
+//! changes nothing. A vehicle is one record whatever its frame: when it moves from a
+//! segment into a junction (or out), its newer message replaces the old one, so no stale
+//! copy of it stays behind in the other frame.
+
+use super::network::Network;
+use crate::bus::Message;
+use planner_core::crossing::CrossingReport;
+use planner_core::{Other, VehicleState};
+
+/// Vehicles one view holds.
+pub const VIEW_CAP: usize = 128;
+
+/// The latest message from one vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Record {
+    /// A state in segment `segment`'s frame.
+    Lane {
+        /// The state.
+        state: VehicleState<f64>,
+        /// Its segment.
+        segment: usize,
+    },
+    /// A crossing report at junction `junction`, stamped `stamp`.
+    Crossing {
+        /// The report.
+        report: CrossingReport<f64>,
+        /// Its junction.
+        junction: usize,
+        /// Sender's time stamp (s).
+        stamp: f64,
+    },
+}
+
+impl Record {
+    fn id_stamp(&self) -> (u16, f64) {
+        match *self {
+            Record::Lane { state, .. } => (state.id, state.stamp),
+            Record::Crossing { report, stamp, .. } => (report.id, stamp),
+        }
+    }
+}
+
+/// Why a message was not taken (the view is unchanged).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reject {
+    /// The receiver's own.
+    Own,
+    /// Not finite, or a negative speed.
+    Invalid,
+    /// Not newer than what is held.
+    Stale,
+    /// The view is full.
+    Full,
+}
+
+/// The latest record of up to [`VIEW_CAP`] other vehicles.
+#[derive(Debug, Clone)]
+pub struct View {
+    own: u16,
+    records: Vec<Record>,
+}
+
+impl View {
+    /// An empty view for vehicle `own`.
+    pub fn new(own: u16) -> Self {
+        Self {
+            own,
+            records: Vec::new(),
+        }
+    }
+
+    /// Takes a message: states and crossing reports replace the sender's record when newer;
+    /// `Left` drops a crossing record at that junction (not a state the vehicle has sent
+    /// since, from its next segment). Grants are not for the view (`Ok`).
+    pub fn take(&mut self, msg: &Message) -> Result<(), Reject> {
+        let rec = match *msg {
+            Message::State { state, segment } => {
+                let f = [
+                    state.x,
+                    state.y,
+                    state.theta,
+                    state.v,
+                    state.omega,
+                    state.stamp,
+                ];
+                if !f.iter().all(|x| x.is_finite()) || state.v < 0.0 {
+                    return Err(Reject::Invalid);
+                }
+                Record::Lane { state, segment }
+            }
+            Message::Crossing {
+                report,
+                stamp,
+                junction,
+            } => {
+                if !(report.s.is_finite() && report.v >= 0.0 && stamp.is_finite()) {
+                    return Err(Reject::Invalid);
+                }
+                Record::Crossing {
+                    report,
+                    junction,
+                    stamp,
+                }
+            }
+            Message::Left { id, at, junction } => {
+                self.records.retain(|r| {
+                    !matches!(*r, Record::Crossing { report, junction: j, stamp }
+                        if report.id == id && j == junction && stamp <= at)
+                });
+                return Ok(());
+            }
+            Message::Grant { .. } => return Ok(()),
+        };
+        let (id, stamp) = rec.id_stamp();
+        if id == self.own {
+            return Err(Reject::Own);
+        }
+        let full = self.records.len() >= VIEW_CAP;
+        match self.records.iter_mut().find(|r| r.id_stamp().0 == id) {
+            Some(r) if !(stamp > r.id_stamp().1) => Err(Reject::Stale),
+            Some(r) => {
+                *r = rec;
+                Ok(())
+            }
+            None if full => Err(Reject::Full),
+            None => {
+                self.records.push(rec);
+                Ok(())
+            }
+        }
+    }
+
+    /// Every record.
+    pub fn records(&self) -> &[Record] {
+        &self.records
+    }
+
+    /// The vehicles on segment `seg` as its multi-lane planner wants them, at `now`, all
+    /// `length` long, into `out` (cleared first): states sent on it, and crossing reports
+    /// of vehicles whose path lies on it there (the inlet part before a stop line, the
+    /// outlet part after a junction) — taken in its frame, its lane, and going straight.
+    pub fn others_on(
+        &self,
+        net: &Network,
+        seg: usize,
+        now: f64,
+        length: f64,
+        out: &mut heapless::Vec<Other<f64>, VIEW_CAP>,
+    ) {
+        out.clear();
+        for r in &self.records {
+            let other = match *r {
+                Record::Lane { state: s, segment } if segment == seg => Other {
+                    alpha: s.alpha,
+                    beta: s.beta,
+                    cooperative: s.cooperative,
+                    ..Other::v2v(s.id, s.x, s.v, length, s.lane, (now - s.stamp).max(0.0))
+                },
+                Record::Crossing {
+                    report,
+                    junction,
+                    stamp,
+                } => match net.on_segment(junction, report.route, report.s) {
+                    Some((sg, x, lane)) if sg == seg => {
+                        Other::v2v(report.id, x, report.v, length, lane, (now - stamp).max(0.0))
+                    }
+                    _ => continue,
+                },
+                Record::Lane { .. } => continue,
+            };
+            // Cannot fail: `out` holds as many as the view.
+            let _ = out.push(other);
+        }
+    }
+
+    /// The positions along junction `j`'s route `route` of the vehicles heard of on the
+    /// segments that carry its inlet or outlet in its lane (states), and of those crossing
+    /// the next junction whose inlet is that outlet's segment (reports); reports at `j`
+    /// itself are the crossing planner's own business.
+    pub fn on_path(&self, net: &Network, j: usize, route: u8) -> Vec<f64> {
+        let mut out = Vec::new();
+        for r in &self.records {
+            match *r {
+                Record::Lane { state, segment } => {
+                    if let Some(s) = net.on_route(segment, state.x, state.lane, j, route) {
+                        out.push(s);
+                    }
+                }
+                Record::Crossing {
+                    report, junction, ..
+                } if junction != j => {
+                    if let Some(s) = net
+                        .on_segment(junction, report.route, report.s)
+                        .and_then(|(seg, x, lane)| net.on_route(seg, x, lane, j, route))
+                    {
+                        out.push(s);
+                    }
+                }
+                Record::Crossing { .. } => {}
+            }
+        }
+        out
+    }
+}

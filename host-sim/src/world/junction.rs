@@ -1,0 +1,87 @@
+//! A junction's manager as a node of the bus (Sec. VI): it hears the vehicles' crossing
+//! reports for its junction, decides by its algorithm, and answers every vehicle holding
+//! a permission with a lease.
+
+use crate::bus::{Message, Received};
+use planner_core::crossing::Manager;
+use planner_core::intersection::Layout;
+
+/// Vehicles one manager can track.
+pub const MANAGER_CAP: usize = 64;
+/// Lease of a permission (s) beyond the bus's notification bound: renewed every period
+/// while held; 0.1 s lets a few messages go missing before a vehicle that has not yet
+/// entered A_S must stop. A lease must outlive its own delivery, hence the bound.
+pub const LEASE_S: f64 = 0.1;
+/// How long a vehicle that has left a junction repeats its `Left` message (s): 50
+/// periods, so that even at 20 % loss every receiver has it (0.2^50) and drops its last
+/// report.
+pub const LEFT_REPEAT_S: f64 = 0.5;
+
+/// The bus node of junction `j`'s manager (vehicle ids stay below it).
+pub fn manager_node(j: usize) -> u16 {
+    0xFF00 | (j as u16 & 0xFF)
+}
+
+/// One junction's manager on the bus.
+#[derive(Debug, Clone)]
+pub struct ManagerNode {
+    /// The junction (index).
+    pub junction: usize,
+    /// The manager.
+    pub manager: Manager<f64, MANAGER_CAP>,
+}
+
+impl ManagerNode {
+    /// The manager of junction `junction` with `layout`, running `algorithm`.
+    pub fn new(
+        junction: usize,
+        layout: Layout<f64>,
+        algorithm: planner_core::crossing::Algorithm,
+    ) -> Self {
+        Self {
+            junction,
+            manager: Manager::new(layout, algorithm),
+        }
+    }
+
+    /// Its bus node.
+    pub fn node(&self) -> u16 {
+        manager_node(self.junction)
+    }
+
+    /// The manager's part of a period at `t`: takes the reports and departures it heard
+    /// for its junction, decides, and returns the vehicles that hold a permission now
+    /// (each is to be sent a lease).
+    pub fn manage(&mut self, heard: &[Received], t: f64) -> Vec<u16> {
+        for r in heard {
+            match r.msg {
+                Message::Crossing {
+                    report, junction, ..
+                } if junction == self.junction => {
+                    let _ = self.manager.observe(&report, t);
+                }
+                Message::Left { id, junction, .. } if junction == self.junction => {
+                    self.manager.forget(id)
+                }
+                _ => {}
+            }
+        }
+        self.manager.update();
+        self.manager
+            .entries()
+            .iter()
+            .filter(|e| e.permitted)
+            .map(|e| e.id)
+            .collect()
+    }
+
+    /// The grant of a lease to `id` at `t` on a bus whose notification bound is `notify`
+    /// over a period `h`.
+    pub fn grant(&self, id: u16, t: f64, notify: f64, h: f64) -> Message {
+        Message::Grant {
+            junction: self.junction,
+            id,
+            until: t + LEASE_S + (notify - h),
+        }
+    }
+}

@@ -1,0 +1,373 @@
+//! One world of roads and intersections (SPEC §10): the network, its vehicles, and its
+//! junctions' managers, stepped by one loop. A straight road is a network of one
+//! segment; the Fig. 8 intersection is one junction with its own inlet and outlet
+//! tracks; a corridor or a grid joins junctions by segments. Every vehicle is its own
+//! planner-core instance that knows the others only from what the bus delivers.
+//!
+//! One period h at time t, data flowing one way:
+//!
+//! ```text
+//! 1. every vehicle broadcasts (a state on a segment, a crossing report at a junction;
+//!    a vehicle that has left a junction repeats Left for a while)
+//! 2. every junction's manager hears the reports, decides, and broadcasts its leases
+//! 3. every vehicle's sensors return what they see (when the world has sensors)
+//! 4. every vehicle hears what the bus delivered → its view → its planner → command
+//! 5. all move (the exact unicycle (1) on a segment, along the path at a junction)
+//! 6. hand-overs between segments and junctions, departures, arrivals
+//! 7. the monitors judge the ground truth: safety, then liveness
+//! ```
+
+pub mod heard;
+pub mod junction;
+pub mod network;
+pub mod sensor;
+pub mod spawn;
+pub mod step;
+pub mod summary;
+pub mod vehicle;
+pub mod wait;
+
+use crate::bus::{Bus, Faults, InProcessBus};
+use crate::monitor::liveness::{Deadlock, DeadlockDetector};
+use crate::monitor::Limits;
+use crate::reference::ClarabelSolver;
+use junction::ManagerNode;
+use network::{Network, Place};
+use planner_core::{IpmSolver, MpcSolver, Sensing, SingleLaneProblem, Solution, SolveError};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+use spawn::Stream;
+use vehicle::{Counters, PlannerSetup, Vehicle};
+
+/// Vehicle length L (Table I).
+pub const LENGTH_M: f64 = 4.5;
+/// Vehicle width W (Table I).
+pub const WIDTH_M: f64 = 1.7;
+/// Lane width Wl (Table I).
+pub const LANE_WIDTH_M: f64 = 3.6;
+/// Extra room scenario starts need over the invariant: the f32 planner margin (2 cm)
+/// plus 1 cm, so that planners of either precision start with (10) feasible.
+pub const START_MARGIN_M: f64 = 0.03;
+
+/// What a vehicle is doing (the trace's `mode` column).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Driving on its verified plan (or its script).
+    Cruise,
+    /// Changing lanes.
+    LaneChange,
+    /// Yielding to a vehicle that wants its lane.
+    Yield,
+    /// The certified max-braking fallback (solver failure, failed verification, or the
+    /// invariant not holding).
+    Fallback,
+    /// Stopped with no room to move (behind a stopped vehicle, at a road end or a line).
+    Waiting,
+    /// Crossing a junction on its verified plan.
+    Crossing,
+    /// Its liveness goal is reached.
+    Done,
+}
+
+impl Mode {
+    /// The name used in traces.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Cruise => "cruise",
+            Self::LaneChange => "lane_change",
+            Self::Yield => "yield",
+            Self::Fallback => "fallback",
+            Self::Waiting => "waiting",
+            Self::Crossing => "crossing",
+            Self::Done => "done",
+        }
+    }
+}
+
+/// Which solver the multi-lane planners use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolverChoice {
+    /// planner-core's interior-point solver.
+    Ours,
+    /// Clarabel (the reference), for comparing plans.
+    Clarabel,
+}
+
+/// Either solver behind one type, so that a planner can be built with either.
+#[derive(Debug, Clone)]
+pub enum AnySolver<const N: usize> {
+    /// Ours.
+    Ours(IpmSolver<f64, N>),
+    /// Clarabel.
+    Clarabel(ClarabelSolver),
+}
+
+impl<const N: usize> MpcSolver<f64, N> for AnySolver<N> {
+    fn solve(
+        &mut self,
+        problem: &SingleLaneProblem<f64, N>,
+        warm: Option<&[f64; N]>,
+    ) -> Result<Solution<f64, N>, SolveError> {
+        match self {
+            Self::Ours(s) => s.solve(problem, warm),
+            Self::Clarabel(s) => MpcSolver::<f64, N>::solve(s, problem, warm),
+        }
+    }
+}
+
+/// One row of the trace: the state at `t` and the command for [t, t+h).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceRow {
+    /// Time (s).
+    pub t: f64,
+    /// Vehicle id.
+    pub id: u16,
+    /// Centre x in the world (m).
+    pub x: f64,
+    /// Centre y in the world (m).
+    pub y: f64,
+    /// Heading (rad): relative to the road on a segment, in the world at a junction.
+    pub theta: f64,
+    /// Speed commanded for [t, t+h) (m/s).
+    pub v: f64,
+    /// Yaw rate commanded for [t, t+h) (rad/s).
+    pub omega: f64,
+    /// Lane (on a segment: 0 = rightmost; at a junction: its inlet lane, 0 = inner).
+    pub lane: u8,
+    /// Target lane.
+    pub target_lane: u8,
+    /// Mode.
+    pub mode: Mode,
+    /// Where it is.
+    pub place: Place,
+}
+
+/// Everything a world is made of, validated (a scenario file loads into one).
+#[derive(Debug, Clone)]
+pub struct WorldSpec {
+    /// Name.
+    pub name: String,
+    /// Simulated time (s).
+    pub duration_s: f64,
+    /// Seed (random drivers, faults, sensor noise, spawns).
+    pub seed: u64,
+    /// MPC horizon N of the multi-lane planners (20 or 50).
+    pub horizon: usize,
+    /// Goals on roads must be reached by this time (s).
+    pub deadline_s: f64,
+    /// The network.
+    pub network: Network,
+    /// The vehicles at t = 0.
+    pub vehicles: Vec<VehicleSpec>,
+    /// Faults the bus injects.
+    pub faults: Faults,
+    /// Onboard sensors of every planner-driven vehicle (none: the paper's V2V world).
+    pub sensing: Option<Sensing<f64>>,
+    /// Arrivals while the world runs.
+    pub arrivals: Arrivals,
+    /// No vehicle moving for this long while some have goals is a deadlock (s).
+    pub deadlock_window_s: f64,
+    /// End the run as soon as every vehicle has met its goals (sweeps).
+    pub stop_when_done: bool,
+}
+
+/// A vehicle at t = 0.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VehicleSpec {
+    /// Id.
+    pub id: u16,
+    /// Where it starts.
+    pub at: vehicle::At,
+    /// Initial speed (m/s).
+    pub v: f64,
+    /// How it is driven.
+    pub driver: crate::scenario::DriverKind,
+    /// Its script, for a scripted driver.
+    pub script: Vec<crate::scenario::Phase>,
+    /// Its trip.
+    pub trip: vehicle::Trip,
+}
+
+/// Vehicles entering while the world runs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Arrivals {
+    /// None.
+    None,
+    /// A closed system (Fig. 9): a vehicle leaving the world comes back at the start of a
+    /// junction's inlet with a random route.
+    Closed,
+    /// Open: arrivals at each entry at its rate (veh/h), each with a trip drawn at random.
+    Poisson(Vec<(spawn::Entry, f64)>),
+}
+
+/// A running world with multi-lane horizon `N` over bus `B`.
+pub struct World<const N: usize, B: Bus = InProcessBus> {
+    spec: WorldSpec,
+    net: Network,
+    vehicles: Vec<Vehicle<N>>,
+    /// Vehicles that left the world (their logs count in the summary).
+    gone: Vec<Vehicle<N>>,
+    managers: Vec<ManagerNode>,
+    bus: B,
+    lim: Limits,
+    setup: PlannerSetup,
+    t: f64,
+    steps_done: u64,
+    total_steps: u64,
+    /// Vehicles that left a junction and repeat `Left`: (id, junction, when).
+    departing: Vec<(u16, usize, f64)>,
+    /// Closed system: (id, route) waiting to come back.
+    pending: Vec<(u16, u8)>,
+    streams: Vec<Stream>,
+    next_id: u16,
+    rng: Box<ChaCha8Rng>,
+    monitor: step::WorldMonitor,
+    detector: DeadlockDetector,
+    deadlock: Option<Deadlock>,
+    counters: Counters,
+    messages_sent: u64,
+    solver: SolverChoice,
+    seed: u64,
+}
+
+impl<const N: usize> World<N, InProcessBus> {
+    /// A world of `spec` on the in-process bus (injecting the spec's faults).
+    pub fn new(spec: WorldSpec, solver: SolverChoice, seed: Option<u64>) -> Self {
+        let lim = Limits::table_i();
+        let seed = seed.unwrap_or(spec.seed);
+        let mut nodes: Vec<u16> = spec.vehicles.iter().map(|v| v.id).collect();
+        nodes.extend((0..spec.network.junctions.len()).map(junction::manager_node));
+        let bus = InProcessBus::with_faults(&nodes, spec.faults, seed, lim.h);
+        Self::with_bus(spec, solver, Some(seed), bus)
+    }
+}
+
+impl<const N: usize, B: Bus> World<N, B> {
+    /// A world of `spec` over `bus` (every vehicle and manager node attached).
+    pub fn with_bus(spec: WorldSpec, solver: SolverChoice, seed: Option<u64>, bus: B) -> Self {
+        let lim = Limits::table_i();
+        let seed = seed.unwrap_or(spec.seed);
+        let setup = PlannerSetup {
+            solver,
+            notify: spec.faults.notify_bound(lim.h),
+            resolution: (0.0, 0.0),
+            sensing: spec.sensing,
+        };
+        let net = spec.network.clone();
+        let vehicles = spec
+            .vehicles
+            .iter()
+            .map(|v| step::build_vehicle::<N>(v, setup, seed, &net))
+            .collect();
+        let managers = net
+            .junctions
+            .iter()
+            .enumerate()
+            .map(|(j, jn)| ManagerNode::new(j, jn.layout.clone(), jn.algorithm))
+            .collect();
+        let mut rng = Box::new(crate::reference::instances::rng(seed ^ 0x1c));
+        let streams = match &spec.arrivals {
+            Arrivals::Poisson(entries) => entries
+                .iter()
+                .map(|&(e, rate)| Stream::new(e, rate, &mut rng))
+                .collect(),
+            _ => Vec::new(),
+        };
+        let next_id = spec.vehicles.iter().map(|v| v.id).max().unwrap_or(0) + 1;
+        Self {
+            total_steps: (spec.duration_s / lim.h).round() as u64,
+            detector: DeadlockDetector::new(spec.deadlock_window_s),
+            monitor: step::WorldMonitor::new(&net),
+            spec,
+            net,
+            vehicles,
+            gone: Vec::new(),
+            managers,
+            bus,
+            lim,
+            setup,
+            t: 0.0,
+            steps_done: 0,
+            departing: Vec::new(),
+            pending: Vec::new(),
+            streams,
+            next_id,
+            rng,
+            deadlock: None,
+            counters: Counters::default(),
+            messages_sent: 0,
+            solver,
+            seed,
+        }
+    }
+
+    /// Tells the planners and managers the steps to which the bus rounds positions and
+    /// speeds (a CAN bus: [`crate::bus::can::RESOLUTION`]).
+    pub fn set_bus_resolution(&mut self, resolution: (f64, f64)) -> Result<(), String> {
+        let ok = |r: f64| r.is_finite() && (0.0..1.0).contains(&r);
+        if !(ok(resolution.0) && ok(resolution.1)) {
+            return Err(format!("bus resolution {resolution:?}"));
+        }
+        self.setup.resolution = resolution;
+        for v in &mut self.vehicles {
+            step::set_setup(v, self.setup);
+        }
+        for m in &mut self.managers {
+            m.manager
+                .set_position_resolution(resolution.0)
+                .map_err(|e| format!("{e:?}"))?;
+        }
+        Ok(())
+    }
+
+    /// The network.
+    pub fn network(&self) -> &Network {
+        &self.net
+    }
+
+    /// Current time (s).
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+
+    /// Steps in the whole run.
+    pub fn total_steps(&self) -> u64 {
+        self.total_steps
+    }
+
+    /// Steps done.
+    pub fn steps_done(&self) -> u64 {
+        self.steps_done
+    }
+
+    /// The vehicles in the world now.
+    pub fn vehicles(&self) -> &[Vehicle<N>] {
+        &self.vehicles
+    }
+
+    /// `true` once the run is over: its duration simulated, a deadlock found, or — when
+    /// asked to stop then — every goal met.
+    pub fn finished(&self) -> bool {
+        self.steps_done >= self.total_steps
+            || self.deadlock.is_some()
+            || (self.spec.stop_when_done && self.all_done())
+            || (self.vehicles.is_empty()
+                && self.pending.is_empty()
+                && self.streams.is_empty()
+                && !self.net.junctions.is_empty())
+    }
+
+    /// The deadlock found, if any.
+    pub fn deadlock(&self) -> Option<&Deadlock> {
+        self.deadlock.as_ref()
+    }
+
+    /// Every (non-scripted) vehicle has met its goals.
+    pub fn all_done(&self) -> bool {
+        self.vehicles.iter().all(|v| !step::unmet(v, &self.net))
+            && self.pending.is_empty()
+            && self.streams.iter().all(|s| s.queue.is_empty())
+    }
+}

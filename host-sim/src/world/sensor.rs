@@ -1,0 +1,211 @@
+//! Onboard range sensors, modelled from ground truth (the planner side is planner-core's
+//! [`sensing`](planner_core::sensing)): what each vehicle's own sensors return this step.
+//!
+//! - A planner on a segment sees every vehicle whose rectangle overlaps its lane or a
+//!   lane next to it, ahead within `ahead_m` of its front bumper or behind within
+//!   `behind_m` of its rear bumper, in its own frame: position and speed each with an
+//!   error drawn uniformly within the stated bound, and the lanes the rectangle overlaps.
+//!   Returns carry the true id: association of a return with a V2V record is assumed
+//!   perfect (a documented simplification; a real tracker associates by position).
+//! - A planner in a junction sees the vehicles on its own path ahead within `ahead_m`:
+//!   their positions along its path, with the same error.
+//! - A scripted or random driver sees the bumper gap to the nearest vehicle physically in
+//!   its lane ahead, exactly (it brakes for it; see `Driver::Script`).
+
+use super::network::Network;
+use super::vehicle::At;
+use super::{LANE_WIDTH_M, LENGTH_M, WIDTH_M};
+use planner_core::{Other, Sensing};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+/// One vehicle's sensor returns of one step.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Sensed {
+    /// On a segment: the vehicles seen, as the multi-lane planner takes them.
+    pub others: Vec<Other<f64>>,
+    /// In a junction: positions along its path of the vehicles seen on it.
+    pub on_path: Vec<f64>,
+    /// A scripted driver: the bumper gap to the nearest vehicle in its lane ahead.
+    pub gap_ahead: Option<f64>,
+}
+
+/// Ground truth of one vehicle, as the sensors see it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Seen {
+    /// Id.
+    pub id: u16,
+    /// Where.
+    pub at: At,
+    /// Speed (m/s).
+    pub v: f64,
+}
+
+/// The lanes (lowest, highest) a rectangle at lateral position `y`, heading `theta`
+/// overlaps on a road of `lanes` lanes.
+fn lanes_overlapped(y: f64, theta: f64, lanes: u8) -> (u8, u8) {
+    let ext = 0.5 * (LENGTH_M * theta.sin().abs() + WIDTH_M * theta.cos().abs());
+    let lane = |v: f64| ((v / LANE_WIDTH_M).floor().max(0.0) as u8).min(lanes.saturating_sub(1));
+    (lane(y - ext + 1e-9), lane(y + ext - 1e-9))
+}
+
+/// Where `c` is in segment `seg`'s frame, if it is physically on it: (x, y, θ).
+fn on_segment(net: &Network, seg: usize, c: &Seen) -> Option<(f64, f64, f64)> {
+    match c.at {
+        At::Lane {
+            seg: s,
+            x,
+            y,
+            theta,
+            ..
+        } if s == seg => Some((x, y, theta)),
+        At::Crossing { junction, route, s } => {
+            let (sg, x, lane) = net.on_segment(junction, route, s)?;
+            (sg == seg).then(|| (x, (f64::from(lane) + 0.5) * LANE_WIDTH_M, 0.0))
+        }
+        At::Lane { .. } => None,
+    }
+}
+
+/// What the sensors of `me` (planner-driven: `sensing`; scripted: `None`) return.
+pub fn sense(
+    net: &Network,
+    me: &Seen,
+    all: &[Seen],
+    sensing: Option<&Sensing<f64>>,
+    rng: &mut ChaCha8Rng,
+) -> Sensed {
+    let mut out = Sensed::default();
+    match (me.at, sensing) {
+        (At::Lane { seg, x, lane, .. }, Some(s)) => {
+            let lanes = net.segments.get(seg).map_or(1, |g| g.lanes);
+            for c in all.iter().filter(|c| c.id != me.id) {
+                let Some((cx, cy, cth)) = on_segment(net, seg, c) else {
+                    continue;
+                };
+                let (lo, hi) = lanes_overlapped(cy, cth, lanes);
+                let near_lane = hi + 1 >= lane && lo <= lane + 1;
+                let ahead = cx - LENGTH_M - x <= s.ahead_m && cx >= x;
+                let behind = x - LENGTH_M - cx <= s.behind_m && cx < x;
+                if near_lane && (ahead || behind) {
+                    let e = s.position_error_m;
+                    let ev = s.speed_error_mps;
+                    let mx = cx
+                        + if e > 0.0 {
+                            rng.random_range(-e..=e)
+                        } else {
+                            0.0
+                        };
+                    let mv = c.v
+                        + if ev > 0.0 {
+                            rng.random_range(-ev..=ev)
+                        } else {
+                            0.0
+                        };
+                    out.others.push(Other {
+                        alpha: (hi != lo).then_some(hi),
+                        cooperative: false,
+                        sensed: true,
+                        ..Other::v2v(c.id, mx, mv.max(0.0), LENGTH_M, lo, 0.0)
+                    });
+                }
+            }
+        }
+        (At::Crossing { junction, route, s }, Some(sn)) => {
+            out.on_path = path_returns(net, junction, route, s, all, me.id, sn, rng);
+        }
+        (At::Lane { seg, x, lane, .. }, None) => {
+            let lanes = net.segments.get(seg).map_or(1, |g| g.lanes);
+            out.gap_ahead = all
+                .iter()
+                .filter(|c| c.id != me.id)
+                .filter_map(|c| on_segment(net, seg, c))
+                .filter(|&(cx, cy, cth)| {
+                    let (lo, hi) = lanes_overlapped(cy, cth, lanes);
+                    cx >= x && lo <= lane && lane <= hi
+                })
+                .map(|(cx, ..)| cx - x - LENGTH_M)
+                .reduce(f64::min);
+        }
+        (At::Crossing { .. }, None) => {}
+    }
+    out
+}
+
+/// The vehicles physically on junction `j`'s route `route` ahead of position `s` within
+/// the forward range: positions along that path, measured.
+#[allow(clippy::too_many_arguments)]
+fn path_returns(
+    net: &Network,
+    j: usize,
+    route: u8,
+    s: f64,
+    all: &[Seen],
+    me: u16,
+    sn: &Sensing<f64>,
+    rng: &mut ChaCha8Rng,
+) -> Vec<f64> {
+    let Some(jn) = net.junctions.get(j) else {
+        return Vec::new();
+    };
+    let Some(mine) = jn.layout.route(usize::from(route)) else {
+        return Vec::new();
+    };
+    let exit = mine.path.exit();
+    let mut out = Vec::new();
+    for c in all.iter().filter(|c| c.id != me) {
+        let along = match c.at {
+            At::Crossing {
+                junction,
+                route: r,
+                s: cs,
+            } if junction == j => {
+                let Some(other) = jn.layout.route(usize::from(r)) else {
+                    continue;
+                };
+                let (oe, ox) = (other.path.entry(), other.path.exit());
+                if r == route || (other.inlet == mine.inlet && cs - 0.5 * LENGTH_M < oe) {
+                    Some(cs)
+                } else if other.outlet == mine.outlet && cs + 0.5 * LENGTH_M > ox {
+                    Some(exit + (cs - ox))
+                } else {
+                    None
+                }
+            }
+            At::Crossing {
+                junction,
+                route: r,
+                s: cs,
+            } => net
+                .on_segment(junction, r, cs)
+                .and_then(|(sg, x, lane)| net.on_route(sg, x, lane, j, route)),
+            At::Lane { seg, x, lane, .. } => net.on_route(seg, x, lane, j, route),
+        };
+        if let Some(p) = along.filter(|&p| p > s && p - s - LENGTH_M <= sn.ahead_m) {
+            let e = sn.position_error_m;
+            out.push(
+                p + if e > 0.0 {
+                    rng.random_range(-e..=e)
+                } else {
+                    0.0
+                },
+            );
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn straddling_rectangles_are_in_both_lanes() {
+        assert_eq!(lanes_overlapped(1.8, 0.0, 3), (0, 0));
+        assert_eq!(lanes_overlapped(3.6, 0.0, 3), (0, 1));
+        assert_eq!(lanes_overlapped(3.6 + 0.86, 0.0, 3), (1, 1));
+        // Turned 0.3 rad, the rectangle reaches 1.48 m to either side of its centre.
+        assert_eq!(lanes_overlapped(8.0, 0.3, 3), (1, 2));
+        assert_eq!(lanes_overlapped(9.0, 0.3, 3), (2, 2));
+    }
+}

@@ -1,0 +1,176 @@
+//! Vehicles entering the world while it runs: the closed system of the paper's Fig. 9
+//! (a vehicle that leaves comes back at the start of an inlet with a random route) and
+//! open systems (arrivals at each entry lane as a Poisson process, SPEC §8 and the
+//! literature's demand test). A vehicle enters only where it keeps the invariant toward
+//! the vehicle ahead; until then it waits outside, and that wait counts as delay.
+
+use super::vehicle::At;
+use super::START_MARGIN_M;
+use crate::monitor::Limits;
+use planner_core::intersection::Movement;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use std::collections::VecDeque;
+
+/// Where vehicles enter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Entry {
+    /// The start of a junction's own inlet track (crossing mode from the start).
+    Stub {
+        /// Junction index.
+        junction: usize,
+        /// Heading of travel of the inlet.
+        heading: u8,
+        /// Inlet lane (0 inner).
+        lane: u8,
+    },
+    /// The start of a boundary segment, in one of its lanes.
+    Segment {
+        /// Segment index.
+        seg: usize,
+        /// Lane (0 rightmost).
+        lane: u8,
+    },
+}
+
+/// Draws an arrival's trip at an entry: its movements, and at a stub its route.
+pub type DrawTrip<'a> = dyn FnMut(&Entry, &mut ChaCha8Rng) -> (Vec<Movement>, Option<u8>) + 'a;
+
+/// A vehicle waiting to enter: since when, and its trip.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Arrival {
+    /// Its id once it enters.
+    pub id: u16,
+    /// When it arrived at the entry (s).
+    pub since: f64,
+    /// Its movements, one per junction.
+    pub movements: Vec<Movement>,
+    /// At a stub entry: its route at that junction.
+    pub route: Option<u8>,
+}
+
+/// Arrivals at one entry: a Poisson process of `rate_vph` vehicles per hour.
+#[derive(Debug, Clone)]
+pub struct Stream {
+    /// Where.
+    pub entry: Entry,
+    /// Vehicles per hour.
+    pub rate_vph: f64,
+    /// When the next one arrives (s).
+    pub next_at: f64,
+    /// Those waiting to enter, first first.
+    pub queue: VecDeque<Arrival>,
+    /// The longest queue seen.
+    pub max_queue: usize,
+}
+
+impl Stream {
+    /// A stream of `rate_vph` at `entry`, its first arrival drawn from `rng`.
+    pub fn new(entry: Entry, rate_vph: f64, rng: &mut ChaCha8Rng) -> Self {
+        let mut s = Self {
+            entry,
+            rate_vph,
+            next_at: 0.0,
+            queue: VecDeque::new(),
+            max_queue: 0,
+        };
+        s.next_at = s.gap(rng);
+        s
+    }
+
+    /// An exponential inter-arrival time (s).
+    fn gap(&self, rng: &mut ChaCha8Rng) -> f64 {
+        if !(self.rate_vph > 0.0) {
+            return f64::INFINITY;
+        }
+        let u: f64 = rng.random_range(f64::EPSILON..1.0);
+        -u.ln() * 3600.0 / self.rate_vph
+    }
+
+    /// Queues every arrival up to `t`, each with a trip from `trip` and a new id from
+    /// `next_id`.
+    pub fn arrive(
+        &mut self,
+        t: f64,
+        rng: &mut ChaCha8Rng,
+        next_id: &mut u16,
+        trip: &mut DrawTrip<'_>,
+    ) {
+        while self.next_at <= t {
+            let (movements, route) = trip(&self.entry, rng);
+            self.queue.push_back(Arrival {
+                id: *next_id,
+                since: self.next_at,
+                movements,
+                route,
+            });
+            *next_id = next_id.wrapping_add(1).max(1);
+            self.next_at += self.gap(rng);
+            self.max_queue = self.max_queue.max(self.queue.len());
+        }
+    }
+}
+
+/// The speed (m/s) at which a vehicle may enter `room` metres (bumper gap minus d0)
+/// behind the vehicle ahead and keep the invariant with the start margin, at most
+/// `v_max`; `None` if there is not room even standing.
+pub fn entry_speed(lim: &Limits, room: f64, v_max: f64) -> Option<f64> {
+    if room.is_infinite() {
+        return Some(v_max);
+    }
+    let r = room - START_MARGIN_M;
+    if !(r > lim.safe_distance(0.0)) {
+        return None;
+    }
+    // dS(v) = (v + |amin| h)² / (2|amin|) < r, with a thousandth to spare.
+    let v = (2.0 * lim.brake * r).sqrt() - lim.brake * lim.h - 1e-3;
+    Some(v.clamp(0.0, v_max))
+}
+
+/// Where an arrival at `entry` starts.
+pub fn start_at(entry: &Entry, route: Option<u8>, half_length: f64) -> At {
+    match *entry {
+        Entry::Stub { junction, .. } => At::Crossing {
+            junction,
+            route: route.unwrap_or(0),
+            s: half_length,
+        },
+        Entry::Segment { seg, lane } => At::Lane {
+            seg,
+            x: half_length,
+            y: (f64::from(lane) + 0.5) * super::LANE_WIDTH_M,
+            theta: 0.0,
+            lane,
+            alpha: None,
+            beta: None,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn entry_speed_keeps_the_invariant() {
+        let lim = Limits::table_i();
+        assert_eq!(entry_speed(&lim, f64::INFINITY, 13.9), Some(13.9));
+        assert_eq!(entry_speed(&lim, 0.02, 13.9), None);
+        let v = entry_speed(&lim, 5.0, 13.9).unwrap();
+        assert!(v > 0.0 && lim.safe_distance(v) + START_MARGIN_M < 5.0);
+        assert_eq!(entry_speed(&lim, 100.0, 13.9), Some(13.9));
+    }
+
+    #[test]
+    fn arrivals_come_at_about_the_rate() {
+        let mut rng = crate::reference::instances::rng(3);
+        let mut s = Stream::new(Entry::Segment { seg: 0, lane: 0 }, 600.0, &mut rng);
+        let mut id = 1;
+        s.arrive(3600.0, &mut rng, &mut id, &mut |_, _| (Vec::new(), None));
+        let n = s.queue.len() as f64;
+        assert!(
+            (n - 600.0).abs() < 4.0 * 600f64.sqrt(),
+            "{n} arrivals in an hour"
+        );
+    }
+}

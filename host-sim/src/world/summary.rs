@@ -1,0 +1,294 @@
+//! What a run produced: the `--json` summary of `host-sim run`.
+
+use super::step::unmet;
+use super::vehicle::{Counters, Vehicle};
+use super::{Arrivals, SolverChoice, World, WorldSpec};
+use crate::bus::{Bus, FaultStats};
+use crate::monitor::liveness::Deadlock;
+use crate::monitor::Findings;
+use serde::Serialize;
+
+/// Lane changes of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LaneChangeStats {
+    /// Planner-driven vehicles.
+    pub vehicles: usize,
+    /// How many are in their target lane with no change pending.
+    pub in_target_lane: usize,
+    /// Lane changes completed.
+    pub changes: usize,
+    /// When the last vehicle reached its target lane (s), if all did.
+    pub all_done_at_s: Option<f64>,
+    /// Longest x-distance driven from declaring an intention to completing the change (m).
+    pub max_distance_m: f64,
+}
+
+/// Junction crossings of a run (present when the world has junctions).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CrossingStats {
+    /// The managers' algorithm (of the first junction).
+    pub algorithm: &'static str,
+    /// Junctions crossed (a vehicle crossing two counts twice).
+    pub crossed: u64,
+    /// Mean time from arrival (entering A_C) to leaving A_C (s).
+    pub crossing_time_mean_s: f64,
+    /// Longest such time (s).
+    pub crossing_time_max_s: f64,
+    /// Steps × vehicles inside A_S without a permission ever granted (IC Protocol (ii)).
+    pub unpermitted_entries: u64,
+    /// Vehicles still in the world at the end.
+    pub in_system: usize,
+}
+
+/// What a run produced.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Vehicles (at the start and entered since).
+    pub vehicles: usize,
+    /// Simulated time (s).
+    pub sim_seconds: f64,
+    /// Collision findings (vehicle pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations (pairs × steps).
+    pub invariant_violations: u64,
+    /// Speed, acceleration or heading limit violations (vehicles × steps).
+    pub limit_violations: u64,
+    /// Steps × vehicles past a road end.
+    pub road_end_overruns: u64,
+    /// Steps × vehicles with their rectangle off the road.
+    pub off_road: u64,
+    /// Smallest bumper-to-bumper gap between consecutive vehicles of a lane (m).
+    pub min_gap_m: f64,
+    /// Planner steps that applied the certified fallback (solver, verification or
+    /// invariant).
+    pub fallback_steps: u64,
+    /// Planner steps standing still with no room (forced, not a failure).
+    pub waiting_steps: u64,
+    /// Planner steps braking under the Yield Protocol (not a failure).
+    pub yield_steps: u64,
+    /// Lane changes.
+    pub lane_changes: LaneChangeStats,
+    /// Lateral-QP iterations over the run.
+    pub lateral_iterations_total: u64,
+    /// Planner steps.
+    pub planner_steps: u64,
+    /// Mean interior-point iterations of the planner steps that solved.
+    pub solver_iterations_mean: f64,
+    /// Every goal met: every goal x reached by the deadline, every planner-driven vehicle
+    /// in its target lane, every vehicle through its junctions (when the world has any
+    /// and no arrivals), and no deadlock.
+    pub completed: bool,
+    /// Vehicles with a goal x.
+    pub goals: usize,
+    /// Goals reached by the deadline.
+    pub goals_reached: usize,
+    /// Latest time a goal was reached (s), if any.
+    pub last_goal_time_s: Option<f64>,
+    /// Messages the vehicles broadcast.
+    pub messages_sent: u64,
+    /// Messages a vehicle's view rejected (stale, invalid).
+    pub messages_rejected: u64,
+    /// What the bus's injected faults did.
+    pub bus_faults: FaultStats,
+    /// Solver used by the multi-lane planners.
+    pub solver: SolverChoice,
+    /// Seed used.
+    pub seed: u64,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+    /// Junction crossings, when the world has junctions.
+    #[serde(flatten)]
+    pub crossing: Option<CrossingStats>,
+    /// Planner-driven vehicles with a goal still unmet at the end.
+    pub unfinished: usize,
+    /// The deadlock that ended the run, if one did.
+    pub deadlock: Option<Deadlock>,
+}
+
+impl Summary {
+    /// Junctions crossed (0 without junctions).
+    pub fn crossed(&self) -> u64 {
+        self.crossing.as_ref().map_or(0, |c| c.crossed)
+    }
+    /// Mean crossing time (s; 0 without junctions).
+    pub fn crossing_time_mean_s(&self) -> f64 {
+        self.crossing
+            .as_ref()
+            .map_or(0.0, |c| c.crossing_time_mean_s)
+    }
+    /// Longest crossing time (s; 0 without junctions).
+    pub fn crossing_time_max_s(&self) -> f64 {
+        self.crossing
+            .as_ref()
+            .map_or(0.0, |c| c.crossing_time_max_s)
+    }
+    /// Entries into A_S without a permission (0 without junctions).
+    pub fn unpermitted_entries(&self) -> u64 {
+        self.crossing.as_ref().map_or(0, |c| c.unpermitted_entries)
+    }
+    /// Collisions, invariant and limit violations, road-end overruns and unpermitted
+    /// entries: every safety finding.
+    pub fn unsafe_events(&self) -> u64 {
+        self.collisions
+            + self.invariant_violations
+            + self.limit_violations
+            + self.road_end_overruns
+            + self.unpermitted_entries()
+    }
+}
+
+/// Lane-change statistics of `vehicles`.
+pub fn lane_changes<'a, const N: usize>(
+    vehicles: impl Iterator<Item = &'a Vehicle<N>> + Clone,
+) -> LaneChangeStats {
+    let wanted: Vec<&Vehicle<N>> = vehicles.filter(|v| v.is_planner()).collect();
+    let done: Vec<f64> = wanted.iter().filter_map(|v| v.log.in_target_at).collect();
+    LaneChangeStats {
+        vehicles: wanted.len(),
+        in_target_lane: done.len(),
+        changes: wanted.iter().map(|v| v.log.changes.len()).sum(),
+        all_done_at_s: (done.len() == wanted.len())
+            .then(|| done.iter().copied().fold(0.0, f64::max)),
+        max_distance_m: wanted
+            .iter()
+            .flat_map(|v| v.log.changes.iter().map(|c| c.0))
+            .fold(0.0, f64::max),
+    }
+}
+
+/// What a run produced besides its vehicles.
+pub struct Outcome<'a> {
+    /// The world that ran.
+    pub spec: &'a WorldSpec,
+    /// Vehicles in the world at the end.
+    pub in_world: usize,
+    /// Of those, planner-driven vehicles with a goal still unmet.
+    pub unfinished: usize,
+    /// The monitor's findings.
+    pub findings: &'a Findings,
+    /// The planners' counters.
+    pub counters: &'a Counters,
+    /// The deadlock that ended the run, if one did.
+    pub deadlock: Option<&'a Deadlock>,
+    /// Simulated time (s).
+    pub t: f64,
+    /// Messages the vehicles broadcast.
+    pub messages_sent: u64,
+    /// What injected faults did.
+    pub bus_faults: FaultStats,
+    /// The multi-lane planners' solver.
+    pub solver: SolverChoice,
+    /// Seed.
+    pub seed: u64,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// The summary of a run whose vehicles (in the world and gone) are `all`.
+pub fn summarize<'v, const N: usize>(
+    all: impl Iterator<Item = &'v Vehicle<N>> + Clone,
+    o: &Outcome<'_>,
+) -> Summary {
+    let f = o.findings;
+    let c = o.counters;
+    let deadline = o.spec.deadline_s;
+    let with_goal: Vec<&Vehicle<N>> = all.clone().filter(|v| v.trip.goal_x.is_some()).collect();
+    let reached: Vec<f64> = with_goal
+        .iter()
+        .filter_map(|v| v.log.reached_at)
+        .filter(|&t| t <= deadline + 1e-9)
+        .collect();
+    let lc = lane_changes(all.clone());
+    let net = &o.spec.network;
+    let crossing = (!net.junctions.is_empty()).then(|| {
+        let times: Vec<f64> = all
+            .clone()
+            .flat_map(|v| v.log.crossings.iter().copied())
+            .collect();
+        CrossingStats {
+            algorithm: net.junctions.first().map_or("", |j| j.algorithm.name()),
+            crossed: times.len() as u64,
+            crossing_time_mean_s: times.iter().sum::<f64>() / times.len().max(1) as f64,
+            crossing_time_max_s: times.iter().copied().fold(0.0, f64::max),
+            unpermitted_entries: f.unpermitted_entries,
+            in_system: o.in_world,
+        }
+    });
+    let through = crossing
+        .as_ref()
+        .is_none_or(|x| x.in_system == 0 || o.spec.arrivals != Arrivals::None);
+    Summary {
+        scenario: o.spec.name.clone(),
+        vehicles: all.clone().count(),
+        sim_seconds: o.t,
+        collisions: f.collisions,
+        invariant_violations: f.invariant_violations,
+        limit_violations: f.limit_violations,
+        road_end_overruns: f.road_end_overruns,
+        off_road: f.off_road,
+        min_gap_m: f.min_gap_m,
+        fallback_steps: c.fallback_steps,
+        waiting_steps: c.waiting_steps,
+        yield_steps: c.yield_steps,
+        lane_changes: lc,
+        lateral_iterations_total: c.lateral_iterations,
+        planner_steps: c.planner_steps,
+        solver_iterations_mean: c.solver_iterations as f64 / c.solved_steps.max(1) as f64,
+        completed: reached.len() == with_goal.len()
+            && lc.in_target_lane == lc.vehicles
+            && through
+            && o.deadlock.is_none(),
+        goals: with_goal.len(),
+        goals_reached: reached.len(),
+        last_goal_time_s: reached.iter().copied().reduce(f64::max),
+        messages_sent: o.messages_sent,
+        messages_rejected: c.rejected,
+        bus_faults: o.bus_faults,
+        solver: o.solver,
+        seed: o.seed,
+        wall_seconds: o.wall_seconds,
+        crossing,
+        unfinished: o.unfinished,
+        deadlock: o.deadlock.cloned(),
+    }
+}
+
+impl<const N: usize, B: Bus> World<N, B> {
+    /// Every vehicle that has been in the world: those in it now, then those gone.
+    pub fn all_vehicles(&self) -> impl Iterator<Item = &Vehicle<N>> + Clone {
+        self.vehicles.iter().chain(self.gone.iter())
+    }
+
+    /// The findings so far.
+    pub fn findings(&self) -> &Findings {
+        &self.monitor.findings
+    }
+
+    /// The counters so far.
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// The summary so far.
+    pub fn summary(&self, wall_seconds: f64) -> Summary {
+        summarize(
+            self.all_vehicles(),
+            &Outcome {
+                spec: &self.spec,
+                in_world: self.vehicles.len(),
+                unfinished: self.vehicles.iter().filter(|v| unmet(v, &self.net)).count(),
+                findings: &self.monitor.findings,
+                counters: &self.counters,
+                deadlock: self.deadlock.as_ref(),
+                t: self.t,
+                messages_sent: self.messages_sent,
+                bus_faults: self.bus.fault_stats(),
+                solver: self.solver,
+                seed: self.seed,
+                wall_seconds,
+            },
+        )
+    }
+}

@@ -1,0 +1,893 @@
+//! One vehicle of the world: where it is (a segment or a junction), how it is driven (its
+//! own planners, or a script), and its trip. Where a vehicle decides is here:
+//! [`Vehicle::decide`] turns what it heard into the command for the next period —
+//! messages → its view → the planner for where it is → command.
+//!
+//! On a segment it plans with the multi-lane planner (Sec. IV–V) toward a lane serving
+//! its next movement; the stop line of a junction is the road end (22) for lanes that
+//! serve that movement, and the edge of A_C is for those that do not (no lane change
+//! inside A_C, IC Protocol (i)). Inside A_C, centred and straight in a serving lane, it
+//! hands over to the crossing planner along its route (Sec. VI); once outside A_C on its
+//! outlet it hands back to the multi-lane planner on the next segment, or leaves.
+
+use super::heard::{Reject, View, VIEW_CAP};
+use super::network::{End, Network, Place};
+use super::sensor::Sensed;
+use super::{AnySolver, Mode, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M};
+use crate::bus::{Message, Received};
+use crate::monitor::Limits;
+use crate::reference::ClarabelSolver;
+use crate::scenario::Phase;
+use planner_core::crossing::{CrossingPlanner, CrossingReport};
+use planner_core::intersection::Movement;
+use planner_core::lane_change::LaneEvent;
+use planner_core::{
+    CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, Other, Params,
+    ParamsSpec, Planner, Pose, Road, Sensing, StepStatus, VehicleState,
+};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+/// Horizon of the crossing planners.
+pub const CROSS_HORIZON: usize = 20;
+/// How far (m) from its lane's centre line, and how far from straight (rad), a vehicle
+/// may be when it hands over from the multi-lane planner to the crossing planner, which
+/// drives the lane's centre line: the difference is where the vehicle is taken to be
+/// from then on (a modelling step well inside the conflict margin of 0.1 m).
+pub const HANDOVER_Y_M: f64 = 0.1;
+/// See [`HANDOVER_Y_M`].
+pub const HANDOVER_THETA_RAD: f64 = 0.02;
+
+/// Table I with vmax replaced by `v_max` (a segment's or a junction's speed limit).
+pub fn params(v_max: f64) -> Params<f64> {
+    let spec = ParamsSpec {
+        v_max,
+        ..ParamsSpec::table_i()
+    };
+    // Limits at or below Table I's keep every Table I relation; loaders check the range.
+    Params::new(spec).unwrap_or_else(|_| Params::table_i())
+}
+
+/// Cost of the crossing planners: the default, plus a small pull toward the target of
+/// Sec. VII-B (x^f), so that the target switching is part of J.
+pub fn crossing_weights() -> CostWeights<f64> {
+    CostWeights {
+        target_position: 1e-3,
+        ..CostWeights::default()
+    }
+}
+
+/// How every planner of a run is set up.
+#[derive(Debug, Clone, Copy)]
+pub struct PlannerSetup {
+    /// The speed solver of the multi-lane planners.
+    pub solver: SolverChoice,
+    /// The bus's notification bound (s).
+    pub notify: f64,
+    /// Steps to which the bus rounds positions and speeds (0: exact).
+    pub resolution: (f64, f64),
+    /// Onboard sensors, if any.
+    pub sensing: Option<Sensing<f64>>,
+}
+
+/// The planners of a planner-driven vehicle and what it heard.
+pub struct Brain<const N: usize> {
+    lane: Option<Box<LanePlanner<f64, N, AnySolver<N>>>>,
+    crossing: Option<Box<CrossingPlanner<f64, CROSS_HORIZON, VIEW_CAP>>>,
+    view: View,
+    others: Box<heapless::Vec<Other<f64>, VIEW_CAP>>,
+    setup: PlannerSetup,
+}
+
+/// How a vehicle is driven.
+pub enum Driver<const N: usize> {
+    /// Its own planners.
+    Planner(Box<Brain<N>>),
+    /// A fixed acceleration script (an adversarial but admissible driver that ignores
+    /// intentions, and brakes for what is physically in its lane ahead).
+    Script(Vec<Phase>),
+    /// Random admissible accelerations (same physical response).
+    Random {
+        /// Its own random numbers.
+        rng: Box<ChaCha8Rng>,
+        /// Current acceleration.
+        accel: f64,
+        /// Until when.
+        until: f64,
+    },
+}
+
+/// Where a vehicle is and its pose there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum At {
+    /// On a segment, in its frame.
+    Lane {
+        /// Segment index.
+        seg: usize,
+        /// x (m).
+        x: f64,
+        /// y (m).
+        y: f64,
+        /// Heading relative to the segment (rad).
+        theta: f64,
+        /// ℓ.
+        lane: u8,
+        /// α.
+        alpha: Option<u8>,
+        /// β.
+        beta: Option<u8>,
+    },
+    /// In a junction, along a route's path.
+    Crossing {
+        /// Junction index.
+        junction: usize,
+        /// Route.
+        route: u8,
+        /// Centre's distance along the route's path (m).
+        s: f64,
+    },
+}
+
+impl At {
+    /// The place.
+    pub fn place(&self) -> Place {
+        match *self {
+            At::Lane { seg, .. } => Place::Segment(seg),
+            At::Crossing { junction, .. } => Place::Junction(junction),
+        }
+    }
+}
+
+/// What a vehicle is to do besides staying safe.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trip {
+    /// Lane to be in on the current segment (a road's mission; at a junction, a lane
+    /// serving the next movement).
+    pub target_lane: u8,
+    /// Centre x to reach on a road by the deadline, if any.
+    pub goal_x: Option<f64>,
+    /// Reference speed on a road (a network's vehicles use the segment's limit).
+    pub v_ref: Option<f64>,
+    /// The movements still to make, one per junction ahead.
+    pub movements: Vec<Movement>,
+}
+
+/// What happened to a vehicle over a run (for the summary and the liveness checks).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Log {
+    /// x where the current intention was declared.
+    pub declared_x: Option<f64>,
+    /// Lane changes completed: (x driven from declaration to completion, time).
+    pub changes: Vec<(f64, f64)>,
+    /// When last seen in its target lane with no change pending.
+    pub in_target_at: Option<f64>,
+    /// When its goal x was reached.
+    pub reached_at: Option<f64>,
+    /// When it entered the current junction's A_C.
+    pub arrived_at: Option<f64>,
+    /// When its rear left the current junction's A_S.
+    pub left_as_at: Option<f64>,
+    /// Junctions crossed: time from entering A_C to leaving it, each.
+    pub crossings: Vec<f64>,
+    /// When it entered the network and when it left it (open systems).
+    pub entered_at: f64,
+    /// When it left the network, if it did.
+    pub left_at: Option<f64>,
+}
+
+/// One vehicle.
+pub struct Vehicle<const N: usize> {
+    /// Id.
+    pub id: u16,
+    /// Where it is.
+    pub at: At,
+    /// v_{t−h}: the speed applied over the last period (m/s).
+    pub v: f64,
+    /// The speed applied over the period before (m/s).
+    pub v_before: f64,
+    /// ω_{t−h} (rad/s).
+    pub omega: f64,
+    /// How it is driven.
+    pub driver: Driver<N>,
+    /// Its trip.
+    pub trip: Trip,
+    /// What it did this step.
+    pub mode: Mode,
+    /// Its history.
+    pub log: Log,
+    /// The status of its last planner step (for the deadlock report).
+    pub last_status: Option<StepStatus<f64>>,
+}
+
+/// What the monitors and the other vehicles' sensors know of a vehicle at an instant:
+/// ground truth, never a planner's view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleTruth {
+    /// Id.
+    pub id: u16,
+    /// Where it is.
+    pub at: At,
+    /// v_{t−h} (m/s).
+    pub v: f64,
+    /// v_{t−2h} (m/s).
+    pub v_before: f64,
+    /// Driven by its own planners (keeps the invariant; has goals).
+    pub planner: bool,
+    /// It still has a goal.
+    pub unmet: bool,
+    /// Its target lane (for the wait-for relation).
+    pub target_lane: u8,
+}
+
+/// What a vehicle's decision at time t needs besides its own state and inbox.
+pub struct StepCtx<'a> {
+    /// Now (s).
+    pub t: f64,
+    /// Steps done.
+    pub steps_done: u64,
+    /// The network.
+    pub net: &'a Network,
+    /// Limits.
+    pub lim: Limits,
+    /// A vehicle whose transmitter fails, and from when.
+    pub silent: Option<crate::bus::Silent>,
+    /// This vehicle's sensor returns (empty without sensors).
+    pub returns: &'a Sensed,
+}
+
+/// Per-step counters, summed over vehicles (and over tasks, in a fleet).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Certified-fallback steps (not standstill, not yield).
+    pub fallback_steps: u64,
+    /// Standing with no room.
+    pub waiting_steps: u64,
+    /// Braking under the Yield Protocol.
+    pub yield_steps: u64,
+    /// Lateral-QP iterations.
+    pub lateral_iterations: u64,
+    /// Planner steps.
+    pub planner_steps: u64,
+    /// Planner steps that solved.
+    pub solved_steps: u64,
+    /// Solver iterations of those.
+    pub solver_iterations: u64,
+    /// Messages a view rejected.
+    pub rejected: u64,
+}
+
+impl Counters {
+    /// Adds `o`.
+    pub fn add(&mut self, o: &Counters) {
+        self.fallback_steps += o.fallback_steps;
+        self.waiting_steps += o.waiting_steps;
+        self.yield_steps += o.yield_steps;
+        self.lateral_iterations += o.lateral_iterations;
+        self.planner_steps += o.planner_steps;
+        self.solved_steps += o.solved_steps;
+        self.solver_iterations += o.solver_iterations;
+        self.rejected += o.rejected;
+    }
+}
+
+impl<const N: usize> Brain<N> {
+    /// A brain for vehicle `id` with `setup`.
+    pub fn new(id: u16, setup: PlannerSetup) -> Self {
+        Self {
+            lane: None,
+            crossing: None,
+            view: View::new(id),
+            others: Box::new(heapless::Vec::new()),
+            setup,
+        }
+    }
+
+    /// A new setup for the planners built from now on.
+    pub fn set_setup(&mut self, setup: PlannerSetup) {
+        self.setup = setup;
+    }
+
+    /// A multi-lane planner in `lane` of a segment with speed limit `v_max`.
+    fn lane_planner(&self, lane: u8, v_max: f64) -> Box<LanePlanner<f64, N, AnySolver<N>>> {
+        let s = match self.setup.solver {
+            SolverChoice::Ours => AnySolver::Ours(IpmSolver::default()),
+            SolverChoice::Clarabel => AnySolver::Clarabel(ClarabelSolver {
+                accept_almost_solved: true,
+                ..ClarabelSolver::default()
+            }),
+        };
+        let mut p = LanePlanner::with_solver(params(v_max), CostWeights::default(), s, lane)
+            .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
+        // The setup was validated where it was made (finite bound, resolution, sensing).
+        let _ = p.set_notify_latency(self.setup.notify);
+        let (pos, speed) = self.setup.resolution;
+        let _ = p.set_bus_resolution(pos, speed);
+        let _ = p.set_sensing(self.setup.sensing);
+        Box::new(p)
+    }
+
+    /// A crossing planner for vehicle `id` on `route` with speed limit `v_limit`.
+    fn crossing_planner(
+        &self,
+        id: u16,
+        route: u8,
+        v_limit: f64,
+    ) -> Box<CrossingPlanner<f64, CROSS_HORIZON, VIEW_CAP>> {
+        let planner = Planner::new(params(v_limit), crossing_weights())
+            .unwrap_or_else(|_| unreachable!("the weights are valid"));
+        let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M);
+        let _ = c.set_notify_latency(self.setup.notify);
+        let _ = c.set_bus_resolution(self.setup.resolution.0);
+        let _ = c.set_sensing(self.setup.sensing);
+        Box::new(c)
+    }
+}
+
+impl<const N: usize> Vehicle<N> {
+    /// A vehicle at `at` driven by `driver`, at speed `v`, entering the network at `t`.
+    pub fn new(id: u16, at: At, v: f64, driver: Driver<N>, trip: Trip, t: f64) -> Self {
+        Self {
+            id,
+            at,
+            v,
+            v_before: v,
+            omega: 0.0,
+            driver,
+            trip,
+            mode: Mode::Cruise,
+            log: Log {
+                entered_at: t,
+                // A vehicle at a junction is in the lane of its route.
+                in_target_at: matches!(at, At::Crossing { .. }).then_some(t),
+                ..Log::default()
+            },
+            last_status: None,
+        }
+    }
+
+    /// `true` if its own planners drive it.
+    pub fn is_planner(&self) -> bool {
+        matches!(self.driver, Driver::Planner(_))
+    }
+
+    /// Its ground truth now.
+    pub fn truth(&self, net: &Network) -> VehicleTruth {
+        VehicleTruth {
+            id: self.id,
+            at: self.at,
+            v: self.v,
+            v_before: self.v_before,
+            planner: self.is_planner(),
+            unmet: super::step::unmet(self, net),
+            target_lane: self.trip.target_lane,
+        }
+    }
+
+    /// What it broadcasts about itself at `t`: its state on a segment, its crossing
+    /// report in a junction.
+    pub fn message(&self, t: f64) -> Message {
+        match self.at {
+            At::Lane {
+                seg,
+                x,
+                y,
+                theta,
+                lane,
+                alpha,
+                beta,
+            } => Message::State {
+                state: VehicleState {
+                    id: self.id,
+                    x,
+                    y,
+                    theta,
+                    v: self.v,
+                    omega: self.omega,
+                    lane,
+                    alpha,
+                    beta,
+                    stamp: t,
+                    // Scripted and random drivers neither hear intentions nor yield.
+                    cooperative: self.is_planner(),
+                },
+                segment: seg,
+            },
+            At::Crossing {
+                junction, route, s, ..
+            } => Message::Crossing {
+                report: CrossingReport {
+                    id: self.id,
+                    route,
+                    s,
+                    v: self.v,
+                    length: LENGTH_M,
+                },
+                stamp: t,
+                junction,
+            },
+        }
+    }
+
+    /// Takes the messages the bus delivered; counts those its view rejected.
+    fn hear(&mut self, inbox: &[Received], counters: &mut Counters) {
+        let Driver::Planner(b) = &mut self.driver else {
+            return;
+        };
+        for r in inbox {
+            match (b.view.take(&r.msg), &mut b.crossing, self.at) {
+                (Err(Reject::Stale | Reject::Invalid | Reject::Full), _, _) => {
+                    if matches!(r.msg, Message::State { .. }) {
+                        counters.rejected += 1;
+                    }
+                }
+                (_, Some(c), At::Crossing { junction, .. }) => match r.msg {
+                    Message::Grant {
+                        junction: j,
+                        id,
+                        until,
+                    } if j == junction => c.hear_grant(id, until),
+                    Message::Left {
+                        id, junction: j, ..
+                    } if j == junction => c.hear_left(id),
+                    Message::Crossing {
+                        report,
+                        stamp,
+                        junction: j,
+                    } if j == junction => {
+                        // The view holds as many vehicles as the planner.
+                        let _ = c.hear_report(&report, stamp);
+                    }
+                    Message::Crossing { report, .. } => c.hear_left(report.id),
+                    _ => {}
+                },
+                _ => {}
+            }
+        }
+    }
+
+    /// Decides the command (v, ω) for [t, t+h) from what the bus delivered, and the
+    /// trace row of this step.
+    pub fn decide(
+        &mut self,
+        ctx: &StepCtx<'_>,
+        inbox: &[Received],
+        counters: &mut Counters,
+    ) -> ((f64, f64), TraceRow) {
+        // A vehicle whose transmitter has failed knows it (bus-off) and gives up lane
+        // changes it has not started: the others could not hear its intention.
+        if let At::Lane {
+            alpha: None, lane, ..
+        } = self.at
+        {
+            if ctx
+                .silent
+                .is_some_and(|s| s.id == self.id && ctx.t >= s.from_s)
+            {
+                self.trip.target_lane = lane;
+            }
+        }
+        self.hear(inbox, counters);
+        let cmd = match self.at {
+            At::Lane { .. } => match &self.driver {
+                Driver::Planner(_) => self.decide_lane(ctx, counters),
+                _ => self.decide_script(ctx),
+            },
+            At::Crossing { .. } => self.decide_crossing(ctx, counters),
+        };
+        if self.log.reached_at.is_some() && self.mode == Mode::Cruise {
+            self.mode = Mode::Done;
+        }
+        (cmd, self.row(ctx, cmd))
+    }
+
+    /// The road as the multi-lane planner on segment `seg` sees it: its lanes, and where
+    /// it ends — a dead end; or at a junction, the edge of A_C (the commitment point of
+    /// SPEC §10: no lane change inside A_C), until the vehicle is ready to hand over to
+    /// its crossing planner (in a lane serving its next movement, no change under way,
+    /// centred and straight: [`Vehicle::ready_to_cross`]), then the stop line.
+    fn road(&self, net: &Network, seg: usize) -> Road<f64> {
+        let Some(sg) = net.segments.get(seg) else {
+            return Road {
+                lanes: 1,
+                lane_width: LANE_WIDTH_M,
+                end_x: None,
+            };
+        };
+        let end_x = match sg.end {
+            End::Open | End::Exit(_) => None,
+            End::DeadEnd(x) => Some(x),
+            End::Junction(j, x) => {
+                let margin = net
+                    .junctions
+                    .get(j)
+                    .map_or(0.0, |jn| jn.layout.spec.comm_margin);
+                Some(if self.ready_to_cross(net) {
+                    x
+                } else {
+                    x - margin
+                })
+            }
+        };
+        Road {
+            lanes: sg.lanes,
+            lane_width: LANE_WIDTH_M,
+            end_x,
+        }
+    }
+
+    /// `true` if, on a segment ending at a junction, the vehicle may enter A_C and hand
+    /// over to its crossing planner: in a lane serving its next movement, no change
+    /// declared or under way, within [`HANDOVER_Y_M`] of the lane's centre line and
+    /// [`HANDOVER_THETA_RAD`] of straight.
+    pub fn ready_to_cross(&self, net: &Network) -> bool {
+        let At::Lane {
+            seg,
+            y,
+            theta,
+            lane,
+            alpha,
+            beta,
+            ..
+        } = self.at
+        else {
+            return false;
+        };
+        net.segments.get(seg).is_some_and(|sg| {
+            sg.serves(net, lane, self.trip.movements.first().copied())
+                && alpha.is_none()
+                && beta.is_none()
+                && (y - sg.lane_centre(lane)).abs() <= HANDOVER_Y_M
+                && theta.abs() <= HANDOVER_THETA_RAD
+        })
+    }
+
+    fn decide_lane(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
+        let At::Lane {
+            seg,
+            x,
+            y,
+            theta,
+            lane,
+            ..
+        } = self.at
+        else {
+            return (0.0, 0.0);
+        };
+        let road = self.road(ctx.net, seg);
+        let v_max = ctx.net.segments.get(seg).map_or(ctx.lim.v_max, |s| s.v_max);
+        let Driver::Planner(b) = &mut self.driver else {
+            return (0.0, 0.0);
+        };
+        if b.lane.is_none() {
+            b.lane = Some(b.lane_planner(lane, v_max));
+        }
+        b.view
+            .others_on(ctx.net, seg, ctx.t, LENGTH_M, &mut b.others);
+        for r in &ctx.returns.others {
+            let _ = b.others.push(*r);
+        }
+        let obs = LaneObservation {
+            pose: Pose { x, y, theta },
+            v_prev: self.v,
+            omega_prev: self.omega,
+            others: &b.others,
+            road,
+            target_lane: self.trip.target_lane,
+            target: self.trip.goal_x.map_or(0.0, |g| g - x),
+            v_ref: self.trip.v_ref.unwrap_or(v_max),
+        };
+        let Some(planner) = b.lane.as_mut() else {
+            return (0.0, 0.0);
+        };
+        counters.planner_steps += 1;
+        if let Some(m) = planner.beta() {
+            // The cheap test first: the environment is read every 50th step only.
+            if ctx.steps_done % 50 == 0 && std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                eprintln!(
+                    "t={:.2} id={} wants lane {m}: {:?}",
+                    ctx.t,
+                    self.id,
+                    planner.start_check(&obs, m)
+                );
+            }
+        }
+        match planner.step(&obs) {
+            Ok(c) => {
+                self.at = At::Lane {
+                    seg,
+                    x,
+                    y,
+                    theta,
+                    lane: c.lane,
+                    alpha: c.alpha,
+                    beta: c.beta,
+                };
+                match c.event {
+                    Some(LaneEvent::Declared(_)) => {
+                        self.log.declared_x.get_or_insert(x);
+                    }
+                    Some(LaneEvent::Completed(_)) => {
+                        let from = self.log.declared_x.take().unwrap_or(x);
+                        self.log.changes.push((x - from, ctx.t));
+                    }
+                    Some(LaneEvent::Started(_)) | None => {}
+                }
+                if c.lane == self.trip.target_lane && c.alpha.is_none() {
+                    self.log.in_target_at.get_or_insert(ctx.t);
+                }
+                counters.lateral_iterations += u64::from(c.lateral_iterations);
+                self.mode = mode_of(c.status, c.alpha.is_some(), counters, ctx.t, self.id);
+                self.last_status = Some(c.status);
+                (c.v, c.omega)
+            }
+            Err(_) => {
+                counters.fallback_steps += 1;
+                self.mode = Mode::Fallback;
+                planner.braking_command(theta, self.v)
+            }
+        }
+    }
+
+    /// A scripted or random driver: its acceleration, kept admissible, unless a vehicle is
+    /// physically in its lane ahead closer than its stopping distance allows after the
+    /// step — then it brakes fully (a one-step safety filter: what any driver does when
+    /// something is in the way, without hearing anyone's intentions).
+    fn decide_script(&mut self, ctx: &StepCtx<'_>) -> (f64, f64) {
+        let t = ctx.t;
+        let lim = &ctx.lim;
+        let accel = match &mut self.driver {
+            Driver::Script(phases) => phases
+                .iter()
+                .find(|p| t < p.until_s)
+                .map_or(0.0, |p| p.accel),
+            Driver::Random { rng, accel, until } => {
+                if t >= *until {
+                    *accel = rng.random_range(-lim.brake..lim.a_max);
+                    *until = t + rng.random_range(0.2..2.0);
+                }
+                *accel
+            }
+            Driver::Planner(_) => 0.0,
+        };
+        self.mode = Mode::Cruise;
+        let v = admissible(lim, self.v, accel);
+        let braking = admissible(lim, self.v, -lim.brake);
+        match ctx.returns.gap_ahead {
+            // x_{t+h} + dS(v_t) ≤ x̄: (10)'s first constraint toward what it sees.
+            Some(gap) if v * lim.h + lim.safe_distance(v) > gap - lim.d0 => (braking, 0.0),
+            _ => (v, 0.0),
+        }
+    }
+
+    fn decide_crossing(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
+        let At::Crossing { junction, route, s } = self.at else {
+            return (0.0, 0.0);
+        };
+        let Some(jn) = ctx.net.junctions.get(junction) else {
+            return (0.0, 0.0);
+        };
+        let layout = &jn.layout;
+        let v_limit = layout.spec.v_limit;
+        let Driver::Planner(b) = &mut self.driver else {
+            return (0.0, 0.0);
+        };
+        if b.crossing.is_none() {
+            b.crossing = Some(b.crossing_planner(self.id, route, v_limit));
+        }
+        let mapped = b.view.on_path(ctx.net, junction, route);
+        let Some(c) = b.crossing.as_mut() else {
+            return (0.0, 0.0);
+        };
+        let _ = c.hear_sensed(&ctx.returns.on_path);
+        let _ = c.hear_mapped(&mapped);
+        let permitted = c.permitted(layout, s, ctx.t);
+        counters.planner_steps += 1;
+        let (v, why) = match c.step(layout, s, self.v, ctx.t) {
+            Ok(cmd) => {
+                self.last_status = Some(cmd.status);
+                match cmd.status {
+                    StepStatus::Solved { iterations } => {
+                        counters.solved_steps += 1;
+                        counters.solver_iterations += u64::from(iterations);
+                        (cmd.v, None)
+                    }
+                    StepStatus::Fallback(FallbackReason::NoRoom) => {
+                        counters.waiting_steps += 1;
+                        (cmd.v, Some(FallbackReason::NoRoom))
+                    }
+                    StepStatus::Fallback(why) => {
+                        if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                            eprintln!(
+                                "t={:.2} id={} route={route} s={s:.2} v={:.2} permitted={permitted} {why:?} gap={:.3}",
+                                ctx.t, self.id, self.v, cmd.gap
+                            );
+                        }
+                        counters.fallback_steps += 1;
+                        (cmd.v, Some(why))
+                    }
+                }
+            }
+            Err(_) => {
+                counters.fallback_steps += 1;
+                let p = params(v_limit);
+                (
+                    planner_core::safety::max_braking_command(&p, self.v),
+                    Some(FallbackReason::Lateral),
+                )
+            }
+        };
+        self.mode = match why {
+            None => Mode::Crossing,
+            Some(FallbackReason::NoRoom) => Mode::Waiting,
+            Some(_) => Mode::Fallback,
+        };
+        (v, 0.0)
+    }
+
+    /// The trace row of this step's decision.
+    fn row(&self, ctx: &StepCtx<'_>, (v, omega): (f64, f64)) -> TraceRow {
+        let (pose, lane, place) = match self.at {
+            At::Lane {
+                seg,
+                x,
+                y,
+                theta,
+                lane,
+                ..
+            } => {
+                let p = ctx
+                    .net
+                    .segments
+                    .get(seg)
+                    .map_or(Pose { x, y, theta }, |s| s.to_world(x, y, theta));
+                (p, lane, Place::Segment(seg))
+            }
+            At::Crossing { junction, route, s } => {
+                let jn = ctx.net.junctions.get(junction);
+                let p = jn.map_or(Pose::default(), |j| j.pose(route, s));
+                let lane = jn
+                    .and_then(|j| j.layout.route(usize::from(route)))
+                    .map_or(0, |r| r.inlet.lane);
+                (p, lane, Place::Junction(junction))
+            }
+        };
+        TraceRow {
+            t: ctx.t,
+            id: self.id,
+            x: pose.x,
+            y: pose.y,
+            theta: pose.theta,
+            v,
+            omega,
+            lane,
+            target_lane: match self.at {
+                At::Lane { .. } => self.trip.target_lane,
+                At::Crossing { .. } => lane,
+            },
+            mode: self.mode,
+            place,
+        }
+    }
+
+    /// Applies (v, ω) for one period h: the exact unicycle (1) on a segment, integrated
+    /// here independently of planner-core; along the path in a junction.
+    pub fn advance(&mut self, v: f64, w: f64, h: f64) {
+        self.v_before = self.v;
+        self.v = v;
+        self.omega = w;
+        match &mut self.at {
+            At::Lane { x, y, theta, .. } => {
+                if w.abs() > 1e-12 {
+                    let th1 = *theta + w * h;
+                    *x += v / w * (th1.sin() - theta.sin());
+                    *y -= v / w * (th1.cos() - theta.cos());
+                    *theta = th1;
+                } else {
+                    *x += v * h * theta.cos();
+                    *y += v * h * theta.sin();
+                }
+            }
+            At::Crossing { s, .. } => *s += v * h,
+        }
+    }
+
+    /// Records reaching the goal x by `t`.
+    pub fn check_goal(&mut self, t: f64) {
+        if let At::Lane { x, .. } = self.at {
+            if self.log.reached_at.is_none() && self.trip.goal_x.is_some_and(|g| x >= g) {
+                self.log.reached_at = Some(t);
+            }
+        }
+    }
+
+    /// Moves into junction `junction` on `route` at path position `s` (hand-over).
+    pub fn enter_junction(&mut self, junction: usize, route: u8, s: f64) {
+        self.at = At::Crossing { junction, route, s };
+        self.omega = 0.0;
+        self.log.arrived_at = None;
+        self.log.left_as_at = None;
+        if let Driver::Planner(b) = &mut self.driver {
+            b.lane = None;
+            b.crossing = None;
+        }
+    }
+
+    /// Moves onto segment `seg` at `x` in `lane`, centred and straight, with target lane
+    /// `target` (hand-back after a junction).
+    pub fn enter_segment(&mut self, net: &Network, seg: usize, x: f64, lane: u8) {
+        self.at = At::Lane {
+            seg,
+            x,
+            y: (f64::from(lane) + 0.5) * LANE_WIDTH_M,
+            theta: 0.0,
+            lane,
+            alpha: None,
+            beta: None,
+        };
+        self.omega = 0.0;
+        if !self.trip.movements.is_empty() {
+            self.trip.movements.remove(0);
+        }
+        self.retarget(net);
+        if let Driver::Planner(b) = &mut self.driver {
+            b.lane = None;
+            b.crossing = None;
+        }
+    }
+
+    /// Sets the target lane on the current segment: the nearest lane serving the next
+    /// movement (SPEC §10).
+    pub fn retarget(&mut self, net: &Network) {
+        if let At::Lane { seg, lane, .. } = self.at {
+            if let Some(sg) = net.segments.get(seg) {
+                let next = self.trip.movements.first().copied();
+                self.trip.target_lane = sg.nearest_serving(net, lane, next);
+                self.log.in_target_at = None;
+            }
+        }
+    }
+}
+
+/// The mode of a multi-lane step, counting it.
+fn mode_of(
+    status: StepStatus<f64>,
+    changing: bool,
+    counters: &mut Counters,
+    t: f64,
+    id: u16,
+) -> Mode {
+    match status {
+        StepStatus::Solved { iterations } => {
+            counters.solved_steps += 1;
+            counters.solver_iterations += u64::from(iterations);
+            if changing {
+                Mode::LaneChange
+            } else {
+                Mode::Cruise
+            }
+        }
+        StepStatus::Fallback(FallbackReason::NoRoom) => {
+            counters.waiting_steps += 1;
+            Mode::Waiting
+        }
+        StepStatus::Fallback(FallbackReason::Yield) => {
+            counters.yield_steps += 1;
+            Mode::Yield
+        }
+        StepStatus::Fallback(why) => {
+            if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                eprintln!("t={t:.2} id={id} fallback {why:?}");
+            }
+            counters.fallback_steps += 1;
+            Mode::Fallback
+        }
+    }
+}
+
+/// The speed reached from `v` by `accel` over one period, kept admissible.
+pub fn admissible(lim: &Limits, v: f64, accel: f64) -> f64 {
+    (v + accel * lim.h).clamp(
+        (v - lim.brake * lim.h).max(0.0),
+        (v + lim.a_max * lim.h).min(lim.v_max),
+    )
+}

@@ -1,0 +1,201 @@
+//! Who waits on whom, for the deadlock report (see [`crate::monitor::liveness`]): from
+//! ground truth, each vehicle's intention, and the managers' records.
+
+use super::junction::ManagerNode;
+use super::network::{End, Network};
+use super::vehicle::{At, VehicleTruth};
+use super::LENGTH_M;
+use crate::monitor::liveness::{Deadlock, DeadlockDetector, Status, WaitsOn, MOVING_MPS};
+use crate::monitor::Limits;
+
+/// Who holds a permission at junction `j`, by id and route.
+pub type Holders<'a> = dyn Fn(usize) -> Vec<(u16, u8)> + 'a;
+
+/// The permissions junction `j`'s manager holds out, among `managers`.
+pub fn holders(managers: &[ManagerNode], j: usize) -> Vec<(u16, u8)> {
+    managers
+        .iter()
+        .filter(|m| m.junction == j)
+        .flat_map(|m| m.manager.entries().iter())
+        .filter(|e| e.permitted)
+        .map(|e| (e.id, e.route))
+        .collect()
+}
+
+/// One instant of the deadlock detector over `truths` (`waiting`: vehicles wait to enter
+/// the world); the report when it fires.
+pub fn watch(
+    detector: &mut DeadlockDetector,
+    t: f64,
+    truths: &[VehicleTruth],
+    waiting: bool,
+    net: &Network,
+    holders: &Holders<'_>,
+    lim: &Limits,
+) -> Option<Deadlock> {
+    let moving = truths.iter().any(|v| v.v > MOVING_MPS);
+    let goals = truths.iter().any(|v| v.unmet) || waiting;
+    if !detector.tick(t, moving, goals) {
+        return None;
+    }
+    let statuses: Vec<Status> = truths
+        .iter()
+        .map(|v| Status {
+            id: v.id,
+            moving: v.v > MOVING_MPS,
+            unmet: v.unmet,
+            waits_on: waits_on(v, truths, net, holders, lim),
+        })
+        .collect();
+    Some(detector.report(t, &statuses))
+}
+
+/// How close (m, bumper to bumper) a stopped vehicle must be to what stops it for that to
+/// count as what it waits on.
+pub const NEAR_M: f64 = 5.0;
+
+/// What stopped vehicle `v` waits on, among `all`.
+pub fn waits_on(
+    v: &VehicleTruth,
+    all: &[VehicleTruth],
+    net: &Network,
+    holders: &Holders<'_>,
+    lim: &Limits,
+) -> Vec<WaitsOn> {
+    match v.at {
+        At::Lane { .. } => on_segment(v, all, net, lim),
+        At::Crossing { junction, route, s } => {
+            at_junction(v, all, net, holders, junction, route, s)
+        }
+    }
+}
+
+/// On a segment: the vehicle ahead in its lane, the vehicles next to it in the lane it
+/// wants, the end of its road.
+fn on_segment(v: &VehicleTruth, all: &[VehicleTruth], net: &Network, lim: &Limits) -> Vec<WaitsOn> {
+    let At::Lane {
+        seg,
+        x,
+        lane,
+        beta,
+        alpha,
+        ..
+    } = v.at
+    else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    let in_lane = |o: &VehicleTruth, j: u8| match o.at {
+        At::Lane {
+            seg: s,
+            lane: l,
+            alpha: a,
+            ..
+        } => s == seg && (l == j || a == Some(j)),
+        At::Crossing { junction, route, s } => net
+            .on_segment(junction, route, s)
+            .is_some_and(|(sg, _, l)| sg == seg && l == j),
+    };
+    let x_of = |o: &VehicleTruth| match o.at {
+        At::Lane { x, .. } => Some(x),
+        At::Crossing { junction, route, s } => {
+            net.on_segment(junction, route, s).map(|(_, x, _)| x)
+        }
+    };
+    let ahead = all
+        .iter()
+        .filter(|o| o.id != v.id && in_lane(o, lane))
+        .filter_map(|o| x_of(o).map(|ox| (o.id, ox - x - LENGTH_M)))
+        .filter(|&(_, gap)| gap >= -LENGTH_M && gap <= NEAR_M + lim.d0)
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    if let Some((id, _)) = ahead {
+        out.push(WaitsOn::Vehicle { id });
+    }
+    if let Some(m) = alpha.or(beta).or((lane != v.target_lane).then(|| {
+        if v.target_lane > lane {
+            lane + 1
+        } else {
+            lane.saturating_sub(1)
+        }
+    })) {
+        let reach = LENGTH_M + lim.d0 + lim.safe_distance(lim.v_max);
+        let ids: Vec<u16> = all
+            .iter()
+            .filter(|o| o.id != v.id && in_lane(o, m))
+            .filter(|o| x_of(o).is_some_and(|ox| (ox - x).abs() <= reach))
+            .map(|o| o.id)
+            .collect();
+        out.push(WaitsOn::LaneChange { ids });
+    }
+    let end = net.segments.get(seg).and_then(|s| match s.end {
+        End::DeadEnd(e) => Some(e),
+        End::Junction(j, e) => Some(
+            e - net
+                .junctions
+                .get(j)
+                .map_or(0.0, |jn| jn.layout.spec.comm_margin),
+        ),
+        _ => None,
+    });
+    if end.is_some_and(|e| e - x - 0.5 * LENGTH_M <= NEAR_M + lim.d0) && ahead.is_none() {
+        out.push(WaitsOn::RoadEnd);
+    }
+    out
+}
+
+/// At a junction: its manager's grant (and who holds conflicting permissions) when it
+/// stands at its stop line unpermitted; else the vehicle ahead on its path.
+fn at_junction(
+    v: &VehicleTruth,
+    all: &[VehicleTruth],
+    net: &Network,
+    holders: &Holders<'_>,
+    junction: usize,
+    route: u8,
+    s: f64,
+) -> Vec<WaitsOn> {
+    let Some(jn) = net.junctions.get(junction) else {
+        return Vec::new();
+    };
+    let Some(mine) = jn.layout.route(usize::from(route)) else {
+        return Vec::new();
+    };
+    let held = holders(junction);
+    let permitted = held.iter().any(|&(id, _)| id == v.id);
+    let ahead = all
+        .iter()
+        .filter(|o| o.id != v.id)
+        .filter_map(|o| match o.at {
+            At::Crossing {
+                junction: j,
+                route: r,
+                s: os,
+            } if j == junction => {
+                let other = jn.layout.route(usize::from(r))?;
+                let on_mine = r == route
+                    || (other.inlet == mine.inlet && os - 0.5 * LENGTH_M < other.path.entry())
+                    || (other.outlet == mine.outlet && os + 0.5 * LENGTH_M > other.path.exit());
+                on_mine.then_some((o.id, os))
+            }
+            _ => None,
+        })
+        .filter(|&(_, os)| os > s && os - s - LENGTH_M <= NEAR_M + 1.0)
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    let mut out = Vec::new();
+    if let Some((id, _)) = ahead {
+        out.push(WaitsOn::Vehicle { id });
+    }
+    let at_line = mine.path.entry() - (s + 0.5 * LENGTH_M) <= NEAR_M;
+    if !permitted && at_line && ahead.is_none() {
+        let holders = held
+            .iter()
+            .filter(|&&(_, r)| jn.layout.conflict(usize::from(r), usize::from(route)))
+            .map(|&(id, _)| id)
+            .collect();
+        out.push(WaitsOn::Grant {
+            junction: jn.id,
+            holders,
+        });
+    }
+    out
+}
