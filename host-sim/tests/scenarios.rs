@@ -108,6 +108,9 @@ impl Bus for Deaf {
     fn attach(&mut self, node: u16) -> Result<(), BusError> {
         self.inner.attach(node)
     }
+    fn detach(&mut self, node: u16) {
+        self.inner.detach(node)
+    }
 }
 
 #[test]

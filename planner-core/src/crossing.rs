@@ -507,6 +507,9 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     /// Steps planned so far (saturating).
     steps: u32,
     others: Vec<(u16, u8, F, F), CAP>,
+    /// A report could not be kept (`CAP` vehicles already known): until the reports are
+    /// cleared, some vehicle may be unknown, and the path is taken as blocked.
+    overflowed: bool,
     /// Sensor returns of this step: positions along this vehicle's path.
     sensed: Vec<F, CAP>,
     /// Vehicles heard of in other frames this step (on the roads its inlet and outlet lie
@@ -528,6 +531,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             sensing: None,
             steps: 0,
             others: Vec::new(),
+            overflowed: false,
             sensed: Vec::new(),
             mapped: Vec::new(),
             obstacles: Vec::new(),
@@ -623,11 +627,18 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
                 }
                 Ok(())
             }
-            None => self
-                .others
-                .push((r.id, r.route, r.s, stamp))
-                .map_err(|_| ManagerError::Full),
+            None => self.others.push((r.id, r.route, r.s, stamp)).map_err(|_| {
+                self.overflowed = true;
+                ManagerError::Full
+            }),
         }
+    }
+
+    /// Forgets every report (for a host that hands the planner its whole view of the
+    /// junction each step), and the overflow with them.
+    pub fn clear_reports(&mut self) {
+        self.others.clear();
+        self.overflowed = false;
     }
 
     /// Takes a permission lease addressed to anyone (only its own counts).
@@ -711,10 +722,14 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
                 length: self.length,
             });
         }
-        let blind = still_unheard(self.steps, p.h(), self.notify);
-        let unknown = match self.sensing {
-            Some(sn) => Some(s + half + sn.ahead_m + half),
-            None => blind.then_some(s + F::from_f64(1e-3)),
+        // Not yet heard of everyone (without sensors to see for itself), or a vehicle it
+        // could not keep: nothing is known free.
+        let blind = (self.sensing.is_none() && still_unheard(self.steps, p.h(), self.notify))
+            || self.overflowed;
+        let unknown = match (self.sensing, blind) {
+            (_, true) => Some(s + F::from_f64(1e-3)),
+            (Some(sn), false) => Some(s + half + sn.ahead_m + half),
+            (None, false) => None,
         };
         if let Some(x) = unknown {
             let _ = self.obstacles.push(crate::planner::Vehicle {

@@ -147,6 +147,11 @@ const ENOBUFS: i32 = 105;
 
 type Queues = Vec<VecDeque<(PlainFrame, SystemTime)>>;
 
+/// Frames a hub port holds for its reader before it overruns. A CAN controller's receive
+/// FIFO (and a SocketCAN socket's buffer) is bounded the same way: a reader that stops
+/// reading — a vehicle that left the world — loses frames, and memory stays bounded.
+pub const HUB_QUEUE: usize = 4096;
+
 /// An in-process broadcast medium for CAN frames: every frame a port transmits is queued,
 /// with the time it was sent, at every other port (CAN's broadcast, no own echo).
 #[derive(Debug, Clone, Default)]
@@ -194,7 +199,8 @@ impl CanPort for HubPort {
         let mut queues = lock.lock().map_err(poisoned)?;
         let now = SystemTime::now();
         for (i, q) in queues.iter_mut().enumerate() {
-            if i != self.index {
+            // On overrun the new frame is lost, as in a controller whose FIFO is full.
+            if i != self.index && q.len() < HUB_QUEUE {
                 q.push_back((*frame, now));
             }
         }
@@ -665,6 +671,11 @@ impl<P: CanPort> Bus for CanBus<P> {
     fn attach(&mut self, node: u16) -> Result<(), BusError> {
         // A CAN node needs a port of its own, opened before anyone transmits.
         node_mut(&mut self.nodes, node).map(|_| ())
+    }
+
+    fn detach(&mut self, _node: u16) {
+        // Its port stays open: a closed world brings the vehicle back, and a port nobody
+        // reads is bounded (HUB_QUEUE; a socket's receive buffer) like a real controller.
     }
 
     fn receive(&mut self, node: u16, now: f64, out: &mut Vec<Received>) -> Result<(), BusError> {

@@ -592,7 +592,6 @@ impl<const N: usize> Harness<N> {
                         &held,
                         &lim,
                     ) {
-                        eprintln!("{}: {d}", self.spec.name);
                         deadlock = Some(d);
                     }
                 }

@@ -76,6 +76,14 @@ impl Bus for InProcessBus {
         Ok(())
     }
 
+    fn detach(&mut self, node: u16) {
+        if let Ok(i) = self.index(node) {
+            self.nodes.remove(i);
+            self.queues.remove(i);
+            self.newest.remove(i);
+        }
+    }
+
     fn send(&mut self, from: u16, msg: &Message, now: f64) -> Result<(), BusError> {
         let me = self.index(from)?;
         let f = self.faults;

@@ -129,4 +129,7 @@ pub trait Bus {
     }
     /// Attaches node `node` (a vehicle entering the world); nothing if it is attached.
     fn attach(&mut self, node: u16) -> Result<(), BusError>;
+    /// Detaches node `node` (a vehicle leaving the world): what was still on its way to it
+    /// is dropped, so an open world's memory stays bounded by the vehicles in it.
+    fn detach(&mut self, node: u16);
 }

@@ -56,6 +56,30 @@ pub enum Experiment {
         #[arg(long)]
         json: bool,
     },
+    /// Open-system demand at the SPEC §8 intersection: Poisson arrivals at every inlet
+    /// lane; per algorithm and rate, throughput, delay and queues, and each algorithm's
+    /// capacity.
+    Demand {
+        /// Arrivals per inlet lane, vehicles per hour (comma-separated).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "200,400,600,800,1000,1200"
+        )]
+        rates: Vec<f64>,
+        /// Simulated seconds per run.
+        #[arg(long, default_value_t = 600.0)]
+        duration: f64,
+        /// Runs per algorithm and rate.
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
+        seeds: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Draw mean delay against demand, one curve per algorithm, to a .png or .svg.
+        #[arg(long, value_name = "out.png|out.svg")]
+        plot: Option<PathBuf>,
+    },
     /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
     Multilane {
         /// Number of runs (seeds 1..=K, or from --seed).
@@ -167,7 +191,47 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
             faults,
         } => throughput(duration, seeds, seed, json, plot, faults),
+        Experiment::Demand {
+            rates,
+            duration,
+            seeds,
+            json,
+            plot,
+        } => demand(&rates, duration, seeds, json, plot),
     }
+}
+
+fn demand(rates: &[f64], duration: f64, seeds: u64, json: bool, plot: Option<PathBuf>) -> ExitCode {
+    if rates.is_empty() || !rates.iter().all(|r| *r > 0.0 && *r <= 3600.0) {
+        return bad_input("--rates: vehicles per hour per lane, each in (0, 3600]");
+    }
+    if let Err(code) = check_duration(duration, 7200.0) {
+        return code;
+    }
+    if let Some(p) = &plot {
+        if let Err(code) = check_plot(p) {
+            return code;
+        }
+    }
+    let r = host_sim::experiments::demand::run(rates, duration, seeds, 0);
+    if let Some(path) = plot {
+        if let Err(e) = host_sim::output::plot::demand(&r, &path) {
+            return bad_input(e);
+        }
+    }
+    let safe = r
+        .results
+        .iter()
+        .all(|x| x.collisions + x.invariant_violations + x.unpermitted_entries == 0);
+    let live = r.results.iter().all(|x| x.deadlocks == 0);
+    if json {
+        if let Err(code) = super::output::print_json(&r) {
+            return code;
+        }
+    } else {
+        println!("{r}");
+    }
+    super::output::code(safe, live)
 }
 
 fn multilane(

@@ -83,6 +83,12 @@ enum Command {
     /// Theorem 2 sweep: random multi-lane traffic (3–4 lanes, up to 30 vehicles, random
     /// target lanes), every vehicle its own planner.
     Traffic(sweep::TrafficArgs),
+    /// Theorem 3 sweep: random dead-end roads (2–5 lanes, 4–40 vehicles, random targets),
+    /// every vehicle to reach its target lane and stop before the end.
+    Deadends(sweep::LivenessArgs),
+    /// Theorems 4–5 sweep: random queues at the intersection under every algorithm, every
+    /// vehicle to cross.
+    Crossings(sweep::LivenessArgs),
     /// The paper's experiments.
     #[command(subcommand)]
     Experiment(experiment::Experiment),
@@ -114,6 +120,8 @@ pub fn main() -> ExitCode {
         }),
         Command::Platoons(a) => sweep::platoons(a),
         Command::Traffic(a) => sweep::traffic(a),
+        Command::Deadends(a) => sweep::deadends(a),
+        Command::Crossings(a) => sweep::crossings(a),
         Command::Experiment(e) => experiment::run(e),
         Command::Scale(a) => bench::scale(a),
         Command::BenchPlanner(a) => bench::bench(a),

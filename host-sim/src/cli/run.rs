@@ -115,6 +115,9 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
         }
         written.push(p.display().to_string());
     }
+    if let Some(d) = &summary.deadlock {
+        eprintln!("{}: {d}", summary.scenario);
+    }
     if a.json {
         let printed = match &fleet {
             Some(f) => print_json(f),

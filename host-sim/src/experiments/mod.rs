@@ -1,9 +1,13 @@
 //! The paper's experiments and the theorems' sweeps, each a function from settings to a
 //! result struct that serialises to its JSON (printing is the CLI's).
 
+pub mod crossings;
+pub mod deadends;
+pub mod demand;
 pub mod faults;
 pub mod multilane;
 pub mod par;
 pub mod platoon;
 pub mod scale;
+pub mod sweep;
 pub mod throughput;

@@ -7,7 +7,7 @@ use crate::bus::Faults;
 use crate::scenario::junction::{placed, Placement};
 use crate::world::network::{Junction, Network};
 use crate::world::summary::Summary;
-use crate::world::{Arrivals, SolverChoice, World, WorldSpec, LENGTH_M};
+use crate::world::{Arrivals, Finish, SolverChoice, World, WorldSpec, LENGTH_M};
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{Layout, LayoutSpec};
 use planner_core::Params;
@@ -75,7 +75,7 @@ pub fn closed_world(algorithm: Algorithm, seed: u64, duration: f64, faults: Faul
         sensing: (!faults.is_none()).then(planner_core::Sensing::radar),
         arrivals: Arrivals::Closed,
         deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
-        stop_when_done: false,
+        finish: Finish::Duration,
     }
 }
 

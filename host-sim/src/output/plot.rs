@@ -590,3 +590,69 @@ where
         .fold(0.0, f64::max);
     speed_panel(data, &right, t1, vmax * 1.2)
 }
+
+/// Mean delay against demand, one curve per algorithm, with each algorithm's capacity
+/// marked and one lane's physical limit.
+pub fn demand(r: &crate::experiments::demand::DemandReport, path: &Path) -> Result<(), PlotError> {
+    render!(path, (1100, 700), |root| draw_demand(r, &root))
+}
+
+fn draw_demand<DB: DrawingBackend>(
+    r: &crate::experiments::demand::DemandReport,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(e)?;
+    let x1 = r
+        .results
+        .iter()
+        .map(|x| x.rate_vph_per_lane)
+        .fold(0.0, f64::max)
+        * 1.05;
+    let y1 = r.results.iter().map(|x| x.mean_delay_s).fold(1.0, f64::max) * 1.1;
+    let mut c = ChartBuilder::on(root)
+        .margin(20)
+        .caption(
+            format!(
+                "Open-system demand at the SPEC §8 intersection ({} s, {} seeds; one lane's limit {:.0} veh/h)",
+                r.duration_s, r.seeds, r.lane_limit_vph
+            ),
+            ("sans-serif", 20),
+        )
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..x1, 0.0..y1)
+        .map_err(e)?;
+    c.configure_mesh()
+        .x_desc("arrivals per inlet lane (veh/h)")
+        .y_desc("mean delay (s)")
+        .draw()
+        .map_err(e)?;
+    for (i, cap) in r.capacity.iter().enumerate() {
+        let col = palette(i);
+        let pts: Vec<(f64, f64)> = r
+            .results
+            .iter()
+            .filter(|x| x.algorithm == cap.algorithm)
+            .map(|x| (x.rate_vph_per_lane, x.mean_delay_s))
+            .collect();
+        c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
+            .map_err(e)?
+            .label(format!(
+                "{} (capacity {:.0} veh/h/lane)",
+                cap.algorithm, cap.capacity_vph_per_lane
+            ))
+            .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
+        c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))
+            .map_err(e)?;
+    }
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(e)?;
+    Ok(())
+}

@@ -9,7 +9,9 @@ use crate::monitor::Limits;
 use crate::world::junction::MANAGER_CAP;
 use crate::world::network::{Junction, Network};
 use crate::world::vehicle::{At, Trip};
-use crate::world::{Arrivals, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M};
+use crate::world::{
+    Arrivals, Finish, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M,
+};
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{Layout, LayoutError, LayoutSpec, Movement};
 use planner_core::{Params, Sensing};
@@ -358,6 +360,34 @@ impl JunctionScenario {
         })
     }
 
+    /// A scenario of `placements` at the layout `lt` under `algorithm`, in the paper's
+    /// world (no faults, no sensors); `Err` if the layout is refused.
+    pub fn new(
+        name: String,
+        duration_s: f64,
+        seed: u64,
+        algorithm: Algorithm,
+        lt: LayoutToml,
+        placements: Vec<Placement>,
+    ) -> Result<Self, String> {
+        Ok(Self {
+            name,
+            seed,
+            header: Header {
+                duration_s,
+                horizon: 20,
+                deadline_s: duration_s,
+                faults: Faults::NONE,
+                sensing: None,
+                deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
+            },
+            algorithm,
+            layout: build_layout(&lt)?,
+            layout_toml: lt,
+            placements,
+        })
+    }
+
     /// The world it describes: one junction at the origin, its own inlet and outlet
     /// tracks, every vehicle crossing from the start.
     pub fn world(&self) -> WorldSpec {
@@ -388,7 +418,7 @@ impl JunctionScenario {
             sensing: self.header.sensing,
             arrivals: Arrivals::None,
             deadlock_window_s: self.header.deadlock_window_s,
-            stop_when_done: false,
+            finish: Finish::Duration,
         }
     }
 

@@ -51,7 +51,9 @@ use crate::monitor::Limits;
 use crate::world::network::{rotate, End, Junction, Network, Segment};
 use crate::world::spawn::Entry;
 use crate::world::vehicle::{At, Trip};
-use crate::world::{Arrivals, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M};
+use crate::world::{
+    Arrivals, Finish, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M,
+};
 use planner_core::intersection::Movement;
 use serde::Deserialize;
 use std::ops::Range;
@@ -327,7 +329,7 @@ impl NetworkScenario {
             sensing: self.header.sensing,
             arrivals,
             deadlock_window_s: self.header.deadlock_window_s,
-            stop_when_done: false,
+            finish: Finish::Duration,
         }
     }
 }

@@ -31,7 +31,7 @@ use crate::bus::Faults;
 use crate::monitor::Limits;
 use crate::world::network::Network;
 use crate::world::vehicle::{At, Trip};
-use crate::world::{Arrivals, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M};
+use crate::world::{Arrivals, Finish, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M};
 use planner_core::Sensing;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -404,7 +404,7 @@ impl RoadScenario {
             sensing: self.header.sensing,
             arrivals: Arrivals::None,
             deadlock_window_s: self.header.deadlock_window_s,
-            stop_when_done: false,
+            finish: Finish::Duration,
         }
     }
 

@@ -4,18 +4,25 @@
 //!
 //! Same rules as planner-core's `WorldView`, so that a straight road plans exactly as
 //! before: records in the order first heard; a message not newer than the record, not
-//! finite, with a negative speed, from itself or beyond the capacity is rejected and
-//! changes nothing. A vehicle is one record whatever its frame: when it moves from a
-//! segment into a junction (or out), its newer message replaces the old one, so no stale
-//! copy of it stays behind in the other frame.
+//! finite, with a negative speed or from itself is rejected and changes nothing. A vehicle
+//! is one record whatever its frame: when it moves from a segment into a junction (or
+//! out), its newer message replaces the old one, so no stale copy of it stays behind in
+//! the other frame.
+//!
+//! Bounded memory: at most [`VIEW_CAP`] vehicles. When full, a message from a new vehicle
+//! takes the place of the record farthest from the receiver if it is nearer than that
+//! (every vehicle repeats its message every period, so a vehicle dropped while far is
+//! back as soon as it comes near); a message that finds no place is an overflow, and the
+//! receiver, which may now miss a vehicle near it, drives on its certified fallback.
 
 use super::network::Network;
 use crate::bus::Message;
 use planner_core::crossing::CrossingReport;
 use planner_core::{Other, VehicleState};
 
-/// Vehicles one view holds.
-pub const VIEW_CAP: usize = 128;
+/// Vehicles one view holds: more than fit near one vehicle at any density (within
+/// 100 m of road in every direction a few lanes hold fewer than 200).
+pub const VIEW_CAP: usize = 256;
 
 /// The latest message from one vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,8 +63,26 @@ pub enum Reject {
     Invalid,
     /// Not newer than what is held.
     Stale,
-    /// The view is full.
+    /// The view is full of vehicles nearer than this one.
     Full,
+}
+
+/// Where a record's vehicle is in the world (m), for keeping the nearest.
+fn where_is(r: &Record, net: &Network) -> (f64, f64) {
+    match *r {
+        Record::Lane { state, segment } => {
+            net.segments.get(segment).map_or((state.x, state.y), |s| {
+                let p = s.to_world(state.x, state.y, 0.0);
+                (p.x, p.y)
+            })
+        }
+        Record::Crossing {
+            report, junction, ..
+        } => net.junctions.get(junction).map_or((0.0, 0.0), |j| {
+            let p = j.pose(report.route, report.s);
+            (p.x, p.y)
+        }),
+    }
 }
 
 /// The latest record of up to [`VIEW_CAP`] other vehicles.
@@ -76,10 +101,11 @@ impl View {
         }
     }
 
-    /// Takes a message: states and crossing reports replace the sender's record when newer;
-    /// `Left` drops a crossing record at that junction (not a state the vehicle has sent
-    /// since, from its next segment). Grants are not for the view (`Ok`).
-    pub fn take(&mut self, msg: &Message) -> Result<(), Reject> {
+    /// Takes a message heard at world position `me` on `net`: states and crossing reports
+    /// replace the sender's record when newer; `Left` drops a crossing record at that
+    /// junction (not a state the vehicle has sent since, from its next segment). Grants
+    /// are not for the view (`Ok`).
+    pub fn take(&mut self, msg: &Message, net: &Network, me: (f64, f64)) -> Result<(), Reject> {
         let rec = match *msg {
             Message::State { state, segment } => {
                 let f = [
@@ -129,11 +155,39 @@ impl View {
                 *r = rec;
                 Ok(())
             }
-            None if full => Err(Reject::Full),
+            None if full => self.replace_farthest(rec, net, me),
             None => {
                 self.records.push(rec);
                 Ok(())
             }
+        }
+    }
+
+    /// A full view takes `rec` in place of its farthest record, if `rec` is nearer.
+    fn replace_farthest(
+        &mut self,
+        rec: Record,
+        net: &Network,
+        me: (f64, f64),
+    ) -> Result<(), Reject> {
+        let d = |r: &Record| {
+            let (x, y) = where_is(r, net);
+            (x - me.0).hypot(y - me.1)
+        };
+        let far = self
+            .records
+            .iter()
+            .enumerate()
+            .map(|(i, r)| (i, d(r)))
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        match far {
+            Some((i, dist)) if d(&rec) < dist => {
+                if let Some(slot) = self.records.get_mut(i) {
+                    *slot = rec;
+                }
+                Ok(())
+            }
+            _ => Err(Reject::Full),
         }
     }
 
@@ -178,6 +232,18 @@ impl View {
             // Cannot fail: `out` holds as many as the view.
             let _ = out.push(other);
         }
+    }
+
+    /// The crossing reports at junction `j`, with their stamps, in the order first heard.
+    pub fn reports_at(&self, j: usize) -> impl Iterator<Item = (CrossingReport<f64>, f64)> + '_ {
+        self.records.iter().filter_map(move |r| match *r {
+            Record::Crossing {
+                report,
+                junction,
+                stamp,
+            } if junction == j => Some((report, stamp)),
+            _ => None,
+        })
     }
 
     /// The positions along junction `j`'s route `route` of the vehicles heard of on the

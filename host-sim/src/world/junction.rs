@@ -7,7 +7,7 @@ use planner_core::crossing::Manager;
 use planner_core::intersection::Layout;
 
 /// Vehicles one manager can track.
-pub const MANAGER_CAP: usize = 64;
+pub const MANAGER_CAP: usize = 128;
 /// Lease of a permission (s) beyond the bus's notification bound: renewed every period
 /// while held; 0.1 s lets a few messages go missing before a vehicle that has not yet
 /// entered A_S must stop. A lease must outlive its own delivery, hence the bound.

@@ -169,8 +169,18 @@ pub struct WorldSpec {
     pub arrivals: Arrivals,
     /// No vehicle moving for this long while some have goals is a deadlock (s).
     pub deadlock_window_s: f64,
-    /// End the run as soon as every vehicle has met its goals (sweeps).
-    pub stop_when_done: bool,
+    /// When the run ends before its duration.
+    pub finish: Finish,
+}
+
+/// When a run ends before its duration (besides a deadlock, which always ends it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Finish {
+    /// At its duration (or when a junction world is empty).
+    Duration,
+    /// As soon as every vehicle has met its goals and nothing moves (a sweep's case: every
+    /// vehicle in its lane and stopped at the road end).
+    GoalsMetAndStill,
 }
 
 /// A vehicle at t = 0.
@@ -352,7 +362,12 @@ impl<const N: usize, B: Bus> World<N, B> {
     pub fn finished(&self) -> bool {
         self.steps_done >= self.total_steps
             || self.deadlock.is_some()
-            || (self.spec.stop_when_done && self.all_done())
+            || (self.spec.finish == Finish::GoalsMetAndStill
+                && self.all_done()
+                && self
+                    .vehicles
+                    .iter()
+                    .all(|v| v.v <= crate::monitor::liveness::MOVING_MPS))
             || (self.vehicles.is_empty()
                 && self.pending.is_empty()
                 && self.streams.is_empty()
@@ -362,6 +377,29 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// The deadlock found, if any.
     pub fn deadlock(&self) -> Option<&Deadlock> {
         self.deadlock.as_ref()
+    }
+
+    /// The longest queue waiting outside one entry so far, and the longest now.
+    pub fn queues(&self) -> (usize, usize) {
+        (
+            self.streams.iter().map(|s| s.max_queue).max().unwrap_or(0),
+            self.streams
+                .iter()
+                .map(|s| s.queue.len())
+                .max()
+                .unwrap_or(0),
+        )
+    }
+
+    /// Open arrivals so far (those that entered and those waiting), and of those waiting,
+    /// how many have waited since before `t`.
+    pub fn arrivals_before(&self, t: f64) -> (u64, u64) {
+        let waiting = self.streams.iter().flat_map(|s| s.queue.iter());
+        let entered = self.vehicles.len() + self.gone.len() - self.spec.vehicles.len();
+        (
+            (entered + waiting.clone().count()) as u64,
+            waiting.filter(|a| a.since <= t).count() as u64,
+        )
     }
 
     /// Every (non-scripted) vehicle has met its goals.

@@ -180,7 +180,7 @@ pub(crate) fn speed_limit(v: &VehicleTruth, net: &Network, default: f64) -> f64 
 }
 
 /// A vehicle's rectangle in the world.
-pub(crate) fn world_truth(v: &VehicleTruth, net: &Network) -> Truth {
+pub fn world_truth(v: &VehicleTruth, net: &Network) -> Truth {
     let (p, lane) = match v.at {
         At::Lane {
             seg,
@@ -303,7 +303,16 @@ impl<const N: usize, B: Bus> World<N, B> {
 
     /// Phase 1: the vehicles that left a junction repeat `Left`; every vehicle broadcasts.
     fn broadcast(&mut self, t: f64) -> Result<(), BusError> {
-        self.departing.retain(|&(_, _, at)| t < at + LEFT_REPEAT_S);
+        let bus = &mut self.bus;
+        let live = &self.vehicles;
+        self.departing.retain(|&(id, _, at)| {
+            let keep = t < at + LEFT_REPEAT_S;
+            // Its last word said, a vehicle gone from the world leaves the bus too.
+            if !keep && !live.iter().any(|v| v.id == id) {
+                bus.detach(id);
+            }
+            keep
+        });
         for &(id, junction, at) in &self.departing {
             self.bus.send(id, &Message::Left { id, at, junction }, t)?;
         }
@@ -413,6 +422,9 @@ impl<const N: usize, B: Bus> World<N, B> {
                     let route = self.rng.random_range(0..routes as u8);
                     self.pending.push((id, route));
                 }
+            }
+            if junction.is_none() {
+                self.bus.detach(v.id);
             }
             self.gone.push(v);
         }
@@ -592,7 +604,6 @@ impl<const N: usize, B: Bus> World<N, B> {
             &holders,
             &self.lim,
         ) {
-            eprintln!("{}: {d}", self.spec.name);
             self.deadlock = Some(d);
         }
     }

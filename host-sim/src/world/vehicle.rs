@@ -408,41 +408,53 @@ impl<const N: usize> Vehicle<N> {
         }
     }
 
-    /// Takes the messages the bus delivered; counts those its view rejected.
-    fn hear(&mut self, inbox: &[Received], counters: &mut Counters) {
+    /// Takes the messages the bus delivered into its view (counting those rejected), and
+    /// its grants; `false` if its view overflowed (it may miss a vehicle near it).
+    fn hear(&mut self, net: &Network, inbox: &[Received], counters: &mut Counters) -> bool {
+        let me = self.position(net);
         let Driver::Planner(b) = &mut self.driver else {
-            return;
+            return true;
         };
+        let mut whole = true;
         for r in inbox {
-            match (b.view.take(&r.msg), &mut b.crossing, self.at) {
-                (Err(Reject::Stale | Reject::Invalid | Reject::Full), _, _) => {
+            match b.view.take(&r.msg, net, me) {
+                Err(Reject::Full) => whole = false,
+                Err(Reject::Stale | Reject::Invalid) => {
                     if matches!(r.msg, Message::State { .. }) {
                         counters.rejected += 1;
                     }
                 }
-                (_, Some(c), At::Crossing { junction, .. }) => match r.msg {
-                    Message::Grant {
-                        junction: j,
-                        id,
-                        until,
-                    } if j == junction => c.hear_grant(id, until),
-                    Message::Left {
-                        id, junction: j, ..
-                    } if j == junction => c.hear_left(id),
-                    Message::Crossing {
-                        report,
-                        stamp,
-                        junction: j,
-                    } if j == junction => {
-                        // The view holds as many vehicles as the planner.
-                        let _ = c.hear_report(&report, stamp);
+                Err(Reject::Own) | Ok(()) => {}
+            }
+            if let (Some(c), At::Crossing { junction, .. }) = (&mut b.crossing, self.at) {
+                if let Message::Grant {
+                    junction: j,
+                    id,
+                    until,
+                } = r.msg
+                {
+                    if j == junction {
+                        c.hear_grant(id, until);
                     }
-                    Message::Crossing { report, .. } => c.hear_left(report.id),
-                    _ => {}
-                },
-                _ => {}
+                }
             }
         }
+        whole
+    }
+
+    /// Its centre in the world.
+    pub fn position(&self, net: &Network) -> (f64, f64) {
+        let p = match self.at {
+            At::Lane { seg, x, y, .. } => net
+                .segments
+                .get(seg)
+                .map_or(Pose { x, y, theta: 0.0 }, |s| s.to_world(x, y, 0.0)),
+            At::Crossing { junction, route, s } => net
+                .junctions
+                .get(junction)
+                .map_or(Pose::default(), |j| j.pose(route, s)),
+        };
+        (p.x, p.y)
     }
 
     /// Decides the command (v, ω) for [t, t+h) from what the bus delivered, and the
@@ -466,8 +478,9 @@ impl<const N: usize> Vehicle<N> {
                 self.trip.target_lane = lane;
             }
         }
-        self.hear(inbox, counters);
+        let whole = self.hear(ctx.net, inbox, counters);
         let cmd = match self.at {
+            _ if !whole => self.blind(ctx, counters),
             At::Lane { .. } => match &self.driver {
                 Driver::Planner(_) => self.decide_lane(ctx, counters),
                 _ => self.decide_script(ctx),
@@ -478,6 +491,31 @@ impl<const N: usize> Vehicle<N> {
             self.mode = Mode::Done;
         }
         (cmd, self.row(ctx, cmd))
+    }
+
+    /// A step whose view overflowed: the vehicle may not know of one near it, so it applies
+    /// the certified fallback (max braking with straightening), safe whatever is there.
+    fn blind(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
+        counters.fallback_steps += 1;
+        self.mode = Mode::Fallback;
+        let p = params(self.speed_limit(ctx.net));
+        let v = planner_core::safety::max_braking_command(&p, self.v);
+        let w = match self.at {
+            At::Lane { theta, .. } => planner_core::lane_change::straighten(&p, theta, v),
+            At::Crossing { .. } => 0.0,
+        };
+        (v, w)
+    }
+
+    /// The speed limit where it is.
+    fn speed_limit(&self, net: &Network) -> f64 {
+        match self.at {
+            At::Lane { seg, .. } => net.segments.get(seg).map_or(27.8, |s| s.v_max),
+            At::Crossing { junction, .. } => net
+                .junctions
+                .get(junction)
+                .map_or(13.9, |j| j.layout.spec.v_limit),
+        }
     }
 
     /// The road as the multi-lane planner on segment `seg` sees it: its lanes, and where
@@ -678,6 +716,12 @@ impl<const N: usize> Vehicle<N> {
         let Some(c) = b.crossing.as_mut() else {
             return (0.0, 0.0);
         };
+        // Its view of the junction, as it stands this period.
+        c.clear_reports();
+        for (report, stamp) in b.view.reports_at(junction) {
+            // An overflow makes the planner take its path as blocked.
+            let _ = c.hear_report(&report, stamp);
+        }
         let _ = c.hear_sensed(&ctx.returns.on_path);
         let _ = c.hear_mapped(&mapped);
         let permitted = c.permitted(layout, s, ctx.t);

@@ -1,0 +1,329 @@
+//! `host-sim experiment demand`: the literature's standard test of an intersection
+//! manager — an open system. Vehicles arrive at each of the SPEC §8 intersection's 8
+//! inlet lanes as a Poisson process (vehicles per hour per lane) with a random movement
+//! the lane serves; each enters the start of its inlet when it keeps the invariant toward
+//! the vehicle ahead there, and waits outside until then. Per algorithm and rate:
+//! throughput, delay and the longest queue outside.
+//!
+//! A vehicle's delay is the time from its arrival at the entry to leaving A_C, less the
+//! free-flow time over the same distance on its route at vImax: waiting outside, queueing
+//! on the inlet and waiting at the stop line all count. A rate is within an algorithm's
+//! capacity when the queues stay bounded: in every run at most [`BOUNDED_QUEUE`] vehicles
+//! wait outside any lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have
+//! not crossed [`GRACE_S`] after their free-flow time (a saturated junction's delays grow
+//! without bound, so its late arrivals miss that).
+
+use super::sweep::case_seed;
+use crate::monitor::Limits;
+use crate::scenario::junction::{build_layout, LayoutToml};
+use crate::world::network::{Junction, Network};
+use crate::world::spawn::Entry;
+use crate::world::{Arrivals, Finish, SolverChoice, World, WorldSpec, LENGTH_M};
+use planner_core::crossing::Algorithm;
+use serde::Serialize;
+
+/// Vehicles waiting outside one lane at the end beyond which its queue is unbounded.
+pub const BOUNDED_QUEUE: usize = 5;
+/// Share of the arrivals that may be unfinished (see [`GRACE_S`]) in a bounded run.
+pub const UNFINISHED_SHARE: f64 = 0.01;
+/// Arrivals less than this long before the end (s) are not required to have crossed.
+pub const GRACE_S: f64 = 120.0;
+
+/// One algorithm at one rate (over its seeds).
+#[derive(Debug, Clone, Serialize)]
+pub struct DemandRow {
+    /// Algorithm.
+    pub algorithm: &'static str,
+    /// Arrivals per inlet lane (vehicles per hour).
+    pub rate_vph_per_lane: f64,
+    /// Vehicles that crossed, per hour (all 8 lanes).
+    pub throughput_vph: f64,
+    /// Vehicles offered, per hour (all 8 lanes).
+    pub offered_vph: f64,
+    /// Mean delay of the vehicles that crossed (s).
+    pub mean_delay_s: f64,
+    /// 95th percentile of their delays (s).
+    pub p95_delay_s: f64,
+    /// Longest queue waiting outside one lane (vehicles).
+    pub max_queue: usize,
+    /// Collisions (pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations (pairs × steps).
+    pub invariant_violations: u64,
+    /// Entries into A_S without a permission.
+    pub unpermitted_entries: u64,
+    /// Vehicles that arrived at least free flow + [`GRACE_S`] before the end and had not
+    /// crossed.
+    pub unfinished: u64,
+    /// Runs that deadlocked.
+    pub deadlocks: u64,
+    /// The queues stayed bounded (see the module docs).
+    pub bounded: bool,
+}
+
+/// One algorithm's capacity.
+#[derive(Debug, Clone, Serialize)]
+pub struct Capacity {
+    /// Algorithm.
+    pub algorithm: &'static str,
+    /// Highest rate tested whose queues stayed bounded (vehicles per hour per lane).
+    pub capacity_vph_per_lane: f64,
+}
+
+/// The `experiment demand` result.
+#[derive(Debug, Clone, Serialize)]
+pub struct DemandReport {
+    /// Per algorithm and rate.
+    pub results: Vec<DemandRow>,
+    /// Per algorithm.
+    pub capacity: Vec<Capacity>,
+    /// One lane's physical limit at vImax: vImax / (L + d0 + dS(vImax)), per hour.
+    pub lane_limit_vph: f64,
+    /// Simulated time per run (s).
+    pub duration_s: f64,
+    /// Runs per algorithm and rate.
+    pub seeds: u64,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// The world of one run: the SPEC §8 junction under `algorithm`, arrivals at `rate` per
+/// inlet lane.
+pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> WorldSpec {
+    let lt = LayoutToml::default();
+    let layout = build_layout(&lt).unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
+    let entries = (0..4u8)
+        .flat_map(|heading| {
+            (0..layout.spec.lanes).map(move |lane| {
+                (
+                    Entry::Stub {
+                        junction: 0,
+                        heading,
+                        lane,
+                    },
+                    rate,
+                )
+            })
+        })
+        .collect();
+    WorldSpec {
+        name: format!("demand-{}-{rate}-{seed}", algorithm.name()),
+        duration_s: duration,
+        seed,
+        horizon: 20,
+        deadline_s: duration,
+        network: Network {
+            segments: Vec::new(),
+            junctions: vec![Junction {
+                id: 0,
+                centre: (0.0, 0.0),
+                layout,
+                algorithm,
+                inlets: [None; 4],
+                outlets: [None; 4],
+            }],
+        },
+        vehicles: Vec::new(),
+        faults: crate::bus::Faults::NONE,
+        sensing: None,
+        arrivals: Arrivals::Poisson(entries),
+        deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
+        finish: Finish::Duration,
+    }
+}
+
+/// What one run gave.
+struct RunOutcome {
+    delays: Vec<f64>,
+    crossed: u64,
+    offered: u64,
+    unfinished: u64,
+    max_queue: usize,
+    queued_at_end: usize,
+    collisions: u64,
+    invariant_violations: u64,
+    unpermitted: u64,
+    deadlock: bool,
+}
+
+fn one(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> RunOutcome {
+    let spec = world(algorithm, rate, duration, seed);
+    let net = spec.network.clone();
+    let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
+    while !w.finished() {
+        if w.step(&mut |_| {}).is_err() {
+            break;
+        }
+    }
+    let s = w.summary(0.0);
+    let end = w.time();
+    let jn = net.junctions.first();
+    let v_limit = jn.map_or(13.9, |j| j.layout.spec.v_limit);
+    let mut delays = Vec::new();
+    let mut unfinished = 0;
+    for v in w.all_vehicles() {
+        let route = match v.at {
+            crate::world::vehicle::At::Crossing { route, .. } => Some(route),
+            _ => None,
+        };
+        // From the start of the inlet (centre at L/2) to leaving A_C on the outlet.
+        let free = route
+            .and_then(|r| jn.and_then(|j| j.layout.route(usize::from(r))))
+            .zip(jn)
+            .map_or(0.0, |(r, j)| {
+                (r.path.exit() + j.layout.spec.comm_margin - 0.5 * LENGTH_M) / v_limit
+            });
+        match v.log.left_at {
+            Some(out) => delays.push((out - v.log.entered_at - free).max(0.0)),
+            None if v.log.entered_at + free + GRACE_S <= end => unfinished += 1,
+            None => {}
+        }
+    }
+    let (max_queue, queued) = w.queues();
+    let (offered, late) = w.arrivals_before(end - GRACE_S);
+    RunOutcome {
+        crossed: delays.len() as u64,
+        delays,
+        offered,
+        unfinished: unfinished + late,
+        max_queue,
+        queued_at_end: queued,
+        collisions: s.collisions,
+        invariant_violations: s.invariant_violations,
+        unpermitted: s.unpermitted_entries(),
+        deadlock: s.deadlock.is_some(),
+    }
+}
+
+/// The experiment: every algorithm at every rate in `rates` (vehicles per hour per lane),
+/// `seeds` runs of `duration` s each, on `threads` threads.
+pub fn run(rates: &[f64], duration: f64, seeds: u64, threads: usize) -> DemandReport {
+    let t0 = std::time::Instant::now();
+    let algorithms = [
+        Algorithm::AllWayStop,
+        Algorithm::Fifo,
+        Algorithm::ConcurrentFair,
+        Algorithm::Pipelined,
+    ];
+    let jobs: Vec<(Algorithm, f64, u64)> = algorithms
+        .iter()
+        .flat_map(|&a| {
+            rates
+                .iter()
+                .flat_map(move |&r| (0..seeds).map(move |k| (a, r, k)))
+        })
+        .collect();
+    let outs = super::par::map_indexed(jobs.len(), threads, |i| {
+        let (a, r, k) = jobs[i];
+        one(a, r, duration, case_seed(r.to_bits(), k))
+    });
+    let mut results = Vec::new();
+    for &a in &algorithms {
+        for &r in rates {
+            let mine: Vec<&RunOutcome> = jobs
+                .iter()
+                .zip(&outs)
+                .filter(|((b, q, _), _)| *b == a && *q == r)
+                .map(|(_, o)| o)
+                .collect();
+            results.push(row(a, r, duration, &mine));
+        }
+    }
+    let capacity = algorithms
+        .iter()
+        .map(|&a| Capacity {
+            algorithm: a.name(),
+            capacity_vph_per_lane: results
+                .iter()
+                .filter(|x| x.algorithm == a.name() && x.bounded)
+                .map(|x| x.rate_vph_per_lane)
+                .fold(0.0, f64::max),
+        })
+        .collect();
+    let lim = Limits::table_i();
+    let v = 13.9;
+    DemandReport {
+        results,
+        capacity,
+        lane_limit_vph: 3600.0 * v / (LENGTH_M + lim.d0 + lim.safe_distance(v)),
+        duration_s: duration,
+        seeds,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+fn row(a: Algorithm, rate: f64, duration: f64, runs: &[&RunOutcome]) -> DemandRow {
+    let mut delays: Vec<f64> = runs.iter().flat_map(|o| o.delays.iter().copied()).collect();
+    delays.sort_by(f64::total_cmp);
+    let hours = duration / 3600.0 * runs.len().max(1) as f64;
+    let crossed: u64 = runs.iter().map(|o| o.crossed).sum();
+    let offered: u64 = runs.iter().map(|o| o.offered).sum();
+    let p95 = delays
+        .get(((delays.len() as f64 - 1.0) * 0.95).round().max(0.0) as usize)
+        .copied()
+        .unwrap_or(0.0);
+    let bounded = runs.iter().all(|o| {
+        o.queued_at_end <= BOUNDED_QUEUE
+            && o.unfinished as f64 <= UNFINISHED_SHARE * o.offered as f64
+    });
+    DemandRow {
+        algorithm: a.name(),
+        rate_vph_per_lane: rate,
+        throughput_vph: crossed as f64 / hours,
+        offered_vph: offered as f64 / hours,
+        mean_delay_s: delays.iter().sum::<f64>() / delays.len().max(1) as f64,
+        p95_delay_s: p95,
+        max_queue: runs.iter().map(|o| o.max_queue).max().unwrap_or(0),
+        collisions: runs.iter().map(|o| o.collisions).sum(),
+        invariant_violations: runs.iter().map(|o| o.invariant_violations).sum(),
+        unpermitted_entries: runs.iter().map(|o| o.unpermitted).sum(),
+        unfinished: runs.iter().map(|o| o.unfinished).sum(),
+        deadlocks: runs.iter().map(|o| u64::from(o.deadlock)).sum(),
+        bounded,
+    }
+}
+
+impl core::fmt::Display for DemandReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        writeln!(
+            f,
+            "open-system demand at the SPEC §8 intersection: {} run(s) of {} s per algorithm and rate",
+            self.seeds, self.duration_s
+        )?;
+        writeln!(
+            f,
+            "{:<9} {:>9} {:>9} {:>10} {:>8} {:>8} {:>6} {:>7} {:>10}",
+            "algorithm",
+            "veh/h/ln",
+            "offered",
+            "through",
+            "delay s",
+            "p95 s",
+            "queue",
+            "unfin.",
+            "collisions"
+        )?;
+        for r in &self.results {
+            writeln!(
+                f,
+                "{:<9} {:>9.0} {:>9.0} {:>10.0} {:>8.1} {:>8.1} {:>6} {:>7} {:>10}{}",
+                r.algorithm,
+                r.rate_vph_per_lane,
+                r.offered_vph,
+                r.throughput_vph,
+                r.mean_delay_s,
+                r.p95_delay_s,
+                r.max_queue,
+                r.unfinished,
+                r.collisions + r.invariant_violations + r.unpermitted_entries,
+                if r.bounded { "" } else { "  saturated" }
+            )?;
+        }
+        write!(f, "capacity (veh/h/lane, highest bounded rate tested):")?;
+        for c in &self.capacity {
+            write!(f, " {} {:.0};", c.algorithm, c.capacity_vph_per_lane)?;
+        }
+        writeln!(f, " one lane's physical limit {:.0}", self.lane_limit_vph)?;
+        write!(f, "wall time {:.1} s", self.wall_seconds)
+    }
+}

@@ -1,0 +1,199 @@
+//! What every randomized sweep shares: a case's seed, which depends on the sweep's seed
+//! and the case's index alone (so that a sweep can be split into shards and rerun case by
+//! case), running a case's world to its end, and the report — with every failing case
+//! kept as a scenario file that `host-sim run` reproduces.
+
+use crate::world::summary::Summary;
+use crate::world::{SolverChoice, World, WorldSpec};
+use serde::Serialize;
+
+/// The seed of case `index` of a sweep seeded `seed`.
+pub fn case_seed(seed: u64, index: u64) -> u64 {
+    // SplitMix64 of (seed, index): independent streams per case.
+    let mut z = seed
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(index.wrapping_mul(0xBF58_476D_1CE4_E5B9))
+        .wrapping_add(0x94D0_49BB_1331_11EB);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Runs `spec` to its end (its duration, its finish, or a deadlock) on the in-process
+/// bus, with multi-lane horizon 20.
+pub fn run(spec: WorldSpec) -> Summary {
+    let t0 = std::time::Instant::now();
+    let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
+    while !w.finished() {
+        // The in-process bus cannot fail.
+        if w.step(&mut |_| {}).is_err() {
+            break;
+        }
+    }
+    w.summary(t0.elapsed().as_secs_f64())
+}
+
+/// One case's result.
+#[derive(Debug, Clone)]
+pub struct Case {
+    /// Its index in the sweep.
+    pub index: u64,
+    /// Its seed.
+    pub seed: u64,
+    /// What ran (for a label: an algorithm).
+    pub label: &'static str,
+    /// Its summary.
+    pub summary: Summary,
+    /// The scenario file that reproduces it.
+    pub scenario: String,
+}
+
+impl Case {
+    /// Vehicles with a goal unmet at the end (a deadlock leaves them so).
+    pub fn unfinished(&self) -> u64 {
+        let s = &self.summary;
+        s.unfinished as u64 + s.goals.saturating_sub(s.goals_reached) as u64
+    }
+
+    /// `true` if it failed: unsafe, or not every vehicle done.
+    pub fn failed(&self) -> bool {
+        self.summary.unsafe_events() > 0 || self.unfinished() > 0 || self.summary.deadlock.is_some()
+    }
+
+    /// When every goal was met (s): the last lane change's completion, or the end of the
+    /// run when every vehicle left.
+    pub fn finish_time_s(&self) -> f64 {
+        let s = &self.summary;
+        match s.crossing {
+            Some(_) => s.sim_seconds,
+            None => s.lane_changes.all_done_at_s.unwrap_or(s.sim_seconds),
+        }
+    }
+}
+
+/// A failing case, reproducible.
+#[derive(Debug, Clone, Serialize)]
+pub struct Failing {
+    /// Its index.
+    pub case: u64,
+    /// What ran.
+    pub label: &'static str,
+    /// Why it failed.
+    pub reason: String,
+    /// The scenario file: `host-sim run` on it reproduces the failure.
+    pub scenario: String,
+}
+
+/// Totals over cases.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Totals {
+    /// Cases run.
+    pub cases: u64,
+    /// Vehicles over all cases.
+    pub vehicles: u64,
+    /// Collisions (pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations (pairs × steps).
+    pub invariant_violations: u64,
+    /// Limit violations, road-end overruns and departures from the road.
+    pub limit_violations: u64,
+    /// Steps × vehicles inside A_S without a permission.
+    pub unpermitted_entries: u64,
+    /// Vehicles with a goal unmet at the end.
+    pub unfinished: u64,
+    /// Cases that deadlocked.
+    pub deadlocks: u64,
+    /// Latest time by which a case had every goal met (s).
+    pub max_finish_time_s: f64,
+    /// Mean of those times (s).
+    pub mean_finish_time_s: f64,
+    /// Certified-fallback steps (not standstill, not yield).
+    pub fallback_steps: u64,
+}
+
+impl Totals {
+    /// The totals of `cases`.
+    pub fn of<'a>(cases: impl Iterator<Item = &'a Case>) -> Self {
+        let mut t = Totals::default();
+        let mut sum = 0.0;
+        for c in cases {
+            let s = &c.summary;
+            t.cases += 1;
+            t.vehicles += s.vehicles as u64;
+            t.collisions += s.collisions;
+            t.invariant_violations += s.invariant_violations;
+            t.limit_violations += s.limit_violations + s.road_end_overruns + s.off_road;
+            t.unpermitted_entries += s.unpermitted_entries();
+            t.unfinished += c.unfinished();
+            t.deadlocks += u64::from(s.deadlock.is_some());
+            t.fallback_steps += s.fallback_steps;
+            let f = c.finish_time_s();
+            t.max_finish_time_s = t.max_finish_time_s.max(f);
+            sum += f;
+        }
+        t.mean_finish_time_s = sum / t.cases.max(1) as f64;
+        t
+    }
+
+    /// No collision, violation, unpermitted entry, unfinished vehicle or deadlock.
+    pub fn clean(&self) -> bool {
+        self.collisions
+            + self.invariant_violations
+            + self.limit_violations
+            + self.unpermitted_entries
+            + self.unfinished
+            + self.deadlocks
+            == 0
+    }
+}
+
+/// Why `c` failed, in a few words.
+pub fn reason(c: &Case) -> String {
+    let s = &c.summary;
+    let mut why = Vec::new();
+    if s.collisions > 0 {
+        why.push(format!("{} collisions", s.collisions));
+    }
+    if s.invariant_violations > 0 {
+        why.push(format!("{} invariant violations", s.invariant_violations));
+    }
+    if s.limit_violations + s.road_end_overruns + s.off_road > 0 {
+        why.push("limit violations".to_string());
+    }
+    if s.unpermitted_entries() > 0 {
+        why.push(format!("{} unpermitted entries", s.unpermitted_entries()));
+    }
+    if let Some(d) = &s.deadlock {
+        why.push(format!("deadlock at {:.1} s", d.at_s));
+    }
+    if c.unfinished() > 0 {
+        why.push(format!("{} vehicles unfinished", c.unfinished()));
+    }
+    why.join(", ")
+}
+
+/// The failing cases among `cases` (at most `keep`), each with its scenario file.
+pub fn failing<'a>(cases: impl Iterator<Item = &'a Case>, keep: usize) -> Vec<Failing> {
+    cases
+        .filter(|c| c.failed())
+        .take(keep)
+        .map(|c| Failing {
+            case: c.index,
+            label: c.label,
+            reason: reason(c),
+            scenario: c.scenario.clone(),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cases_seed_depends_on_its_index_and_the_sweeps_seed() {
+        assert_eq!(case_seed(1, 5), case_seed(1, 5));
+        assert_ne!(case_seed(1, 5), case_seed(1, 6));
+        assert_ne!(case_seed(1, 5), case_seed(2, 5));
+    }
+}
