@@ -766,6 +766,125 @@ mod tests {
         );
     }
 
+    fn request(id: u16) -> Request<f64> {
+        Request {
+            id,
+            inlet: TrackWire {
+                heading: 2,
+                lane: 1,
+            },
+            outlet: TrackWire {
+                heading: 3,
+                lane: 1,
+            },
+            arrival: 3.5,
+            s: 97.25,
+            v: 13.9,
+        }
+    }
+
+    /// Every message that names its sender, each with the vehicle it names (id 9).
+    fn naming_vehicle_9() -> [Message<f64>; 6] {
+        let mut st = state();
+        st.id = 9;
+        [
+            Message::Exit { id: 9, at: 9.0 },
+            Message::JunctionExit {
+                junction: 2,
+                id: 9,
+                at: 9.0,
+            },
+            Message::Request(request(9)),
+            Message::JunctionRequest {
+                junction: 2,
+                request: request(9),
+            },
+            Message::State(st),
+            Message::Located {
+                segment: 4,
+                state: st,
+            },
+        ]
+    }
+
+    /// Pushes every frame of `m` from `sa`; the last push's result.
+    fn push_all(
+        r: &mut Reassembler<8>,
+        m: &Message<f64>,
+        sa: u8,
+        counter: u8,
+    ) -> Result<Option<Message<f64>>, DecodeError> {
+        let frames: Frames<TestFrame> = encode(m, sa, counter).unwrap();
+        let mut last = Ok(None);
+        for f in &frames {
+            last = r.push::<f64, _>(f);
+        }
+        last
+    }
+
+    #[test]
+    fn exits_requests_and_states_come_only_from_the_vehicle_they_name() {
+        // On an Exit the manager forgets the vehicle: one forged by another node would let
+        // a conflicting route be granted while the vehicle is still inside A_S.
+        for m in naming_vehicle_9() {
+            let mut r = Reassembler::<8>::new();
+            for sa in [8u8, 10, 0x19, MANAGER_ADDRESS, CLOCK_ADDRESS] {
+                let before = r.slots.clone();
+                assert_eq!(
+                    push_all(&mut r, &m, sa, 1).map(|_| ()),
+                    Err(DecodeError::SenderMismatch),
+                    "{m:?} from {sa:#x}"
+                );
+                // Only the partial frames of that sender are kept: nothing accepted.
+                assert!(
+                    r.slots.iter().all(|s| s.last_counter.is_none()),
+                    "{m:?} from {sa:#x}: {before:?}"
+                );
+            }
+            assert!(
+                matches!(push_all(&mut r, &m, 9, 1), Ok(Some(_))),
+                "{m:?} from its own vehicle is accepted"
+            );
+        }
+    }
+
+    #[test]
+    fn continuation_frames_of_another_message_are_not_spliced_in() {
+        // Two states of one sender: frames of the second must not complete the first,
+        // whatever their CRC (which alone lets 1 in 256 splices through).
+        let (mut a, mut b) = (state(), state());
+        a.stamp = 20.0;
+        b.stamp = 21.0;
+        b.x = -50.0;
+        let fa: Frames<TestFrame> = encode(&Message::State(a), 0x07, 3).unwrap();
+        let fb: Frames<TestFrame> = encode(&Message::State(b), 0x07, 4).unwrap();
+        let mut r = Reassembler::<4>::new();
+        assert_eq!(r.push::<f64, _>(&fa[0]), Ok(None));
+        let kept = r.slots.clone();
+        // b's second frame after a's first: another counter.
+        assert_eq!(r.push::<f64, _>(&fb[1]), Err(DecodeError::OutOfSequence));
+        assert_eq!(r.slots, kept, "a refused frame changes nothing");
+        // a's last frame before its second: out of order.
+        assert_eq!(r.push::<f64, _>(&fa[2]), Err(DecodeError::OutOfSequence));
+        assert_eq!(r.slots, kept);
+        // a itself still completes.
+        assert_eq!(r.push::<f64, _>(&fa[1]), Ok(None));
+        let Ok(Some(Message::State(got))) = r.push::<f64, _>(&fa[2]) else {
+            panic!("a completes");
+        };
+        assert!((got.x - a.x).abs() < 0.01);
+        // b's first frame, then a's (old) frames: a's counter is not b's.
+        assert_eq!(r.push::<f64, _>(&fb[0]), Ok(None));
+        assert_eq!(r.push::<f64, _>(&fa[1]), Err(DecodeError::OutOfSequence));
+        // A splice whose CRC happens to match is still refused: build b's second frame
+        // with a's counter in its header and check that the counter alone refuses it.
+        let mut d = [0u8; 8];
+        d.copy_from_slice(fb[1].data());
+        d[0] = (d[0] & 0xF0) | 0x03;
+        let forged = TestFrame::new(fb[1].id(), &d).unwrap();
+        assert_eq!(r.push::<f64, _>(&forged), Err(DecodeError::OutOfSequence));
+    }
+
     #[test]
     fn sync_ticks_come_from_the_clock_in_order() {
         let mut r = Reassembler::<4>::new();

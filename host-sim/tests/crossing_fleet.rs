@@ -169,12 +169,30 @@ fn crossing_reports_map_onto_requests_and_back() {
     assert_eq!(route_of(&q), Some(0));
 }
 
-/// A port that, with every request its vehicle sends, forges a grant for that vehicle
-/// from the vehicle's own address (as a compromised or buggy node would).
+/// A port that, with every request its vehicle sends, forges a message from the
+/// vehicle's own address (as a compromised or buggy node would): `forge(sa)`.
 struct Forger {
     inner: HubPort,
     sa: Option<u8>,
     forged: u8,
+    forge: fn(u8) -> wire::Message<f64>,
+}
+
+/// A grant for itself.
+fn own_grant(sa: u8) -> wire::Message<f64> {
+    wire::Message::Grant {
+        id: u16::from(sa),
+        until: 1e5,
+    }
+}
+
+/// An Exit for the next vehicle: the manager would forget it while it is still inside
+/// A_S and could grant a conflicting route.
+fn exit_of_another(sa: u8) -> wire::Message<f64> {
+    wire::Message::Exit {
+        id: u16::from(sa) + 1,
+        at: 0.5,
+    }
 }
 
 impl CanPort for Forger {
@@ -189,12 +207,8 @@ impl CanPort for Forger {
         };
         // After the last frame of one of its requests.
         if wire::split_id(id) == Some((wire::MessageKind::Request as u8, 1, sa)) {
-            let grant = wire::Message::Grant {
-                id: u16::from(sa),
-                until: 1e5,
-            };
-            let frames: Frames<PlainFrame> =
-                encode(&grant, sa, self.forged).map_err(|e| io::Error::other(format!("{e:?}")))?;
+            let frames: Frames<PlainFrame> = encode(&(self.forge)(sa), sa, self.forged)
+                .map_err(|e| io::Error::other(format!("{e:?}")))?;
             self.forged = (self.forged + 1) & 0x0F;
             for f in &frames {
                 self.inner.transmit(f)?;
@@ -207,12 +221,11 @@ impl CanPort for Forger {
     }
 }
 
-/// Vehicles forging their own permissions are refused by every receiver (only the
-/// manager's address may grant): the run is the clean run, to the bit.
-#[test]
-fn forged_grants_are_refused_and_change_nothing() {
-    let sc = scenario("intersection.toml", Some("fifo"));
-    let clean = on_hub(&sc);
+/// Runs `sc` with every vehicle forging `forge(sa)` after each request: every forged
+/// message is refused by every receiver (SenderMismatch and nothing else), and the run is
+/// the clean run, to the bit.
+fn forgeries_change_nothing(sc: &WorldSpec, forge: fn(u8) -> wire::Message<f64>) {
+    let clean = on_hub(sc);
     let hub = Hub::new();
     let forged = fleet::run_with_ports(
         sc.clone(),
@@ -227,6 +240,7 @@ fn forged_grants_are_refused_and_change_nothing() {
                     _ => None,
                 },
                 forged: 0,
+                forge,
             })
         },
         &mut |_| {},
@@ -243,9 +257,26 @@ fn forged_grants_are_refused_and_change_nothing() {
     assert_eq!(
         format!("{:?}", strip(&forged.run)),
         format!("{:?}", strip(&clean.run)),
-        "the forged grants changed the run"
+        "the forged messages changed the run"
     );
     assert_eq!(forged.messages, clean.messages);
+}
+
+/// Vehicles forging their own permissions are refused by every receiver (only the
+/// manager's address may grant).
+#[test]
+fn forged_grants_are_refused_and_change_nothing() {
+    forgeries_change_nothing(&scenario("intersection.toml", Some("fifo")), own_grant);
+}
+
+/// Vehicles forging Exits for others are refused (an Exit comes only from the vehicle
+/// it names): no vehicle is forgotten inside A_S, no unpermitted entry, no collision.
+#[test]
+fn forged_exits_are_refused_and_change_nothing() {
+    forgeries_change_nothing(
+        &scenario("intersection.toml", Some("pipelined")),
+        exit_of_another,
+    );
 }
 
 /// A manager or a vehicle whose transmitter fails ends the run at once with a typed

@@ -9,7 +9,7 @@
 # scenario, against the summary's message counts for an intersection.
 #
 # Usage: host-sim/vcan/run-in-qemu.sh [SCENARIO.toml ...]   (default: multilane.toml)
-# Results go to $VCAN_OUT (default target/vcan-qemu).
+# Results go to $VCAN_OUT (default: vcan-qemu in cargo's target directory).
 # Needs: qemu-system-x86_64, apt-get (Debian's archive), cargo with the
 # x86_64-unknown-linux-musl target, python3 with cantools (.ci/run installs all of them).
 # The kernel, busybox-static and can-utils come from Debian's packages (apt-get download);
@@ -22,13 +22,15 @@ for sc in "${@:-$root/scenarios/multilane.toml}"; do
   [ -f "$sc" ] || { echo "run-in-qemu: no scenario $sc" >&2; exit 2; }
   scenarios+=("$(realpath "$sc")")
 done
-out="$(mkdir -p "${VCAN_OUT:-$root/target/vcan-qemu}" && cd "${VCAN_OUT:-$root/target/vcan-qemu}" && pwd)"
-debs="$out/debs"
-mkdir -p "$debs"
-
 for tool in qemu-system-x86_64 apt-get dpkg-deb python3 cargo; do
   command -v "$tool" >/dev/null || { echo "run-in-qemu: $tool is missing" >&2; exit 2; }
 done
+# Cargo says where it builds (CARGO_TARGET_DIR may move it).
+target="$(cd "$root" && cargo metadata --format-version 1 --no-deps \
+  | python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')"
+out="$(mkdir -p "${VCAN_OUT:-$target/vcan-qemu}" && cd "${VCAN_OUT:-$target/vcan-qemu}" && pwd)"
+debs="$out/debs"
+mkdir -p "$debs"
 
 echo "== Debian packages: the kernel linux-image-amd64 depends on, busybox-static, can-utils"
 kernel_of() { apt-cache depends linux-image-amd64 2>/dev/null | awk '/Depends: linux-image-[0-9]/ {print $2; exit}'; }
@@ -54,7 +56,7 @@ kernel="$out/pkg/boot/vmlinuz-$kver"
 
 echo "== host-sim, statically linked (musl)"
 (cd "$root" && cargo build --release -q -p host-sim --target x86_64-unknown-linux-musl)
-hostsim="$root/target/x86_64-unknown-linux-musl/release/host-sim"
+hostsim="$target/x86_64-unknown-linux-musl/release/host-sim"
 if file "$hostsim" 2>/dev/null | grep -q 'dynamically linked'; then
   echo "run-in-qemu: $hostsim is not static" >&2
   exit 1

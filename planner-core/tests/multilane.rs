@@ -2,7 +2,9 @@
 //! unicycle code, and behaviour tests of the multi-lane planner.
 
 use planner_core::free_space::FreeSpace;
-use planner_core::lane_change::{braking_tail_ok, LaneEvent, LaneObservation, LanePlanner};
+use planner_core::lane_change::{
+    braking_tail_ok, LaneEvent, LaneObservation, LanePlanner, StartBlock,
+};
 use planner_core::lanes::{Band, Other, Road};
 use planner_core::safety::{d_s, max_braking_command};
 use planner_core::unicycle::{chord, step, Pose};
@@ -230,6 +232,81 @@ fn the_lower_vehicle_yields() {
     low.beta = Some(1);
     let c = me.step(&obs(0.0, 5.4, 15.0, &[low], 1)).unwrap();
     assert!(matches!(c.status, StepStatus::Solved { .. }));
+}
+
+/// (17) is tested against the vehicles changing into the target lane too, not only those
+/// in it (SPEC's C⁻_t): a fast vehicle behind, two lanes over, that has started a change
+/// into lane 1 blocks the ego's start into lane 1; the same vehicle staying in its lane
+/// (its intention known and fresh) does not.
+#[test]
+fn vehicles_changing_into_the_target_lane_block_a_start() {
+    let p = p();
+    let mut coming = other(2, -30.0, 27.8, 2);
+    assert!(d_s(&p, 27.8) > 30.0, "it could not stop behind the ego");
+    let pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+    let check = |one: Other<f64>| {
+        let others = [one];
+        pl.start_check(&obs(0.0, 1.8, 15.0, &others, 1), 1)
+    };
+    assert_eq!(check(coming), Ok(()), "staying in lane 2");
+    coming.alpha = Some(1);
+    assert_eq!(
+        check(coming),
+        Err(StartBlock::Behind(2)),
+        "changing into lane 1"
+    );
+    // In lane 1 itself: blocked too; far enough back: not.
+    assert_eq!(check(other(3, -30.0, 27.8, 1)), Err(StartBlock::Behind(3)));
+    assert_eq!(check(other(3, -60.0 - d_s(&p, 27.8), 27.8, 1)), Ok(()));
+    // And through step(): declared, then held back while the changer comes.
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+    for k in 0..5 {
+        let c = pl
+            .step(&obs(0.15 * k as f64, 1.8, 15.0, &[coming], 1))
+            .unwrap();
+        assert_ne!(c.event, Some(LaneEvent::Started(1)), "step {k}");
+    }
+}
+
+/// The Yield Protocol (20)(21), directly: a vehicle ahead in ≺ that declared my lane is my
+/// leader — my command keeps the invariant toward it (slower than without it); one
+/// already changing into my lane is my leader too; one declaring another lane is not.
+#[test]
+fn a_vehicle_declaring_my_lane_ahead_is_yielded_to() {
+    let p = p();
+    let free = {
+        let mut me = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+        me.step(&obs(0.0, 1.8, 20.0, &[], 0)).unwrap().v
+    };
+    let gap = 4.5 + 0.5 + d_s(&p, 20.0) + 1.0;
+    for (beta, alpha, yields) in [
+        (Some(0), None, true),
+        (None, Some(0), true),
+        (Some(2), None, false),
+        (None, None, false),
+    ] {
+        let mut ahead = other(2, gap, 10.0, 1);
+        ahead.beta = beta;
+        ahead.alpha = alpha;
+        let mut me = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+        let c = me.step(&obs(0.0, 1.8, 20.0, &[ahead], 0)).unwrap();
+        if yields {
+            assert!(
+                c.v < free - 0.01,
+                "β {beta:?} α {alpha:?}: {} vs {free}",
+                c.v
+            );
+            // It keeps the invariant toward the slower vehicle ahead at its next position.
+            let room = gap - 4.5 - 0.5 - c.v * 0.01 + 10.0 * 0.01;
+            assert!(room >= d_s(&p, c.v) - 1e-9, "β {beta:?} α {alpha:?}");
+        } else {
+            assert!(
+                (c.v - free).abs() < 1e-9,
+                "β {beta:?} α {alpha:?}: {} vs {free}",
+                c.v
+            );
+        }
+    }
 }
 
 #[test]

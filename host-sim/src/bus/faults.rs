@@ -52,7 +52,9 @@ impl Faults {
     };
 
     /// Checks the values: probabilities in [0, 1) (a bus that loses everything carries
-    /// nothing), times finite, ≥ 0 and below 1 s.
+    /// nothing), times in [0, [`MAX_FAULT_TIME_S`]] s. No protocol needs a tighter bound:
+    /// the planners are safe at any loss and delay (stale data never loosens a
+    /// constraint); the bound only keeps a run's event queues finite and meaningful.
     pub fn validate(&self) -> Result<(), String> {
         for (name, p) in [
             ("loss", self.loss),
@@ -68,8 +70,10 @@ impl Faults {
             ("jitter_s", self.jitter_s),
             ("reorder_s", self.reorder_s),
         ] {
-            if !(0.0..1.0).contains(&t) {
-                return Err(format!("faults.{name} = {t}: must be in [0, 1) s"));
+            if !(0.0..=MAX_FAULT_TIME_S).contains(&t) {
+                return Err(format!(
+                    "faults.{name} = {t}: must be in [0, {MAX_FAULT_TIME_S}] s"
+                ));
             }
         }
         if let Some(s) = self.silent {
@@ -108,6 +112,9 @@ impl Faults {
         h + self.delay_s + self.jitter_s + held + lost
     }
 }
+
+/// The longest delay, jitter or hold-back a bus may be given (s).
+pub const MAX_FAULT_TIME_S: f64 = 10.0;
 
 /// Consecutive losses of a repeated message the notification bound covers: at 20 % loss,
 /// 12 in a row has probability 0.2^12 ≈ 4·10⁻⁹ per message and receiver.

@@ -52,6 +52,19 @@ pub enum Experiment {
         /// Extra delay drawn uniformly from [0, jitter] (s).
         #[arg(long, default_value_t = 0.0)]
         jitter: f64,
+        /// Instead: the fault grid — loss × delay, then jitter, duplicates, reordering and
+        /// a vehicle silent from t = 0, each cell over the multi-lane road, a fully braking
+        /// platoon leader, drivers that do not cooperate and the intersection under every
+        /// algorithm (exit 1 if any cell saw an unsafe event).
+        #[arg(long, conflicts_with_all = ["loss", "delay", "jitter", "throughput_seeds", "duration"])]
+        grid: bool,
+        /// Runs per workload and cell, with --grid.
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..), requires = "grid")]
+        runs: u64,
+        /// With --grid: draw the heat maps (completion per cell and workload, unsafe
+        /// events printed in each cell) to a .png or .svg.
+        #[arg(long, value_name = "out.png|out.svg", requires = "grid")]
+        plot: Option<PathBuf>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -64,7 +77,7 @@ pub enum Experiment {
         #[arg(
             long,
             value_delimiter = ',',
-            default_value = "200,400,600,800,1000,1200"
+            default_value = "50,100,150,200,250,300,350,400"
         )]
         rates: Vec<f64>,
         /// Simulated seconds per run.
@@ -157,8 +170,14 @@ pub fn run(e: Experiment) -> ExitCode {
             loss,
             delay,
             jitter,
+            grid,
+            runs,
+            plot,
             json,
         } => {
+            if grid {
+                return fault_grid(runs, json, plot);
+            }
             let args = FaultArgs {
                 loss,
                 delay,
@@ -199,6 +218,30 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
         } => demand(&rates, duration, seeds, json, plot),
     }
+}
+
+fn fault_grid(runs: u64, json: bool, plot: Option<PathBuf>) -> ExitCode {
+    if let Some(p) = &plot {
+        if let Err(code) = check_plot(p) {
+            return code;
+        }
+    }
+    use host_sim::experiments::fault_grid::{grid, Cell};
+    let r = grid(&Cell::all(), runs, 1, 0);
+    if let Some(path) = &plot {
+        match host_sim::output::plot::fault_grid(&r, path) {
+            Ok(()) => eprintln!("wrote {}", path.display()),
+            Err(e) => return bad_input(e),
+        }
+    }
+    if json {
+        if let Err(code) = super::output::print_json(&r) {
+            return code;
+        }
+    } else if let Err(code) = super::output::say(&r.to_string()) {
+        return code;
+    }
+    super::output::code(r.unsafe_cells == 0, true)
 }
 
 fn demand(rates: &[f64], duration: f64, seeds: u64, json: bool, plot: Option<PathBuf>) -> ExitCode {

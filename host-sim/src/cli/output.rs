@@ -16,12 +16,24 @@ pub const EXIT_BUS: u8 = 4;
 /// Prints `value` as one line of JSON.
 pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
     match serde_json::to_string(value) {
-        Ok(s) => {
-            println!("{s}");
-            Ok(())
-        }
+        Ok(s) => say(&s),
         Err(e) => {
             eprintln!("error: {e}");
+            Err(ExitCode::from(EXIT_BAD_INPUT))
+        }
+    }
+}
+
+/// Prints `text` and a newline to stdout; a reader that went away (`| head`) ends the
+/// output quietly instead of a panic.
+pub fn say(text: &str) -> Result<(), ExitCode> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(ExitCode::SUCCESS),
+        Err(e) => {
+            eprintln!("error: stdout: {e}");
             Err(ExitCode::from(EXIT_BAD_INPUT))
         }
     }

@@ -59,10 +59,23 @@ pub struct CrossingsReport {
 
 /// The vehicles of case `index` of the sweep seeded `seed` at `layout`.
 pub fn placements(seed: u64, index: u64, layout: &Layout<f64>) -> Vec<Placement> {
-    let lim = Limits::table_i();
     let mut rng = rng(case_seed(seed, index));
-    let v_limit = layout.spec.v_limit;
     let per_lane = [1usize, 2, 3, 5, 8, 16][rng.random_range(0..6)];
+    queue_placements(&mut rng, layout, per_lane)
+}
+
+/// Random queues at `layout`: on each inlet lane from none to `per_lane` vehicles (as
+/// many as the inlet holds, up to the manager's capacity in all), each at a random speed
+/// (a fifth standing) on a random route its lane serves, placed at random behind the
+/// frontmost place it can be — able to stop before the line, or behind the vehicle ahead
+/// with the invariant.
+pub fn queue_placements(
+    rng: &mut impl Rng,
+    layout: &Layout<f64>,
+    per_lane: usize,
+) -> Vec<Placement> {
+    let lim = Limits::table_i();
+    let v_limit = layout.spec.v_limit;
     let line = layout.spec.inlet_length;
     let mut out: Vec<Placement> = Vec::new();
     for heading in 0..4u8 {
@@ -78,18 +91,13 @@ pub fn placements(seed: u64, index: u64, layout: &Layout<f64>) -> Vec<Placement>
                 } else {
                     rng.random_range(0.0..v_limit)
                 };
-                // The frontmost possible place: able to stop before the line, or behind the
-                // vehicle ahead with the invariant.
                 let front = match ahead {
-                    None => {
-                        line - 0.5 * LENGTH_M
-                            - lim.d0
-                            - lim.safe_distance(v)
-                            - START_MARGIN_M
-                            - 0.01
-                    }
-                    Some(a) => a - LENGTH_M - lim.d0 - lim.safe_distance(v) - START_MARGIN_M - 0.01,
-                };
+                    None => line - 0.5 * LENGTH_M,
+                    Some(a) => a - LENGTH_M,
+                } - lim.d0
+                    - lim.safe_distance(v)
+                    - START_MARGIN_M
+                    - 0.01;
                 if front < 0.5 * LENGTH_M {
                     break;
                 }

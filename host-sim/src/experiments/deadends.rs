@@ -51,6 +51,7 @@ pub fn case(seed: u64, index: u64) -> RoadScenario {
         };
         back[usize::from(lane)] = Some(x);
         vehicles.push(RoadVehicle {
+            cooperative: None,
             id: i as u16 + 1,
             x,
             lane,

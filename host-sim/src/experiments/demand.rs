@@ -8,10 +8,11 @@
 //! A vehicle's delay is the time from its arrival at the entry to leaving A_C, less the
 //! free-flow time over the same distance on its route at vImax: waiting outside, queueing
 //! on the inlet and waiting at the stop line all count. A rate is within an algorithm's
-//! capacity when the queues stay bounded: in every run at most [`BOUNDED_QUEUE`] vehicles
-//! wait outside any lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have
-//! not crossed [`GRACE_S`] after their free-flow time (a saturated junction's delays grow
-//! without bound, so its late arrivals miss that).
+//! capacity when the queues stay bounded, in every run: delays do not grow over the run
+//! ([`GROWTH_FACTOR`]: an overloaded junction's delays grow with the arrival time, a
+//! stable one's are stationary), at most [`BOUNDED_QUEUE`] vehicles wait outside any
+//! lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have not crossed
+//! [`GRACE_S`] after they arrived.
 
 use super::sweep::case_seed;
 use crate::monitor::Limits;
@@ -28,6 +29,10 @@ pub const BOUNDED_QUEUE: usize = 5;
 pub const UNFINISHED_SHARE: f64 = 0.01;
 /// Arrivals less than this long before the end (s) are not required to have crossed.
 pub const GRACE_S: f64 = 120.0;
+/// Delays grow when the later arrivals' mean exceeds this factor of the earlier ones'…
+pub const GROWTH_FACTOR: f64 = 1.5;
+/// … plus this (s).
+pub const GROWTH_SLACK_S: f64 = 5.0;
 
 /// One algorithm at one rate (over its seeds).
 #[derive(Debug, Clone, Serialize)]
@@ -52,8 +57,7 @@ pub struct DemandRow {
     pub invariant_violations: u64,
     /// Entries into A_S without a permission.
     pub unpermitted_entries: u64,
-    /// Vehicles that arrived at least free flow + [`GRACE_S`] before the end and had not
-    /// crossed.
+    /// Vehicles that arrived at least [`GRACE_S`] before the end and had not crossed.
     pub unfinished: u64,
     /// Runs that deadlocked.
     pub deadlocks: u64,
@@ -140,10 +144,72 @@ struct RunOutcome {
     unfinished: u64,
     max_queue: usize,
     queued_at_end: usize,
+    growing: bool,
     collisions: u64,
     invariant_violations: u64,
     unpermitted: u64,
     deadlock: bool,
+}
+
+/// One arrival: when (s), its delay or, if it has not crossed, the least it will be (s).
+struct Arrival {
+    at: f64,
+    delay: f64,
+    crossed: bool,
+}
+
+/// Free-flow time from the start of the inlet (centre at L/2) to leaving A_C on route
+/// `route` at vImax (s).
+fn free_flow(jn: Option<&Junction>, route: Option<u8>) -> f64 {
+    route
+        .zip(jn)
+        .and_then(|(r, j)| j.layout.route(usize::from(r)).map(|r| (r, j)))
+        .map_or(0.0, |(r, j)| {
+            (r.path.exit() + j.layout.spec.comm_margin - 0.5 * LENGTH_M) / j.layout.spec.v_limit
+        })
+}
+
+/// Every arrival of a finished run: those that entered and those still waiting outside.
+fn arrivals(w: &World<20>, jn: Option<&Junction>) -> Vec<Arrival> {
+    let end = w.time();
+    let mut out: Vec<Arrival> = w
+        .all_vehicles()
+        .map(|v| {
+            let route = match v.at {
+                crate::world::vehicle::At::Crossing { route, .. } => Some(route),
+                _ => None,
+            };
+            let free = free_flow(jn, route);
+            let out = v.log.left_at.unwrap_or(end);
+            Arrival {
+                at: v.log.entered_at,
+                delay: (out - v.log.entered_at - free).max(0.0),
+                crossed: v.log.left_at.is_some(),
+            }
+        })
+        .collect();
+    out.extend(w.waiting_since().into_iter().map(|at| Arrival {
+        at,
+        delay: end - at,
+        crossed: false,
+    }));
+    out
+}
+
+/// `true` if delays grow: arrivals of the second window [T/2, T − GRACE_S) wait
+/// markedly longer than those of the first [T/6, T/2) (past the warm-up). A stable queue
+/// has stationary delays; an overloaded one's grow with the arrival time.
+fn growing(arrivals: &[Arrival], end: f64) -> bool {
+    let mean = |lo: f64, hi: f64| {
+        let d: Vec<f64> = arrivals
+            .iter()
+            .filter(|a| a.at >= lo && a.at < hi)
+            .map(|a| a.delay)
+            .collect();
+        d.iter().sum::<f64>() / d.len().max(1) as f64
+    };
+    let (first, second) = (mean(end / 6.0, end / 2.0), mean(end / 2.0, end - GRACE_S));
+    second > GROWTH_FACTOR * first + GROWTH_SLACK_S
 }
 
 fn one(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> RunOutcome {
@@ -157,37 +223,20 @@ fn one(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> RunOutcome 
     }
     let s = w.summary(0.0);
     let end = w.time();
-    let jn = net.junctions.first();
-    let v_limit = jn.map_or(13.9, |j| j.layout.spec.v_limit);
-    let mut delays = Vec::new();
-    let mut unfinished = 0;
-    for v in w.all_vehicles() {
-        let route = match v.at {
-            crate::world::vehicle::At::Crossing { route, .. } => Some(route),
-            _ => None,
-        };
-        // From the start of the inlet (centre at L/2) to leaving A_C on the outlet.
-        let free = route
-            .and_then(|r| jn.and_then(|j| j.layout.route(usize::from(r))))
-            .zip(jn)
-            .map_or(0.0, |(r, j)| {
-                (r.path.exit() + j.layout.spec.comm_margin - 0.5 * LENGTH_M) / v_limit
-            });
-        match v.log.left_at {
-            Some(out) => delays.push((out - v.log.entered_at - free).max(0.0)),
-            None if v.log.entered_at + free + GRACE_S <= end => unfinished += 1,
-            None => {}
-        }
-    }
+    let all = arrivals(&w, net.junctions.first());
     let (max_queue, queued) = w.queues();
-    let (offered, late) = w.arrivals_before(end - GRACE_S);
     RunOutcome {
-        crossed: delays.len() as u64,
-        delays,
-        offered,
-        unfinished: unfinished + late,
+        delays: all.iter().filter(|a| a.crossed).map(|a| a.delay).collect(),
+        crossed: all.iter().filter(|a| a.crossed).count() as u64,
+        offered: all.len() as u64,
+        // Arrived long enough before the end to have crossed even after a long wait.
+        unfinished: all
+            .iter()
+            .filter(|a| !a.crossed && a.at + GRACE_S <= end)
+            .count() as u64,
         max_queue,
         queued_at_end: queued,
+        growing: growing(&all, end),
         collisions: s.collisions,
         invariant_violations: s.invariant_violations,
         unpermitted: s.unpermitted_entries(),
@@ -263,7 +312,8 @@ fn row(a: Algorithm, rate: f64, duration: f64, runs: &[&RunOutcome]) -> DemandRo
         .copied()
         .unwrap_or(0.0);
     let bounded = runs.iter().all(|o| {
-        o.queued_at_end <= BOUNDED_QUEUE
+        !o.growing
+            && o.queued_at_end <= BOUNDED_QUEUE
             && o.unfinished as f64 <= UNFINISHED_SHARE * o.offered as f64
     });
     DemandRow {

@@ -4,6 +4,7 @@
 pub mod crossings;
 pub mod deadends;
 pub mod demand;
+pub mod fault_grid;
 pub mod faults;
 pub mod multilane;
 pub mod par;

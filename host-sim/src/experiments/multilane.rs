@@ -37,6 +37,7 @@ pub fn paper_scenario(seed: u64) -> RoadScenario {
     for lane in 0..3u8 {
         for (i, x) in [spacing, 0.0].into_iter().enumerate() {
             vehicles.push(RoadVehicle {
+                cooperative: None,
                 id: u16::from(lane) * 2 + i as u16 + 1,
                 x,
                 lane,
@@ -81,6 +82,7 @@ pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> RoadSc
         };
         *slot = Some((x, v));
         vehicles.push(RoadVehicle {
+            cooperative: None,
             id: i as u16 + 1,
             x,
             lane,

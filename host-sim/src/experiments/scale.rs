@@ -53,6 +53,7 @@ pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> RoadScenario 
                 + rng.random_range(0.5..15.0);
         }
         vehicles.push(RoadVehicle {
+            cooperative: None,
             id: i as u16 + 1,
             x,
             lane: 0,

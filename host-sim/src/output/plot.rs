@@ -656,3 +656,105 @@ where
         .map_err(e)?;
     Ok(())
 }
+
+/// The fault grid as heat maps, one panel per workload: rows are loss, columns delay,
+/// and a last row of the other faults; each cell's colour is the share of vehicles that
+/// met their goals (red 0 % → green 100 %) and its text the completion and the unsafe
+/// events (the target is 0 in every cell).
+pub fn fault_grid(
+    r: &crate::experiments::fault_grid::GridReport,
+    path: &Path,
+) -> Result<(), PlotError> {
+    render!(path, (1600, 900), |root| draw_fault_grid(r, &root))
+}
+
+fn draw_fault_grid<DB: DrawingBackend>(
+    r: &crate::experiments::fault_grid::GridReport,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    use crate::experiments::fault_grid::{DELAYS, LOSSES, VARIANTS};
+    root.fill(&WHITE).map_err(e)?;
+    let title = format!(
+        "fault grid: completion per cell (colour), unsafe events (\"!n\", target none); {} runs per cell",
+        r.runs
+    );
+    let root = root.titled(&title, ("sans-serif", 22)).map_err(e)?;
+    let mut workloads: Vec<&str> = Vec::new();
+    for c in &r.cells {
+        if !workloads.contains(&c.workload.as_str()) {
+            workloads.push(&c.workload);
+        }
+    }
+    let panels = root.split_evenly((2, workloads.len().div_ceil(2)));
+    for (w, area) in workloads.iter().zip(panels.iter()) {
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .caption(*w, ("sans-serif", 18))
+            .x_label_area_size(34)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..DELAYS.len() as f64, 0.0..(LOSSES.len() + 1) as f64)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_labels(DELAYS.len())
+            .y_labels(LOSSES.len() + 1)
+            .x_label_formatter(&|x| {
+                DELAYS
+                    .get(*x as usize)
+                    .map_or(String::new(), |d| format!("{d} s"))
+            })
+            .y_label_formatter(&|y| match LOSSES.get(*y as usize) {
+                Some(l) => format!("loss {l}"),
+                None => "other".into(),
+            })
+            .x_desc("delay")
+            .draw()
+            .map_err(e)?;
+        for c in r.cells.iter().filter(|c| c.workload == *w) {
+            let (col, row) = match c.cell.variant {
+                "grid" => (
+                    DELAYS
+                        .iter()
+                        .position(|&d| d == c.cell.delay_s)
+                        .unwrap_or(0),
+                    LOSSES.iter().position(|&l| l == c.cell.loss).unwrap_or(0),
+                ),
+                v => (
+                    VARIANTS.iter().position(|&x| x == v).unwrap_or(0) + 1,
+                    LOSSES.len(),
+                ),
+            };
+            let (x, y) = (col as f64, row as f64);
+            let p = c.completion.clamp(0.0, 1.0);
+            let fill = RGBColor((230.0 * (1.0 - p)) as u8 + 25, (200.0 * p) as u8 + 40, 60);
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(x + 0.03, y + 0.03), (x + 0.97, y + 0.97)],
+                    fill.filled(),
+                )))
+                .map_err(e)?;
+            let bad = c.unsafe_events();
+            let label = match c.cell.variant {
+                "grid" => format!("{:.0}%", 100.0 * p),
+                v => format!("{v} {:.0}%", 100.0 * p),
+            };
+            let text = if bad > 0 {
+                format!("{label} !{bad}")
+            } else {
+                label
+            };
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    text,
+                    (x + 0.08, y + 0.62),
+                    ("sans-serif", 13).into_font().color(&BLACK),
+                )))
+                .map_err(e)?;
+        }
+    }
+    Ok(())
+}

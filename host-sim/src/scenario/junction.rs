@@ -486,6 +486,7 @@ pub fn placed(layout: &Layout<f64>, p: &Placement) -> VehicleSpec {
         v: p.v,
         driver: super::DriverKind::Planner,
         script: Vec::new(),
+        cooperative: true,
         trip: Trip {
             target_lane: r.map_or(0, |r| r.inlet.lane),
             goal_x: None,

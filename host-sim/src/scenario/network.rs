@@ -629,6 +629,7 @@ pub fn change_distance(v: f64) -> f64 {
         target_lane: Some(1),
         driver: crate::scenario::DriverKind::Planner,
         script: Vec::new(),
+        cooperative: None,
         goal_x: None,
         v_ref: None,
     };
@@ -705,6 +706,7 @@ fn vehicle(
         v: v.v,
         driver: crate::scenario::DriverKind::Planner,
         script: Vec::new(),
+        cooperative: true,
         trip: Trip {
             target_lane: v.lane,
             goal_x: None,

@@ -104,6 +104,13 @@ pub struct RoadVehicle {
     /// Reference speed of a planner (default vmax).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub v_ref: Option<f64>,
+    /// It cooperates (yields, keeps its declared intentions): by default a planner does
+    /// and a scripted or random driver does not. Others assume a vehicle that does not
+    /// may accelerate at amax and never yield (RSS-style); `true` on a script makes it a
+    /// cooperating leader (the paper's platoon experiments), `false` on a planner a legacy
+    /// vehicle the others must not count on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cooperative: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -455,6 +462,9 @@ impl RoadVehicle {
                 v_ref: Some(self.v_ref.unwrap_or(v_max)),
                 movements: Vec::new(),
             },
+            cooperative: self
+                .cooperative
+                .unwrap_or(self.driver == DriverKind::Planner),
         }
     }
 }

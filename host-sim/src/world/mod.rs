@@ -198,6 +198,10 @@ pub struct VehicleSpec {
     pub script: Vec<crate::scenario::Phase>,
     /// Its trip.
     pub trip: vehicle::Trip,
+    /// It says over V2V that it cooperates (keeps the protocols: yields, keeps its
+    /// intentions). Others assume one that does not may accelerate at amax and never
+    /// yield.
+    pub cooperative: bool,
 }
 
 /// Vehicles entering while the world runs.
@@ -391,15 +395,12 @@ impl<const N: usize, B: Bus> World<N, B> {
         )
     }
 
-    /// Open arrivals so far (those that entered and those waiting), and of those waiting,
-    /// how many have waited since before `t`.
-    pub fn arrivals_before(&self, t: f64) -> (u64, u64) {
-        let waiting = self.streams.iter().flat_map(|s| s.queue.iter());
-        let entered = self.vehicles.len() + self.gone.len() - self.spec.vehicles.len();
-        (
-            (entered + waiting.clone().count()) as u64,
-            waiting.filter(|a| a.since <= t).count() as u64,
-        )
+    /// When each open arrival still waiting outside arrived (s).
+    pub fn waiting_since(&self) -> Vec<f64> {
+        self.streams
+            .iter()
+            .flat_map(|s| s.queue.iter().map(|a| a.since))
+            .collect()
     }
 
     /// Every (non-scripted) vehicle has met its goals.

@@ -33,6 +33,7 @@ pub(crate) fn build_vehicle<const N: usize>(
         },
     };
     let mut v = Vehicle::new(spec.id, spec.at, spec.v, driver, spec.trip.clone(), 0.0);
+    v.cooperative = spec.cooperative;
     if let At::Lane { x, lane, .. } = spec.at {
         if spec.trip.target_lane == lane {
             v.log.in_target_at = Some(0.0);
@@ -220,7 +221,7 @@ pub fn world_truth(v: &VehicleTruth, net: &Network) -> Truth {
 
 /// A vehicle's rectangle in segment `k`'s frame, if it is on it (a junction vehicle on
 /// an inlet or outlet track lying on it is `mapped`).
-fn segment_truth(v: &VehicleTruth, net: &Network, k: usize) -> Option<Truth> {
+pub fn segment_truth(v: &VehicleTruth, net: &Network, k: usize) -> Option<Truth> {
     let (x, y, theta, lane, mapped) = match v.at {
         At::Lane {
             seg,

@@ -197,6 +197,8 @@ pub struct Vehicle<const N: usize> {
     pub log: Log,
     /// The status of its last planner step (for the deadlock report).
     pub last_status: Option<StepStatus<f64>>,
+    /// It says it cooperates ([`crate::world::VehicleSpec::cooperative`]).
+    pub cooperative: bool,
 }
 
 /// What the monitors and the other vehicles' sensors know of a vehicle at an instant:
@@ -327,6 +329,7 @@ impl<const N: usize> Vehicle<N> {
     /// A vehicle at `at` driven by `driver`, at speed `v`, entering the network at `t`.
     pub fn new(id: u16, at: At, v: f64, driver: Driver<N>, trip: Trip, t: f64) -> Self {
         Self {
+            cooperative: matches!(driver, Driver::Planner(_)),
             id,
             at,
             v,
@@ -388,7 +391,7 @@ impl<const N: usize> Vehicle<N> {
                     beta,
                     stamp: t,
                     // Scripted and random drivers neither hear intentions nor yield.
-                    cooperative: self.is_planner(),
+                    cooperative: self.cooperative,
                 },
                 segment: seg,
             },

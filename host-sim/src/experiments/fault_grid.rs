@@ -1,0 +1,427 @@
+//! `host-sim experiment faults --grid`: safety off the ideal world, cell by cell (issue 21).
+//!
+//! Every cell is a bus: loss × delay over [`LOSSES`] × [`DELAYS`], then the other faults
+//! one at a time ([`VARIANTS`]: jitter, duplicates, reordering, a vehicle silent from
+//! t = 0). Every cell runs the same workloads ([`Workload`]): the paper's multi-lane road,
+//! a dense platoon at the smallest safe gap behind a leader that brakes fully, planners
+//! changing lanes among drivers that do not cooperate, and queues at the SPEC §8
+//! intersection under every algorithm. Every vehicle has the onboard radar
+//! ([`Sensing::radar`]) in every cell, the clean one included, so that cells differ in
+//! their bus alone.
+//!
+//! The target is safety in every cell: 0 collisions, 0 invariant violations, 0 limit
+//! violations, 0 unpermitted entries. Liveness may degrade, and is reported: the share of
+//! vehicles that met their goals and the mean time by which a run had met them.
+
+use super::crossings::queue_placements;
+use super::multilane::{paper_scenario, safe_spacing};
+use super::sweep::{self, case_seed, Case, Totals};
+use crate::bus::{Faults, Silent};
+use crate::monitor::Limits;
+use crate::reference::instances::rng;
+use crate::scenario::junction::{JunctionScenario, LayoutToml};
+use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
+use crate::scenario::{DriverKind, Phase};
+use crate::world::{Finish, WorldSpec};
+use planner_core::crossing::Algorithm;
+use planner_core::sensing::Sensing;
+use rand::Rng;
+use serde::Serialize;
+
+/// Loss probabilities of the grid.
+pub const LOSSES: [f64; 5] = [0.0, 0.2, 0.5, 0.9, 0.99];
+/// Delivery delays of the grid (s).
+pub const DELAYS: [f64; 5] = [0.0, 0.01, 0.1, 0.5, 1.0];
+/// The other faults, each alone (with a 50 ms delay so that there is something to
+/// reorder and jitter).
+pub const VARIANTS: [&str; 4] = ["jitter", "duplicates", "reordering", "silent"];
+
+/// What runs in every cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Workload {
+    /// The paper's multi-lane experiment (SPEC §8): 6 vehicles, 3 lanes, random targets.
+    Multilane,
+    /// Six vehicles in one lane at the smallest safe gap; the scripted leader brakes at
+    /// amin to a stop after 2 s.
+    Platoon,
+    /// Four planners changing lanes among two drivers with random admissible
+    /// accelerations that neither cooperate nor yield.
+    NonCooperative,
+    /// Up to three vehicles queued on each of the 8 inlet lanes under one algorithm.
+    Intersection(Algorithm),
+}
+
+impl Workload {
+    /// Every workload, in report order.
+    pub fn all() -> Vec<Workload> {
+        let mut w = vec![Self::Multilane, Self::Platoon, Self::NonCooperative];
+        w.extend(
+            super::crossings::ALGORITHMS
+                .iter()
+                .map(|&a| Self::Intersection(a)),
+        );
+        w
+    }
+
+    /// Its label.
+    pub fn label(self) -> String {
+        match self {
+            Self::Multilane => "multilane".into(),
+            Self::Platoon => "platoon".into(),
+            Self::NonCooperative => "non-cooperative".into(),
+            Self::Intersection(a) => format!("intersection {}", a.name()),
+        }
+    }
+
+    /// Run `k`'s world, without faults yet.
+    fn world(self, seed: u64, k: u64) -> WorldSpec {
+        let s = case_seed(seed, k);
+        match self {
+            Self::Multilane => {
+                let mut w = paper_scenario(s).world();
+                w.duration_s = 60.0;
+                w
+            }
+            Self::Platoon => platoon(s).world(),
+            Self::NonCooperative => non_cooperative(s).world(),
+            Self::Intersection(a) => intersection(a, s).world(),
+        }
+    }
+}
+
+/// One cell's bus.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Cell {
+    /// Loss probability.
+    pub loss: f64,
+    /// Delay (s).
+    pub delay_s: f64,
+    /// `"grid"`, or the fault of [`VARIANTS`] this cell adds.
+    pub variant: &'static str,
+}
+
+impl Cell {
+    /// Every cell: the grid, then the variants.
+    pub fn all() -> Vec<Cell> {
+        let mut cells: Vec<Cell> = LOSSES
+            .iter()
+            .flat_map(|&loss| {
+                DELAYS.iter().map(move |&delay_s| Cell {
+                    loss,
+                    delay_s,
+                    variant: "grid",
+                })
+            })
+            .collect();
+        cells.extend(VARIANTS.iter().map(|&variant| Cell {
+            loss: 0.0,
+            delay_s: 0.05,
+            variant,
+        }));
+        cells
+    }
+
+    /// Its faults; `silent` is the vehicle that a "silent" cell silences.
+    pub fn faults(&self, silent: u16) -> Faults {
+        let mut f = Faults {
+            loss: self.loss,
+            delay_s: self.delay_s,
+            ..Faults::NONE
+        };
+        match self.variant {
+            "jitter" => f.jitter_s = 0.2,
+            "duplicates" => f.duplicate = 0.5,
+            "reordering" => {
+                f.reorder = 0.5;
+                f.reorder_s = 0.1;
+            }
+            "silent" => {
+                f.silent = Some(Silent {
+                    id: silent,
+                    from_s: 0.0,
+                })
+            }
+            _ => {}
+        }
+        f
+    }
+}
+
+/// One workload in one cell, over its runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct CellResult {
+    /// The bus.
+    #[serde(flatten)]
+    pub cell: Cell,
+    /// The workload.
+    pub workload: String,
+    /// Safety and liveness totals.
+    #[serde(flatten)]
+    pub totals: Totals,
+    /// Share of vehicles that met their goals (1 = all).
+    pub completion: f64,
+}
+
+impl CellResult {
+    /// Collisions, invariant and limit violations and unpermitted entries.
+    pub fn unsafe_events(&self) -> u64 {
+        let t = &self.totals;
+        t.collisions + t.invariant_violations + t.limit_violations + t.unpermitted_entries
+    }
+}
+
+/// The grid's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct GridReport {
+    /// Per cell and workload.
+    pub cells: Vec<CellResult>,
+    /// Cells (cell × workload) with an unsafe event: the target is 0.
+    pub unsafe_cells: u64,
+    /// Runs per workload and cell.
+    pub runs: u64,
+    /// The seed.
+    pub seed: u64,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// Runs every workload `runs` times in every cell of `cells`, on `threads` threads.
+pub fn grid(cells: &[Cell], runs: u64, seed: u64, threads: usize) -> GridReport {
+    let t0 = std::time::Instant::now();
+    let workloads = Workload::all();
+    let jobs: Vec<(usize, usize, u64)> = (0..cells.len())
+        .flat_map(|c| (0..workloads.len()).flat_map(move |w| (0..runs).map(move |k| (c, w, k))))
+        .collect();
+    let outs = super::par::map_indexed(jobs.len(), threads, |i| {
+        let (c, w, k) = jobs[i];
+        let (cell, workload) = (cells[c], workloads[w]);
+        let mut world = workload.world(seed, k);
+        world.faults = cell.faults(1);
+        world.sensing = Some(Sensing::radar());
+        world.finish = Finish::GoalsMetAndStill;
+        world.name = format!("{}-{}", world.name, cell_name(&cell));
+        Case {
+            index: k,
+            seed: case_seed(seed, k),
+            label: "",
+            summary: sweep::run(world),
+            scenario: String::new(),
+        }
+    });
+    let mut results = Vec::new();
+    for (c, cell) in cells.iter().enumerate() {
+        for (w, workload) in workloads.iter().enumerate() {
+            let mine: Vec<&Case> = jobs
+                .iter()
+                .zip(&outs)
+                .filter(|((jc, jw, _), _)| *jc == c && *jw == w)
+                .map(|(_, o)| o)
+                .collect();
+            let totals = Totals::of(mine.iter().copied());
+            let completion = if totals.vehicles == 0 {
+                1.0
+            } else {
+                1.0 - totals.unfinished as f64 / totals.vehicles as f64
+            };
+            results.push(CellResult {
+                cell: *cell,
+                workload: workload.label(),
+                totals,
+                completion,
+            });
+        }
+    }
+    GridReport {
+        unsafe_cells: results.iter().filter(|r| r.unsafe_events() > 0).count() as u64,
+        cells: results,
+        runs,
+        seed,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// A short name of a cell (for scenario names).
+pub fn cell_name(c: &Cell) -> String {
+    match c.variant {
+        "grid" => format!("loss{}-delay{}", c.loss, c.delay_s),
+        v => v.to_owned(),
+    }
+}
+
+/// Six vehicles in one lane at the smallest safe gap at a random speed; the scripted
+/// leader cruises 2 s, then brakes at amin to a stop and stays.
+fn platoon(seed: u64) -> RoadScenario {
+    let lim = Limits::table_i();
+    let mut r = rng(seed ^ 0x706c_6174);
+    let v = r.random_range(5.0..lim.v_max);
+    let gap = safe_spacing(v);
+    let stop_at = 2.0 + v / lim.brake;
+    let vehicles = (0..6u16)
+        .map(|i| RoadVehicle {
+            id: i + 1,
+            x: 300.0 - f64::from(i) * gap,
+            lane: 0,
+            v,
+            target_lane: None,
+            driver: if i == 0 {
+                DriverKind::Script
+            } else {
+                DriverKind::Planner
+            },
+            script: if i == 0 {
+                vec![
+                    Phase {
+                        until_s: 2.0,
+                        accel: 0.0,
+                    },
+                    Phase {
+                        until_s: stop_at,
+                        accel: -lim.brake,
+                    },
+                ]
+            } else {
+                Vec::new()
+            },
+            goal_x: None,
+            v_ref: Some(v),
+            cooperative: None,
+        })
+        .collect();
+    RoadScenario::new(
+        format!("grid-platoon-{seed}"),
+        15.0,
+        seed,
+        Road {
+            lanes: 1,
+            end_x: None,
+        },
+        vehicles,
+    )
+}
+
+/// Three lanes: four planners with random target lanes and two drivers with random
+/// admissible accelerations that do not cooperate, at random safe spacings.
+fn non_cooperative(seed: u64) -> RoadScenario {
+    let lim = Limits::table_i();
+    let mut r = rng(seed ^ 0x6e6f_6e63);
+    let mut back: [Option<f64>; 3] = [None; 3];
+    let mut vehicles = Vec::new();
+    for i in 0..6u16 {
+        let lane = r.random_range(0..3u8);
+        let v = r.random_range(5.0..20.0);
+        let slot = &mut back[usize::from(lane)];
+        // A random driver may accelerate: leave it room for a second at amax.
+        let x = match *slot {
+            None => r.random_range(100.0..160.0),
+            Some(ahead) => ahead - safe_spacing(lim.v_max) - r.random_range(0.0..20.0),
+        };
+        *slot = Some(x);
+        let planner = i % 3 != 2;
+        vehicles.push(RoadVehicle {
+            id: i + 1,
+            x,
+            lane,
+            v,
+            target_lane: planner.then(|| r.random_range(0..3u8)),
+            driver: if planner {
+                DriverKind::Planner
+            } else {
+                DriverKind::Random
+            },
+            script: Vec::new(),
+            goal_x: None,
+            v_ref: None,
+            cooperative: None,
+        });
+    }
+    RoadScenario::new(
+        format!("grid-non-cooperative-{seed}"),
+        60.0,
+        seed,
+        Road {
+            lanes: 3,
+            end_x: None,
+        },
+        vehicles,
+    )
+}
+
+/// Up to three vehicles on each inlet lane of the SPEC §8 intersection.
+fn intersection(algorithm: Algorithm, seed: u64) -> JunctionScenario {
+    let lt = LayoutToml::default();
+    let layout = crate::scenario::junction::build_layout(&lt)
+        .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
+    let placements = queue_placements(&mut rng(seed), &layout, 3);
+    JunctionScenario::new(
+        format!("grid-intersection-{}-{seed}", algorithm.name()),
+        240.0,
+        seed,
+        algorithm,
+        lt,
+        placements,
+    )
+    .unwrap_or_else(|_| unreachable!("queue placements are valid"))
+}
+
+impl core::fmt::Display for GridReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        writeln!(
+            f,
+            "fault grid: {} runs per workload and cell; every vehicle with the onboard radar",
+            self.runs
+        )?;
+        writeln!(
+            f,
+            "{:<22} {:<22} {:>5} {:>7} {:>9} {:>9} {:>10}",
+            "cell", "workload", "runs", "unsafe", "complete", "finish s", "deadlocks"
+        )?;
+        for r in &self.cells {
+            writeln!(
+                f,
+                "{:<22} {:<22} {:>5} {:>7} {:>8.0}% {:>9.1} {:>10}",
+                cell_name(&r.cell),
+                r.workload,
+                r.totals.cases,
+                r.unsafe_events(),
+                100.0 * r.completion,
+                r.totals.mean_finish_time_s,
+                r.totals.deadlocks
+            )?;
+        }
+        write!(
+            f,
+            "cells with an unsafe event: {} of {}; wall time {:.1} s",
+            self.unsafe_cells,
+            self.cells.len(),
+            self.wall_seconds
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn workloads_are_valid_and_the_platoon_is_at_the_smallest_safe_gap() {
+        for k in 0..5 {
+            for w in Workload::all() {
+                let world = w.world(1, k);
+                assert!(!world.vehicles.is_empty(), "{}", w.label());
+            }
+            let p = platoon(k);
+            let lim = Limits::table_i();
+            let gap = p.vehicles[0].x - p.vehicles[1].x;
+            assert!((gap - safe_spacing(p.vehicles[0].v)).abs() < 1e-9);
+            assert!(
+                gap - crate::world::LENGTH_M - lim.d0 < lim.safe_distance(p.vehicles[0].v) + 1.0
+            );
+        }
+        assert_eq!(Cell::all().len(), 29);
+        let silent = Cell::all()[28].faults(1);
+        assert_eq!(silent.silent.map(|s| s.id), Some(1));
+        for c in Cell::all() {
+            c.faults(1).validate().unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+}

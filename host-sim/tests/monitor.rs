@@ -1,0 +1,409 @@
+//! The independent monitors must see what they are there to see (issue 20): hand-placed
+//! ground truth just inside and just outside each rule, for the road, the intersection
+//! and the network monitor. A blind monitor would certify every run; these fail if a
+//! check is switched off, loosened or pointed at the wrong lane.
+
+mod common;
+
+use host_sim::monitor::junction::{JunctionWatch, OnRoute};
+use host_sim::monitor::{Findings, Limits, Truth};
+use host_sim::world::network::{End, Network};
+use host_sim::world::step::{segment_truth, WorldMonitor};
+use host_sim::world::vehicle::{At, VehicleTruth};
+use host_sim::world::{LANE_WIDTH_M, LENGTH_M};
+use std::f64::consts::FRAC_PI_4;
+
+const MM: f64 = 1e-3;
+
+fn lim() -> Limits {
+    Limits::table_i()
+}
+
+/// A planner-driven car at (x, y), straight, at `v` (steady).
+fn car(x: f64, y: f64, v: f64) -> Truth {
+    Truth {
+        x,
+        y,
+        theta: 0.0,
+        length: LENGTH_M,
+        width: 1.7,
+        lane: (y / LANE_WIDTH_M) as u8,
+        keeps_invariant: true,
+        v,
+        v_before: v,
+        mapped: false,
+    }
+}
+
+fn centre(lane: u8) -> f64 {
+    (f64::from(lane) + 0.5) * LANE_WIDTH_M
+}
+
+/// Findings of one instant on a straight road of 3 lanes.
+fn road(all: &[Truth], end_x: Option<f64>) -> Findings {
+    let mut f = Findings::new();
+    f.check(&lim(), all, end_x, 3);
+    f
+}
+
+/// Bumper gap at which a follower at `v` is exactly on Lemma 3's boundary.
+fn boundary(v: f64) -> f64 {
+    lim().d0 + lim().safe_distance(v)
+}
+
+#[test]
+fn the_invariant_is_judged_in_every_lane_to_the_millimetre() {
+    for lane in 0..3 {
+        let y = centre(lane);
+        for (gap, violated) in [(boundary(20.0) - MM, true), (boundary(20.0) + MM, false)] {
+            let leader = car(100.0, y, 20.0);
+            let follower = car(100.0 - LENGTH_M - gap, y, 20.0);
+            let f = road(&[leader, follower], None);
+            assert_eq!(
+                f.invariant_violations,
+                u64::from(violated),
+                "lane {lane}, gap {gap}"
+            );
+            assert_eq!(f.collisions, 0);
+            assert!((f.min_gap_m - gap).abs() < 1e-9);
+        }
+        // The rule is the follower's speed: the same gap is fine at a lower speed.
+        let f = road(
+            &[
+                car(100.0, y, 20.0),
+                car(100.0 - LENGTH_M - boundary(20.0) + MM, y, 15.0),
+            ],
+            None,
+        );
+        assert_eq!(f.invariant_violations, 0, "lane {lane}");
+    }
+}
+
+#[test]
+fn a_vehicle_straddling_two_lanes_is_in_both() {
+    // Centred on the line between lanes 0 and 1.
+    let straddler = car(100.0, LANE_WIDTH_M, 20.0);
+    let tight = LENGTH_M + boundary(20.0) - MM;
+    for lane in [0, 1] {
+        // A follower too close behind it in either lane.
+        let f = road(&[straddler, car(100.0 - tight, centre(lane), 20.0)], None);
+        assert_eq!(f.invariant_violations, 1, "follower in lane {lane}");
+        // It too close behind a leader in either lane.
+        let f = road(&[car(100.0 + tight, centre(lane), 20.0), straddler], None);
+        assert_eq!(f.invariant_violations, 1, "leader in lane {lane}");
+    }
+    // Not in lane 2.
+    let f = road(&[straddler, car(100.0 - tight, centre(2), 20.0)], None);
+    assert_eq!(f.invariant_violations, 0);
+    // A rectangle turned toward lane 1 from lane 0's centre reaches into it.
+    // Straight there, its edge is 0.35 m short of lane 1; turned by 0.2 rad, its corner
+    // is 0.08 m into it.
+    let mut turned = car(100.0, centre(0) + 0.6, 20.0);
+    let f = road(&[turned, car(100.0 - tight, centre(1), 20.0)], None);
+    assert_eq!(f.invariant_violations, 0);
+    turned.theta = 0.2;
+    let f = road(&[turned, car(100.0 - tight, centre(1), 20.0)], None);
+    assert_eq!(f.invariant_violations, 1);
+}
+
+#[test]
+fn the_road_end_is_judged_like_a_stopped_leader() {
+    let end = 500.0;
+    for (room, violated) in [(boundary(10.0) - MM, true), (boundary(10.0) + MM, false)] {
+        let c = car(end - 0.5 * LENGTH_M - room, centre(1), 10.0);
+        let f = road(&[c], Some(end));
+        assert_eq!(f.invariant_violations, u64::from(violated), "room {room}");
+        assert_eq!(f.road_end_overruns, 0);
+    }
+    // Its front past the end: an overrun.
+    let f = road(&[car(end - 0.5 * LENGTH_M + MM, centre(0), 0.0)], Some(end));
+    assert_eq!(f.road_end_overruns, 1);
+    let f = road(&[car(end - 0.5 * LENGTH_M - MM, centre(0), 0.0)], Some(end));
+    assert_eq!(f.road_end_overruns, 0);
+}
+
+#[test]
+fn leaving_the_road_and_breaking_the_limits_are_seen() {
+    let l = lim();
+    // A rectangle's edge below y = 0 or above the top lane.
+    assert_eq!(road(&[car(0.0, 0.85 - MM, 5.0)], None).off_road, 1);
+    assert_eq!(road(&[car(0.0, 0.85 + MM, 5.0)], None).off_road, 0);
+    assert_eq!(
+        road(&[car(0.0, 3.0 * LANE_WIDTH_M - 0.85 + MM, 5.0)], None).off_road,
+        1
+    );
+    // Speed, acceleration, braking, heading.
+    let mut c = car(0.0, centre(0), l.v_max + 1e-3);
+    assert_eq!(road(&[c], None).limit_violations, 1);
+    c = car(0.0, centre(0), 10.0);
+    c.v_before = 10.0 - l.a_max * l.h - 1e-4;
+    assert_eq!(road(&[c], None).limit_violations, 1);
+    c.v_before = 10.0 + l.brake * l.h + 1e-4;
+    assert_eq!(road(&[c], None).limit_violations, 1);
+    c.v_before = 10.0 - l.a_max * l.h + 1e-6;
+    assert_eq!(road(&[c], None).limit_violations, 0);
+    c = car(0.0, centre(1), 10.0);
+    c.theta = l.theta_max + 1e-6;
+    assert_eq!(road(&[c], None).limit_violations, 1);
+}
+
+#[test]
+fn collisions_of_rotated_rectangles_are_seen() {
+    let a = car(0.0, centre(1), 10.0);
+    // Nose to tail: touching by a millimetre, or a millimetre apart.
+    assert_eq!(
+        road(&[a, car(LENGTH_M - MM, centre(1), 10.0)], None).collisions,
+        1
+    );
+    assert_eq!(
+        road(&[a, car(LENGTH_M + MM, centre(1), 10.0)], None).collisions,
+        0
+    );
+    // Rotated 45° beside it: the corner reaches in, or its bounding boxes overlap while
+    // the rectangles do not.
+    let mut b = car(3.6, centre(1) + 2.2, 10.0);
+    b.theta = FRAC_PI_4;
+    assert_eq!(road(&[a, b], None).collisions, 1);
+    b.x = 4.0;
+    b.y = centre(1) + 2.6;
+    assert_eq!(road(&[a, b], None).collisions, 0);
+    // Every pair counts, whatever their lanes and drivers.
+    let mut s = car(1.0, centre(1), 10.0);
+    s.keeps_invariant = false;
+    assert_eq!(road(&[a, s, car(2.0, centre(1), 0.0)], None).collisions, 3);
+}
+
+#[test]
+fn a_scripted_follower_is_not_held_to_the_invariant_but_its_follower_is() {
+    let tight = LENGTH_M + boundary(20.0) - MM;
+    let mut script = car(100.0 - tight, centre(0), 20.0);
+    script.keeps_invariant = false;
+    let f = road(&[car(100.0, centre(0), 20.0), script], None);
+    assert_eq!(f.invariant_violations, 0);
+    let f = road(
+        &[
+            car(100.0, centre(0), 20.0),
+            script,
+            car(100.0 - 2.0 * tight, centre(0), 20.0),
+        ],
+        None,
+    );
+    assert_eq!(f.invariant_violations, 1);
+}
+
+// ---- the intersection's monitor ----
+
+fn layout() -> planner_core::intersection::Layout<f64> {
+    host_sim::experiments::throughput::spec8_layout()
+}
+
+fn on(id: u16, route: u8, s: f64, v: f64) -> OnRoute {
+    OnRoute {
+        id,
+        route,
+        s,
+        v,
+        length: LENGTH_M,
+    }
+}
+
+fn junction(watch: &JunctionWatch, cars: &[OnRoute]) -> Findings {
+    let mut f = Findings::new();
+    watch.check(&mut f, &layout(), &lim(), cars);
+    f
+}
+
+#[test]
+fn the_invariant_is_judged_on_shared_paths_of_a_junction() {
+    let l = layout();
+    let w = JunctionWatch::default();
+    let tight = LENGTH_M + boundary(10.0) - MM;
+    let loose = LENGTH_M + boundary(10.0) + MM;
+    // Same route.
+    let r = 0u8;
+    assert_eq!(
+        junction(&w, &[on(1, r, 60.0, 0.0), on(2, r, 60.0 - tight, 10.0)]).invariant_violations,
+        1
+    );
+    assert_eq!(
+        junction(&w, &[on(1, r, 60.0, 0.0), on(2, r, 60.0 - loose, 10.0)]).invariant_violations,
+        0
+    );
+    // Two routes of one inlet lane while the one ahead is still on the inlet.
+    let r0 = l.route(0).expect("route 0");
+    let other = (0..l.routes.len())
+        .find(|&k| k != 0 && l.route(k).is_some_and(|q| q.inlet == r0.inlet))
+        .expect("another route from route 0's inlet") as u8;
+    let ahead = r0.path.entry() - 10.0;
+    let cars = [on(1, other, ahead, 0.0), on(2, 0, ahead - tight, 10.0)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 1);
+    // Routes sharing an outlet, both past their exits.
+    let mut pair = None;
+    for a in 0..l.routes.len() {
+        for b in 0..l.routes.len() {
+            let (ra, rb) = (l.route(a).expect("a"), l.route(b).expect("b"));
+            if a != b && ra.outlet == rb.outlet && ra.inlet != rb.inlet {
+                pair = Some((a as u8, b as u8, ra.path.exit(), rb.path.exit()));
+            }
+        }
+    }
+    let (a, b, xa, xb) = pair.expect("two routes into one outlet");
+    let cars = [on(1, a, xa + 30.0, 0.0), on(2, b, xb + 30.0 - tight, 10.0)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 1);
+    let cars = [on(1, a, xa + 30.0, 0.0), on(2, b, xb + 30.0 - loose, 10.0)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 0);
+}
+
+#[test]
+fn entering_a_s_without_a_permission_is_seen() {
+    let l = layout();
+    let r = l.route(3).expect("route 3");
+    let mut w = JunctionWatch::default();
+    let front_at = |x: f64| x - 0.5 * LENGTH_M;
+    // Front a millimetre into A_S, never permitted.
+    let inside = on(7, 3, front_at(r.path.entry()) + MM, 5.0);
+    let before = on(7, 3, front_at(r.path.entry()) - MM, 5.0);
+    assert_eq!(junction(&w, &[inside]).unpermitted_entries, 1);
+    assert_eq!(junction(&w, &[before]).unpermitted_entries, 0);
+    // Permitted once: not an unpermitted entry.
+    w.granted(&[7]);
+    assert_eq!(junction(&w, &[inside]).unpermitted_entries, 0);
+    assert_eq!(
+        junction(&w, &[on(8, 3, r.path.entry() + 2.0, 5.0)]).unpermitted_entries,
+        1
+    );
+}
+
+// ---- the network's monitor ----
+
+fn network() -> Network {
+    let spec = common::parse(
+        r#"
+name = "net-monitor"
+duration_s = 10.0
+algorithm = "pipelined"
+[grid]
+rows = 1
+cols = 2
+block_m = 300.0
+lanes = 2
+[arrivals]
+rate_vph = 100.0
+"#,
+        "net-monitor.toml",
+    );
+    spec.network
+}
+
+fn truth(id: u16, at: At, v: f64) -> VehicleTruth {
+    VehicleTruth {
+        id,
+        at,
+        v,
+        v_before: v,
+        planner: true,
+        unmet: true,
+        target_lane: 0,
+    }
+}
+
+fn on_lane(seg: usize, x: f64, lane: u8) -> At {
+    At::Lane {
+        seg,
+        x,
+        y: centre(lane),
+        theta: 0.0,
+        lane,
+        alpha: None,
+        beta: None,
+    }
+}
+
+fn world(net: &Network, vehicles: &[VehicleTruth]) -> Findings {
+    let mut m = WorldMonitor::new(net);
+    m.check(&lim(), net, vehicles);
+    m.findings
+}
+
+#[test]
+fn the_network_monitor_judges_segments_junction_edges_and_the_world() {
+    let net = network();
+    let (k, stop) = net
+        .segments
+        .iter()
+        .enumerate()
+        .find_map(|(k, s)| match s.end {
+            End::Junction(_, x) => Some((k, x)),
+            _ => None,
+        })
+        .expect("a segment into a junction");
+    let tight = LENGTH_M + boundary(12.0) - MM;
+    let loose = LENGTH_M + boundary(12.0) + MM;
+    // On a segment, in each lane.
+    for lane in 0..2 {
+        let a = truth(1, on_lane(k, 100.0, lane), 0.0);
+        let f = world(&net, &[a, truth(2, on_lane(k, 100.0 - tight, lane), 12.0)]);
+        assert_eq!(f.invariant_violations, 1, "lane {lane}");
+        let f = world(&net, &[a, truth(2, on_lane(k, 100.0 - loose, lane), 12.0)]);
+        assert_eq!(f.invariant_violations, 0, "lane {lane}");
+    }
+    // A vehicle on a segment past its junction's stop line: only crossing vehicles may be
+    // in A_S.
+    let f = world(
+        &net,
+        &[truth(3, on_lane(k, stop - 0.5 * LENGTH_M + MM, 0), 1.0)],
+    );
+    assert_eq!(f.unpermitted_entries, 1);
+    let f = world(
+        &net,
+        &[truth(3, on_lane(k, stop - 0.5 * LENGTH_M - MM, 0), 1.0)],
+    );
+    assert_eq!(f.unpermitted_entries, 0);
+    // Across the edge of a junction: a crossing vehicle on its outlet track, which lies
+    // on the segment leaving the junction, and a vehicle on that segment ahead of it.
+    let jn = &net.junctions[0];
+    let (route, seg, x, lane) = (0..jn.layout.routes.len())
+        .find_map(|r| {
+            let s = jn.layout.route(r)?.path.exit() + 20.0;
+            let (seg, x, lane) = net.on_segment(0, r as u8, s)?;
+            Some((r as u8, seg, x, lane))
+        })
+        .expect("an outlet on a segment");
+    let s = jn
+        .layout
+        .route(usize::from(route))
+        .expect("route")
+        .path
+        .exit()
+        + 20.0;
+    let crossing = truth(
+        4,
+        At::Crossing {
+            junction: 0,
+            route,
+            s,
+        },
+        12.0,
+    );
+    let mapped = segment_truth(&crossing, &net, seg).expect("mapped onto the segment");
+    assert!(mapped.mapped && (mapped.x - x).abs() < 1e-9);
+    let f = world(
+        &net,
+        &[crossing, truth(5, on_lane(seg, x + tight, lane), 0.0)],
+    );
+    assert_eq!(f.invariant_violations, 1, "across the junction's edge");
+    let f = world(
+        &net,
+        &[crossing, truth(5, on_lane(seg, x + loose, lane), 0.0)],
+    );
+    assert_eq!(f.invariant_violations, 0);
+    // Collisions in world coordinates, between any two places.
+    let f = world(
+        &net,
+        &[
+            crossing,
+            truth(5, on_lane(seg, x + LENGTH_M - MM, lane), 0.0),
+        ],
+    );
+    assert_eq!(f.collisions, 1);
+}
