@@ -144,6 +144,101 @@ fn cantools_decodes_the_gateways_candump_log() {
             &mut expected,
         );
     }
+    // A network's kinds: a located state, a junction's request, leaving a junction and
+    // leaving the network (junction 255).
+    let st = VehicleState {
+        id: 0x21,
+        x: 812.34,
+        y: 9.0,
+        theta: -0.25,
+        v: 12.5,
+        omega: -0.5,
+        lane: 2,
+        alpha: None,
+        beta: Some(1),
+        stamp: 42.125,
+        cooperative: false,
+    };
+    let deg = 180.0 / std::f64::consts::PI;
+    let frames: Frames<F8> = encode(
+        &Message::Located {
+            segment: 1013,
+            state: st,
+        },
+        0x21,
+        7,
+    )
+    .expect("encodes");
+    push(
+        &frames,
+        vec![
+            vec![
+                ("VehicleId", 33.0),
+                ("Segment", 1013.0),
+                ("Lane", 2.0),
+                ("LaneChangeTo", 15.0),
+                ("IntendedLane", 1.0),
+                ("NotCooperative", 1.0),
+            ],
+            vec![("X", st.x), ("Y", st.y)],
+            vec![
+                ("Heading", st.theta * deg),
+                ("Speed", st.v),
+                ("YawRate", st.omega * deg),
+            ],
+            vec![("Timestamp", st.stamp), ("FrameIndex", 3.0)],
+        ],
+        &mut log,
+        &mut expected,
+    );
+    let frames: Frames<F8> = encode(
+        &Message::JunctionRequest {
+            junction: 2,
+            request: req,
+        },
+        9,
+        8,
+    )
+    .expect("encodes");
+    push(
+        &frames,
+        vec![
+            vec![
+                ("VehicleId", 9.0),
+                ("Junction", 2.0),
+                ("InletHeading", 2.0),
+                ("InletLane", 1.0),
+                ("OutletHeading", 3.0),
+                ("OutletLane", 1.0),
+                ("Speed", 13.9),
+            ],
+            vec![("PathPosition", 97.25), ("Arrival", 3.5)],
+            vec![("FrameIndex", 2.0)],
+        ],
+        &mut log,
+        &mut expected,
+    );
+    for junction in [2u8, 255] {
+        let m = Message::JunctionExit {
+            junction,
+            id: 9,
+            at: 9.25,
+        };
+        let frames: Frames<F8> = encode(&m, 9, 3).expect("encodes");
+        push(
+            &frames,
+            vec![
+                vec![
+                    ("VehicleId", 9.0),
+                    ("Junction", f64::from(junction)),
+                    ("At", 9.25),
+                ],
+                vec![("FrameIndex", 1.0)],
+            ],
+            &mut log,
+            &mut expected,
+        );
+    }
     let sync = Message::<f64>::Sync {
         period: 1234,
         last: true,

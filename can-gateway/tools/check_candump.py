@@ -17,7 +17,7 @@ def crc8_j1850(data: bytes, crc: int = 0xFF) -> int:
     return crc
 
 
-FRAMES_PER_KIND = {1: 3, 2: 2}  # kind code -> frames per message (others: 1)
+FRAMES_PER_KIND = {1: 3, 2: 2, 7: 4, 8: 3, 9: 2}  # kind code -> frames per message (others: 1)
 
 
 def reassemble(frames):

@@ -7,7 +7,9 @@ lost), the SYNC ticks come in order with the end flag on the last. For a road sc
 one state per vehicle and period, each equal to the vehicle's trace within half a
 resolution step. For an intersection scenario, grants only from the manager's address
 (0xF1), as many requests, grants and exits on the bus as the fleet sent, each request
-on a route of the layout with its vehicle's position never going back.
+on a route of the layout with its vehicle's position never going back. For a network,
+the same per junction: grants only from that junction's manager (0xF1 + index), every
+request on a route of a junction, and every vehicle leaving the network once.
 
 Usage: check_vcan_run.py DBC SUMMARY.json CANDUMP.log TRACE.csv|- VM_STATUS
 Exit 0 when every check holds; 1 with the first failure."""
@@ -23,7 +25,9 @@ import cantools
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "can-gateway", "tools"))
 from check_candump import reassemble  # noqa: E402
 
-KIND = {1: "State", 2: "Request", 3: "Grant", 4: "Revoke", 5: "Exit", 6: "Sync"}
+KIND = {1: "State", 2: "Request", 3: "Grant", 4: "Revoke", 5: "Exit", 6: "Sync",
+        7: "Located", 8: "JunctionRequest", 9: "JunctionExit"}
+NETWORK_EXIT = 255  # JunctionExit's junction when the vehicle left the network
 H = 0.01  # the period (Table I)
 MANAGER = 0xF1  # can-gateway's wire::MANAGER_ADDRESS
 
@@ -59,12 +63,12 @@ def check_summary(s, vm_status):
         fail(f"unsafe run: {unsafe}")
     if s["medium"] != "socketcan:vcan0":
         fail(f"medium {s['medium']}")
-    tasks = s["vehicles"] + (1 if crossing else 0)
-    if s["tasks"] != tasks:
-        fail(f"{s['tasks']} tasks for {s['vehicles']} vehicles")
+    tasks = s["vehicles"] + s["managers"]
+    if s["tasks"] != tasks or (crossing and s["managers"] < 1):
+        fail(f"{s['tasks']} tasks for {s['vehicles']} vehicles and {s['managers']} managers")
     if s["can"]["rejected"]:
         fail(f"frames rejected: {s['can']['rejected']}")
-    if not s["completed"] or (crossing and s["crossed"] != s["vehicles"]):
+    if not s["completed"] or (crossing and s["crossed"] < s["vehicles"]):
         fail("liveness goals not met")
     if vm_status != "0":
         fail(f"host-sim exited {vm_status} in the VM")
@@ -104,6 +108,7 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
     states = {}  # (id, stamp ms) -> signals of the three frames
     requests = defaultdict(list)  # vehicle -> [(inlet, outlet, s, v)] in bus order
     kinds = Counter()
+    exits = Counter()  # (vehicle, junction) -> JunctionExit messages
     syncs = []
     for sa, kind, counter, _body, parts in messages:
         signals = {}
@@ -115,10 +120,10 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
             fail(f"alive counter of {KIND[kind]} from {sa} jumped {prev} -> {counter}: a lost message")
         last_counter[key] = counter
         kinds[KIND[kind]] += 1
-        if kind in (1, 2, 5) and signals["VehicleId"] != sa:
+        if kind in (1, 2, 5, 7, 8, 9) and signals["VehicleId"] != sa:
             fail(f"{KIND[kind]} of vehicle {signals['VehicleId']} sent by {sa}")
-        if kind in (3, 4) and sa != MANAGER:
-            fail(f"{KIND[kind]} sent by {sa:#x}, not the manager")
+        if kind in (3, 4) and not MANAGER <= sa < MANAGER + s["managers"]:
+            fail(f"{KIND[kind]} sent by {sa:#x}, not a manager")
         if kind == 1:
             states[(sa, round(signals["Timestamp"] * 1000))] = signals
         elif kind == 2:
@@ -127,12 +132,23 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
                                  signals["PathPosition"], signals["Speed"]))
         elif kind == 6:
             syncs.append((signals["Period"], signals["Last"]))
+        elif kind == 7:
+            states[(sa, round(signals["Timestamp"] * 1000))] = signals
+        elif kind == 8:
+            requests[(sa, signals["Junction"])].append(
+                ((signals["InletHeading"], signals["InletLane"]),
+                 (signals["OutletHeading"], signals["OutletLane"]),
+                 signals["PathPosition"], signals["Speed"]))
+        elif kind == 9:
+            exits[(sa, signals["Junction"])] += 1
     ticks = s["sync_ticks"] if crossing else s["periods"]
     if [p for p, _ in syncs] != list(range(ticks)):
         fail(f"SYNC ticks not 0..{ticks - 1} in order")
     if [l for _, l in syncs] != [0] * (ticks - 1) + [1]:
         fail("the last flag is not on the last SYNC alone")
     span = frames[-1][0] - frames[0][0] if frames else 0.0
+    if kinds["Located"] or kinds["JunctionRequest"]:
+        return check_network(s, states, requests, exits, kinds, frames, names, span)
     if crossing:
         return check_crossing(s, requests, kinds, frames, names, span)
     if len(states) != s["vehicles"] * ticks:
@@ -204,6 +220,52 @@ def check_crossing(s, requests, kinds, frames, names, span):
           f"{got['requests']} requests, {got['grants']} grants (all from 0x{MANAGER:X}), "
           f"{got['exits']} exits, as the fleet sent them; every vehicle on one route of the "
           f"layout, never going back")
+    return 0
+
+
+def route_ok(inlet, outlet, lanes):
+    """A route of a junction with `lanes` lanes per approach (SPEC §10): the inner lane
+    (0) goes straight or left, the outer (lanes - 1) straight or right, any other straight,
+    each into the same lane of its outlet."""
+    (ih, il), (oh, ol) = inlet, outlet
+    return il == ol and (oh == ih or (oh == (ih + 1) % 4 and il == 0)
+                         or (oh == (ih + 3) % 4 and il == lanes - 1))
+
+
+def check_network(s, states, requests, exits, kinds, frames, names, span):
+    """A network run: as many located states, requests, grants and exits on the bus as
+    the fleet sent; every request on a route of its junction, never going back along it;
+    every vehicle leaving the network once (JunctionExit 255 repeated while it says so)."""
+    m = s["messages"]
+    got = {"states": kinds["Located"], "requests": kinds["JunctionRequest"],
+           "grants": kinds["Grant"], "exits": kinds["JunctionExit"]}
+    if got != {k: m[k] for k in got}:
+        fail(f"messages on the bus {got}, the fleet sent {m}")
+    lanes = 1 + max((l for reqs in requests.values() for (_, l), _, _, _ in reqs), default=0)
+    for (vid, j), reqs in requests.items():
+        if not 0 <= j < s["managers"]:
+            fail(f"vehicle {vid} asked junction {j} of {s['managers']}")
+        routes = {(i, o) for i, o, _s, _v in reqs}
+        if len(routes) != 1:
+            fail(f"vehicle {vid} changed its route at junction {j}: {routes}")
+        (i, o) = routes.pop()
+        if not route_ok(i, o, lanes):
+            fail(f"vehicle {vid}: {i} -> {o} is not a route of junction {j} ({lanes} lanes)")
+        for (_, _, a, _), (_, _, b, _) in zip(reqs, reqs[1:]):
+            if b < a:
+                fail(f"vehicle {vid} went back from {a} m to {b} m along junction {j}'s path")
+    left = {vid for (vid, j) in exits if j == NETWORK_EXIT}
+    if len(left) != s["vehicles"]:
+        fail(f"{len(left)} vehicles said they left the network, of {s['vehicles']}")
+    crossed = {(vid, j) for (vid, j) in requests}
+    print(f"cantools decoded {len(frames)} frames over {span:.1f} s of vcan0 "
+          f"({', '.join(f'{k} {v}' for k, v in sorted(names.items()))}); "
+          f"every CRC and alive counter right; {s['sync_ticks']} SYNC ticks in order; "
+          f"{got['states']} located states, {got['requests']} requests at "
+          f"{s['managers']} junctions ({len(crossed)} crossings), {got['grants']} grants "
+          f"(each from its junction's manager), {got['exits']} exits, as the fleet sent "
+          f"them; every vehicle on routes of the layout, never going back, and out of the "
+          f"network once")
     return 0
 
 

@@ -42,6 +42,13 @@ pub const STRAIGHT_HEADING_RAD: f64 = 0.02;
 /// failures). 0.6 m from the centre leaves 0.35 m to the edge. Until the change
 /// completes its band spans both lanes, so the S-curve can finish.
 pub const CENTRED_M: f64 = 0.6;
+/// Offset (m) from its lane's centre line beyond which a vehicle with no change under way
+/// steers back along an S-curve (a quintic like a change's, see [`recentre_length`]). A
+/// change completes up to [`CENTRED_M`] off the line, and the lateral QP alone, tracking
+/// the line with a straight heading over its short horizon, closes such an offset only
+/// over hundreds of metres — a vehicle that must be centred to hand over at a junction
+/// would reach the stop line first.
+pub const RECENTRE_M: f64 = 0.05;
 /// Margin (m) by which the lateral QP tightens the band: the QP's linearisation and
 /// move blocking are approximate; 5 cm keeps the exact check from failing on them.
 pub const LATERAL_MARGIN_M: f64 = 0.05;
@@ -210,6 +217,12 @@ pub enum LaneInputError {
     LaneTooNarrow,
     /// The vehicle's reference point is outside its band.
     OutsideBand,
+}
+
+/// Length (m) of the S-curve back to the centre line at speed `v`: two seconds of travel,
+/// at least 8 m (a 0.6 m offset then needs a radius of ≥ 18 m, above ρmin).
+pub fn recentre_length<F: Real>(v: F) -> F {
+    (F::TWO * v).max(F::from_f64(8.0))
 }
 
 /// A lane change's reference path: a quintic S-curve from (x0, y0) to (x0 + len, y1).
@@ -709,6 +722,26 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         }
     }
 
+    /// With no change under way: the S-curve back to the centre line ([`RECENTRE_M`]),
+    /// dropped once driven.
+    fn recentre(&mut self, obs: &LaneObservation<'_, F>) {
+        if self.alpha.is_some() {
+            return;
+        }
+        if self.reference.is_some_and(|r| obs.pose.x >= r.x0 + r.len) {
+            self.reference = None;
+        }
+        let centre = obs.road.lane_centre(self.lane);
+        if self.reference.is_none() && (obs.pose.y - centre).abs() > F::from_f64(RECENTRE_M) {
+            self.reference = Some(Reference {
+                x0: obs.pose.x,
+                y0: obs.pose.y,
+                y1: centre,
+                len: recentre_length(obs.v_prev),
+            });
+        }
+    }
+
     /// Protocol bookkeeping at the start of a step: completes, declares or starts a change.
     fn update_lanes(&mut self, obs: &LaneObservation<'_, F>) -> Option<LaneEvent> {
         let p = *self.params();
@@ -796,6 +829,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         self.check(obs)?;
         let p = *self.params();
         let event = self.update_lanes(obs);
+        self.recentre(obs);
         if self.beta.is_some() {
             self.beta_steps = self.beta_steps.saturating_add(1);
         }

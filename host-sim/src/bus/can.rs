@@ -32,6 +32,10 @@ use std::io;
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
+/// The junction number of a `JunctionExit` that says its vehicle left the network at an
+/// exit (no junction has it: a network has at most 64).
+pub const NETWORK_EXIT: u8 = 0xFF;
+
 /// The steps to which can-gateway rounds what vehicles broadcast (position 0.01 m, speed
 /// 0.02 m/s): the planners' bus resolution over CAN.
 pub const RESOLUTION: (f64, f64) = (wire::POS_RES, wire::SPEED_RES);
@@ -498,6 +502,16 @@ impl<'a> WireMap<'a> {
                 at,
             },
             Message::Left { id, at, .. } => wire::Message::Exit { id, at },
+            Message::Gone { id, at } if self.network => wire::Message::JunctionExit {
+                junction: NETWORK_EXIT,
+                id,
+                at,
+            },
+            Message::Gone { .. } => {
+                return Err(CanError::Unmapped(
+                    "leaving a network on a map without segments",
+                ))
+            }
             Message::Grant { id, until, .. } => wire::Message::Grant { id, until },
         })
     }
@@ -574,6 +588,11 @@ impl<'a> WireMap<'a> {
                 at,
                 junction: 0,
             }),
+            wire::Message::JunctionExit {
+                junction: NETWORK_EXIT,
+                id,
+                at,
+            } => Some(Message::Gone { id, at }),
             wire::Message::JunctionExit { junction, id, at } => Some(Message::Left {
                 id,
                 at,

@@ -133,6 +133,8 @@ pub struct FleetSummary {
     pub medium: String,
     /// Tasks: one per vehicle and per junction manager.
     pub tasks: usize,
+    /// Junction managers (each its own node, at 0xF1 + its index).
+    pub managers: usize,
     /// Periods run (0 to the last, inclusive).
     pub periods: u64,
     /// SYNC ticks sent.
@@ -300,7 +302,7 @@ fn kind_of(m: &Message) -> Kind {
         Message::State { .. } => Kind::State,
         Message::Crossing { .. } => Kind::Request,
         Message::Grant { .. } => Kind::Grant,
-        Message::Left { .. } => Kind::Other,
+        Message::Left { .. } | Message::Gone { .. } => Kind::Other,
     }
 }
 
@@ -721,6 +723,7 @@ impl<const N: usize> Harness<N> {
             run,
             medium: medium.to_string(),
             tasks: n + m,
+            managers: m,
             periods,
             sync_ticks: tally.ticks,
             messages: msgs,
@@ -811,7 +814,7 @@ fn vehicle_task<const N: usize, P: CanPort>(
     let mut row = None;
     let mut heard = Vec::new();
     let mut sync_rx = None;
-    let mut departing: Option<(usize, f64)> = None;
+    let mut departing: Option<(Option<usize>, f64)> = None;
     for k in 0..=ctx.total {
         let t = k as f64 * h;
         let published = SystemTime::now();
@@ -819,16 +822,8 @@ fn vehicle_task<const N: usize, P: CanPort>(
         if let Some((j, at)) =
             departing.filter(|&(_, at)| t < at + crate::world::junction::LEFT_REPEAT_S)
         {
-            node.send(
-                &Message::Left {
-                    id,
-                    at,
-                    junction: j,
-                },
-                ctx.map,
-                at,
-            )
-            .map_err(|e| fail(e.to_string()))?;
+            node.send(&Message::departure(id, at, j), ctx.map, at)
+                .map_err(|e| fail(e.to_string()))?;
             exit = true;
         }
         let in_world = car.log.left_at.is_none();
@@ -883,8 +878,10 @@ fn vehicle_task<const N: usize, P: CanPort>(
         car.advance(v, w, h);
         let now = (k + 1) as f64 * h;
         car.check_goal(now);
-        if let Moved::LeftJunction(j) = step_place(&mut car, ctx.net, now) {
-            departing = Some((j, now));
+        match step_place(&mut car, ctx.net, now) {
+            Moved::LeftJunction(j) => departing = Some((Some(j), now)),
+            Moved::LeftWorld => departing = Some((None, now)),
+            Moved::Stays => {}
         }
         row = Some(r);
     }
@@ -990,7 +987,7 @@ fn in_order(inbox: &mut [(Received, u8)], order: &[u16], t: f64) -> Vec<Received
     let rank = |r: &Received| -> (u8, usize) {
         let pos = |id: u16| order.iter().position(|&o| o == id).unwrap_or(usize::MAX);
         match r.msg {
-            Message::Left { id, .. } => (0, pos(id)),
+            Message::Left { id, .. } | Message::Gone { id, .. } => (0, pos(id)),
             Message::State { .. } | Message::Crossing { .. } => (1, pos(r.msg.subject().0)),
             Message::Grant { junction, id, .. } => (2, junction * 65536 + pos(id).min(65535)),
         }

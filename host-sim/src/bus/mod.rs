@@ -54,6 +54,14 @@ pub enum Message {
         /// The junction (index).
         junction: usize,
     },
+    /// V2V: vehicle `id` left the network at an exit at `at`: nothing it said up to then
+    /// stands any more (its followers must not go on braking for where it last was).
+    Gone {
+        /// The vehicle.
+        id: u16,
+        /// When (sender's clock, s).
+        at: f64,
+    },
     /// I2V: vehicle `id` may enter junction `junction`'s A_S until `until` (a lease,
     /// renewed while held).
     Grant {
@@ -67,13 +75,22 @@ pub enum Message {
 }
 
 impl Message {
+    /// What a vehicle `id` says at `at` when it leaves junction `from`, or the network
+    /// (`None`).
+    pub fn departure(id: u16, at: f64, from: Option<usize>) -> Message {
+        match from {
+            Some(junction) => Message::Left { id, at, junction },
+            None => Message::Gone { id, at },
+        }
+    }
+
     /// The vehicle the message is about, and its time stamp (sender's clock; a grant's
     /// is its lease end, which grows with every renewal).
     pub fn subject(&self) -> (u16, f64) {
         match *self {
             Message::State { state, .. } => (state.id, state.stamp),
             Message::Crossing { report, stamp, .. } => (report.id, stamp),
-            Message::Left { id, at, .. } => (id, at),
+            Message::Left { id, at, .. } | Message::Gone { id, at } => (id, at),
             Message::Grant { id, until, .. } => (id, until),
         }
     }

@@ -93,6 +93,32 @@ pub enum Experiment {
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
     },
+    /// Open-system traffic on a grid of intersections: Poisson arrivals at every boundary
+    /// inlet with random boundary destinations; trips, delays, safety and the realtime
+    /// factor.
+    Network {
+        /// Rows x columns of intersections, e.g. 3x3.
+        #[arg(long, default_value = "3x3", value_parser = parse_grid)]
+        grid: (u8, u8),
+        /// Arrivals per boundary inlet, vehicles per hour (spread over its lanes).
+        #[arg(long, default_value_t = 300.0)]
+        rate: f64,
+        /// Simulated seconds.
+        #[arg(long, default_value_t = 600.0)]
+        duration: f64,
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Centre-to-centre distance of intersections (m).
+        #[arg(long, default_value_t = 300.0)]
+        block: f64,
+        /// Lanes per direction.
+        #[arg(long, default_value_t = 2)]
+        lanes: u8,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
     Multilane {
         /// Number of runs (seeds 1..=K, or from --seed).
@@ -210,6 +236,26 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
             faults,
         } => throughput(duration, seeds, seed, json, plot, faults),
+        Experiment::Network {
+            grid,
+            rate,
+            duration,
+            seed,
+            block,
+            lanes,
+            json,
+        } => network(
+            &host_sim::experiments::network::NetworkSettings {
+                rows: grid.0,
+                cols: grid.1,
+                block_m: block,
+                lanes,
+                rate_vph: rate,
+                duration_s: duration,
+                seed,
+            },
+            json,
+        ),
         Experiment::Demand {
             rates,
             duration,
@@ -218,6 +264,48 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
         } => demand(&rates, duration, seeds, json, plot),
     }
+}
+
+/// "RxC" → (R, C), each 1..=8.
+fn parse_grid(s: &str) -> Result<(u8, u8), String> {
+    let bad = || format!("{s}: rows x columns, e.g. 3x3, each 1 to 8");
+    let (r, c) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (r, c): (u8, u8) = (
+        r.trim().parse().map_err(|_| bad())?,
+        c.trim().parse().map_err(|_| bad())?,
+    );
+    if (1..=8).contains(&r) && (1..=8).contains(&c) {
+        Ok((r, c))
+    } else {
+        Err(bad())
+    }
+}
+
+fn network(s: &host_sim::experiments::network::NetworkSettings, json: bool) -> ExitCode {
+    if !(s.rate_vph > 0.0 && s.rate_vph <= 3600.0) {
+        return bad_input("--rate: vehicles per hour per boundary inlet, in (0, 3600]");
+    }
+    if let Err(code) = check_duration(s.duration_s, 7200.0) {
+        return code;
+    }
+    // The grid is checked by the scenario loader before anything runs.
+    if let Err(e) = s.world() {
+        return bad_input(e);
+    }
+    let r = match host_sim::experiments::network::run(s) {
+        Ok(r) => r,
+        Err(e) => return bad_input(e),
+    };
+    if json {
+        if let Err(code) = super::output::print_json(&r) {
+            return code;
+        }
+    } else if let Err(code) = super::output::say(&r.to_string()) {
+        return code;
+    }
+    let safe =
+        r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries == 0;
+    super::output::code(safe, r.deadlocks == 0 && r.due_completed_share >= 0.95)
 }
 
 fn fault_grid(runs: u64, json: bool, plot: Option<PathBuf>) -> ExitCode {

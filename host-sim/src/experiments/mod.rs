@@ -7,6 +7,7 @@ pub mod demand;
 pub mod fault_grid;
 pub mod faults;
 pub mod multilane;
+pub mod network;
 pub mod par;
 pub mod platoon;
 pub mod scale;

@@ -103,8 +103,9 @@ impl View {
 
     /// Takes a message heard at world position `me` on `net`: states and crossing reports
     /// replace the sender's record when newer; `Left` drops a crossing record at that
-    /// junction (not a state the vehicle has sent since, from its next segment). Grants
-    /// are not for the view (`Ok`).
+    /// junction (not a state the vehicle has sent since, from its next segment); `Gone`
+    /// drops every record of a vehicle that left the network. Grants are not for the view
+    /// (`Ok`).
     pub fn take(&mut self, msg: &Message, net: &Network, me: (f64, f64)) -> Result<(), Reject> {
         let rec = match *msg {
             Message::State { state, segment } => {
@@ -139,6 +140,13 @@ impl View {
                 self.records.retain(|r| {
                     !matches!(*r, Record::Crossing { report, junction: j, stamp }
                         if report.id == id && j == junction && stamp <= at)
+                });
+                return Ok(());
+            }
+            Message::Gone { id, at } => {
+                self.records.retain(|r| {
+                    let (rid, stamp) = r.id_stamp();
+                    rid != id || stamp > at
                 });
                 return Ok(());
             }

@@ -231,7 +231,7 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     steps_done: u64,
     total_steps: u64,
     /// Vehicles that left a junction and repeat `Left`: (id, junction, when).
-    departing: Vec<(u16, usize, f64)>,
+    departing: Vec<(u16, Option<usize>, f64)>,
     /// Closed system: (id, route) waiting to come back.
     pending: Vec<(u16, u8)>,
     streams: Vec<Stream>,

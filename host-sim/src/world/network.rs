@@ -288,6 +288,33 @@ impl Network {
         *self.junctions.get(j)?.outlets.get(usize::from(out))?
     }
 
+    /// The free-flow time (s) of a trip from segment `seg` at centre `x` through
+    /// `movements` to its exit: the length of road its centre covers until its rear is
+    /// past the exit, each segment driven at its speed limit and each junction at its
+    /// vImax, with no stop. `None` if the movements do not lead out of the network.
+    pub fn free_flow_s(&self, mut seg: usize, mut x: f64, movements: &[Movement]) -> Option<f64> {
+        let mut t = 0.0;
+        for &m in movements {
+            let sg = self.segments.get(seg)?;
+            let End::Junction(j, stop) = sg.end else {
+                return None;
+            };
+            let jn = self.junctions.get(j)?;
+            let lane = sg.nearest_serving(self, 0, Some(m));
+            let route = self.route_from(seg, lane, m)?;
+            let r = jn.layout.route(usize::from(route))?;
+            t += (stop - x).max(0.0) / sg.v_max;
+            t += (r.path.exit() - r.path.entry()) / jn.layout.spec.v_limit;
+            seg = self.after(seg, m)?;
+            x = 0.0;
+        }
+        let sg = self.segments.get(seg)?;
+        let End::Exit(end) = sg.end else {
+            return None;
+        };
+        Some(t + (end + 0.5 * crate::world::LENGTH_M - x).max(0.0) / sg.v_max)
+    }
+
     /// The movements of a shortest path (by length of road) from segment `from` to
     /// segment `to`, one per junction; `None` if `to` cannot be reached.
     pub fn path(&self, from: usize, to: usize) -> Option<Vec<Movement>> {

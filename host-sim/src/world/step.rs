@@ -34,6 +34,7 @@ pub(crate) fn build_vehicle<const N: usize>(
     };
     let mut v = Vehicle::new(spec.id, spec.at, spec.v, driver, spec.trip.clone(), 0.0);
     v.cooperative = spec.cooperative;
+    v.note_free_flow(net);
     if let At::Lane { x, lane, .. } = spec.at {
         if spec.trip.target_lane == lane {
             v.log.in_target_at = Some(0.0);
@@ -42,7 +43,6 @@ pub(crate) fn build_vehicle<const N: usize>(
             v.log.reached_at = Some(0.0);
         }
     }
-    let _ = net;
     v
 }
 
@@ -302,7 +302,8 @@ impl<const N: usize, B: Bus> World<N, B> {
         Ok(())
     }
 
-    /// Phase 1: the vehicles that left a junction repeat `Left`; every vehicle broadcasts.
+    /// Phase 1: the vehicles that left a junction or the network repeat it; every vehicle
+    /// broadcasts.
     fn broadcast(&mut self, t: f64) -> Result<(), BusError> {
         let bus = &mut self.bus;
         let live = &self.vehicles;
@@ -314,8 +315,8 @@ impl<const N: usize, B: Bus> World<N, B> {
             }
             keep
         });
-        for &(id, junction, at) in &self.departing {
-            self.bus.send(id, &Message::Left { id, at, junction }, t)?;
+        for &(id, from, at) in &self.departing {
+            self.bus.send(id, &Message::departure(id, at, from), t)?;
         }
         for v in &self.vehicles {
             self.bus.send(v.id, &v.message(t), t)?;
@@ -384,16 +385,9 @@ impl<const N: usize, B: Bus> World<N, B> {
                 Moved::Stays => {}
                 Moved::LeftJunction(j) if v.log.left_at.is_none() => {
                     let id = v.id;
-                    self.bus.send(
-                        id,
-                        &Message::Left {
-                            id,
-                            at: now,
-                            junction: j,
-                        },
-                        now,
-                    )?;
-                    self.departing.push((id, j, now));
+                    self.bus
+                        .send(id, &Message::departure(id, now, Some(j)), now)?;
+                    self.departing.push((id, Some(j), now));
                 }
                 Moved::LeftJunction(j) => leaving.push((i, Some(j))),
                 Moved::LeftWorld => leaving.push((i, None)),
@@ -402,18 +396,13 @@ impl<const N: usize, B: Bus> World<N, B> {
         // Last first, so that the indices stay valid.
         for &(i, junction) in leaving.iter().rev() {
             let v = self.vehicles.remove(i);
+            // It says it left (a junction, or the network at an exit) and repeats it for
+            // LEFT_REPEAT_S; then it leaves the bus.
+            let id = v.id;
+            self.bus
+                .send(id, &Message::departure(id, now, junction), now)?;
+            self.departing.push((id, junction, now));
             if let Some(j) = junction {
-                let id = v.id;
-                self.bus.send(
-                    id,
-                    &Message::Left {
-                        id,
-                        at: now,
-                        junction: j,
-                    },
-                    now,
-                )?;
-                self.departing.push((id, j, now));
                 if self.spec.arrivals == Arrivals::Closed {
                     let routes = self
                         .net
@@ -423,9 +412,6 @@ impl<const N: usize, B: Bus> World<N, B> {
                     let route = self.rng.random_range(0..routes as u8);
                     self.pending.push((id, route));
                 }
-            }
-            if junction.is_none() {
-                self.bus.detach(v.id);
             }
             self.gone.push(v);
         }
@@ -585,6 +571,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         };
         let driver = Driver::Planner(Box::new(Brain::new(id, self.setup)));
         let mut car = Vehicle::new(id, at, v, driver, trip, since);
+        car.note_free_flow(&self.net);
         car.retarget(&self.net);
         self.bus.attach(id)?;
         self.vehicles.push(car);
@@ -679,7 +666,9 @@ pub(crate) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now:
                     let Some(jn) = net.junctions.get(j) else {
                         return Moved::Stays;
                     };
-                    if x < end - jn.layout.spec.comm_margin {
+                    // Into A_C and onto the route's path once centred and straight in a
+                    // lane serving its movement (until then it drives on in its lane).
+                    if x < end - jn.layout.spec.comm_margin || !v.ready_to_cross(net) {
                         return Moved::Stays;
                     }
                     let movement = v

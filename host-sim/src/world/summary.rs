@@ -186,6 +186,10 @@ pub struct Outcome<'a> {
     pub wall_seconds: f64,
 }
 
+/// In an open world, how long after its free-flow time a vehicle may still be under way
+/// at the end without counting as unfinished (s).
+pub const OPEN_GRACE_S: f64 = 120.0;
+
 /// The summary of a run whose vehicles (in the world and gone) are `all`.
 pub fn summarize<'v, const N: usize>(
     all: impl Iterator<Item = &'v Vehicle<N>> + Clone,
@@ -236,9 +240,13 @@ pub fn summarize<'v, const N: usize>(
         lateral_iterations_total: c.lateral_iterations,
         planner_steps: c.planner_steps,
         solver_iterations_mean: c.solver_iterations as f64 / c.solved_steps.max(1) as f64,
+        // An open world is never empty of vehicles under way: there, every vehicle that
+        // is due (see `World::due`) must have met its goals.
         completed: reached.len() == with_goal.len()
-            && lc.in_target_lane == lc.vehicles
-            && through
+            && match o.spec.arrivals {
+                Arrivals::Poisson(_) => o.unfinished == 0,
+                _ => lc.in_target_lane == lc.vehicles && through,
+            }
             && o.deadlock.is_none(),
         goals: with_goal.len(),
         goals_reached: reached.len(),
@@ -271,6 +279,15 @@ impl<const N: usize, B: Bus> World<N, B> {
         &self.counters
     }
 
+    /// `true` if vehicle `v` should have met its goals by now: always in a world whose
+    /// vehicles are all there from the start; in an open world only if it arrived at
+    /// least its trip's free-flow time plus [`OPEN_GRACE_S`] ago (one that just arrived
+    /// has not failed).
+    fn due<const M: usize>(&self, v: &crate::world::vehicle::Vehicle<M>) -> bool {
+        !matches!(self.spec.arrivals, crate::world::Arrivals::Poisson(_))
+            || v.log.entered_at + v.log.free_flow_s.unwrap_or(0.0) + OPEN_GRACE_S <= self.t
+    }
+
     /// The summary so far.
     pub fn summary(&self, wall_seconds: f64) -> Summary {
         summarize(
@@ -278,7 +295,11 @@ impl<const N: usize, B: Bus> World<N, B> {
             &Outcome {
                 spec: &self.spec,
                 in_world: self.vehicles.len(),
-                unfinished: self.vehicles.iter().filter(|v| unmet(v, &self.net)).count(),
+                unfinished: self
+                    .vehicles
+                    .iter()
+                    .filter(|v| unmet(v, &self.net) && self.due(v))
+                    .count(),
                 findings: &self.monitor.findings,
                 counters: &self.counters,
                 deadlock: self.deadlock.as_ref(),

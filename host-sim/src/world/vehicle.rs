@@ -173,6 +173,9 @@ pub struct Log {
     pub entered_at: f64,
     /// When it left the network, if it did.
     pub left_at: Option<f64>,
+    /// Its trip's free-flow time from where it entered (s), if it drives out of a
+    /// network ([`Network::free_flow_s`]).
+    pub free_flow_s: Option<f64>,
 }
 
 /// One vehicle.
@@ -345,6 +348,13 @@ impl<const N: usize> Vehicle<N> {
                 ..Log::default()
             },
             last_status: None,
+        }
+    }
+
+    /// Notes its trip's free-flow time from where it is now (at its entry).
+    pub fn note_free_flow(&mut self, net: &Network) {
+        if let At::Lane { seg, x, .. } = self.at {
+            self.log.free_flow_s = net.free_flow_s(seg, x, &self.trip.movements);
         }
     }
 
@@ -523,9 +533,13 @@ impl<const N: usize> Vehicle<N> {
 
     /// The road as the multi-lane planner on segment `seg` sees it: its lanes, and where
     /// it ends — a dead end; or at a junction, the edge of A_C (the commitment point of
-    /// SPEC §10: no lane change inside A_C), until the vehicle is ready to hand over to
-    /// its crossing planner (in a lane serving its next movement, no change under way,
-    /// centred and straight: [`Vehicle::ready_to_cross`]), then the stop line.
+    /// SPEC §10: no lane change inside A_C), until the vehicle is in a lane serving its
+    /// next movement with no change declared or under way; then the stop line. It hands
+    /// over to its crossing planner once also centred and straight
+    /// ([`Vehicle::ready_to_cross`]): a change completes within 0.6 m of the centre line
+    /// (Lemma 12's manoeuvre converges there), and a vehicle that had to stop at the edge
+    /// of A_C before it was centred could never centre (a unicycle does not move sideways
+    /// at rest) — it finishes centring on its way to the stop line.
     fn road(&self, net: &Network, seg: usize) -> Road<f64> {
         let Some(sg) = net.segments.get(seg) else {
             return Road {
@@ -542,7 +556,7 @@ impl<const N: usize> Vehicle<N> {
                     .junctions
                     .get(j)
                     .map_or(0.0, |jn| jn.layout.spec.comm_margin);
-                Some(if self.ready_to_cross(net) {
+                Some(if self.in_serving_lane(net) {
                     x
                 } else {
                     x - margin
@@ -556,15 +570,11 @@ impl<const N: usize> Vehicle<N> {
         }
     }
 
-    /// `true` if, on a segment ending at a junction, the vehicle may enter A_C and hand
-    /// over to its crossing planner: in a lane serving its next movement, no change
-    /// declared or under way, within [`HANDOVER_Y_M`] of the lane's centre line and
-    /// [`HANDOVER_THETA_RAD`] of straight.
-    pub fn ready_to_cross(&self, net: &Network) -> bool {
+    /// `true` if, on a segment ending at a junction, it is in a lane serving its next
+    /// movement with no lane change declared or under way.
+    pub fn in_serving_lane(&self, net: &Network) -> bool {
         let At::Lane {
             seg,
-            y,
-            theta,
             lane,
             alpha,
             beta,
@@ -577,9 +587,29 @@ impl<const N: usize> Vehicle<N> {
             sg.serves(net, lane, self.trip.movements.first().copied())
                 && alpha.is_none()
                 && beta.is_none()
-                && (y - sg.lane_centre(lane)).abs() <= HANDOVER_Y_M
-                && theta.abs() <= HANDOVER_THETA_RAD
         })
+    }
+
+    /// `true` if, on a segment ending at a junction, the vehicle may hand over to its
+    /// crossing planner: in a lane serving its next movement, no change
+    /// declared or under way, within [`HANDOVER_Y_M`] of the lane's centre line and
+    /// [`HANDOVER_THETA_RAD`] of straight.
+    pub fn ready_to_cross(&self, net: &Network) -> bool {
+        let At::Lane {
+            seg,
+            y,
+            theta,
+            lane,
+            ..
+        } = self.at
+        else {
+            return false;
+        };
+        self.in_serving_lane(net)
+            && net.segments.get(seg).is_some_and(|sg| {
+                (y - sg.lane_centre(lane)).abs() <= HANDOVER_Y_M
+                    && theta.abs() <= HANDOVER_THETA_RAD
+            })
     }
 
     fn decide_lane(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {

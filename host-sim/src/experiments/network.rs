@@ -1,0 +1,263 @@
+//! `host-sim experiment network`: open-system traffic on a grid of intersections.
+//!
+//! Vehicles arrive at every boundary inlet of a rows × cols grid (Poisson, `rate`
+//! vehicles per hour per inlet, spread evenly over its lanes) with a random boundary
+//! destination, routed by the shortest path; they change lanes toward each turn, cross
+//! with the IC Protocol and leave at their destination. A trip's delay is its time from
+//! arrival (waiting outside included) to leaving the network, less the free-flow time of
+//! the same route ([`crate::world::network::Network::free_flow_s`]).
+//!
+//! Targets (issue 15): 0 collisions, 0 invariant violations, 0 unpermitted entries, no
+//! deadlock, and at least 95 % of the trips that arrived at least free flow + [`GRACE_S`]
+//! before the end completed.
+
+use crate::scenario::network::NetworkScenario;
+use crate::world::{SolverChoice, World, WorldSpec};
+use serde::Serialize;
+use std::path::Path;
+
+/// Trips that arrived less than their free-flow time plus this before the end (s) are
+/// not required to have completed.
+pub const GRACE_S: f64 = 120.0;
+
+/// The experiment's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NetworkSettings {
+    /// Rows of intersections.
+    pub rows: u8,
+    /// Columns of intersections.
+    pub cols: u8,
+    /// Centre-to-centre distance (m).
+    pub block_m: f64,
+    /// Lanes per direction.
+    pub lanes: u8,
+    /// Arrivals per boundary inlet (vehicles per hour, all its lanes).
+    pub rate_vph: f64,
+    /// Simulated time (s).
+    pub duration_s: f64,
+    /// Seed.
+    pub seed: u64,
+}
+
+impl Default for NetworkSettings {
+    fn default() -> Self {
+        Self {
+            rows: 3,
+            cols: 3,
+            block_m: 300.0,
+            lanes: 2,
+            rate_vph: 300.0,
+            duration_s: 600.0,
+            seed: 1,
+        }
+    }
+}
+
+impl NetworkSettings {
+    /// The scenario file of this grid (what `host-sim run` would load).
+    pub fn to_toml(&self) -> String {
+        format!(
+            "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"pipelined\"\n\n\
+             [grid]\nrows = {r}\ncols = {c}\nblock_m = {b}\nlanes = {l}\n\n\
+             [arrivals]\nrate_vph = {rate}\n",
+            r = self.rows,
+            c = self.cols,
+            d = self.duration_s,
+            seed = self.seed,
+            b = self.block_m,
+            l = self.lanes,
+            rate = self.rate_vph / f64::from(self.lanes.max(1)),
+        )
+    }
+
+    /// The world, or why the grid is refused (the scenario loader's reason).
+    pub fn world(&self) -> Result<WorldSpec, String> {
+        NetworkScenario::parse(&self.to_toml(), Path::new("experiment-network.toml"))
+            .map(|s| s.world())
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// The `experiment network` result.
+#[derive(Debug, Clone, Serialize)]
+pub struct NetworkReport {
+    /// "RxC".
+    pub grid: String,
+    /// Arrivals per boundary inlet (vehicles per hour).
+    pub rate_vph: f64,
+    /// Vehicles that entered the network.
+    pub vehicles_spawned: u64,
+    /// Trips completed (left at their destination).
+    pub trips_completed: u64,
+    /// Vehicles still in the network at the end.
+    pub trips_in_progress: u64,
+    /// Arrivals still waiting outside at the end.
+    pub waiting_outside: u64,
+    /// Trips that arrived at least free flow + [`GRACE_S`] before the end.
+    pub trips_due: u64,
+    /// Of those, the share completed (target ≥ 0.95).
+    pub due_completed_share: f64,
+    /// Mean time of the completed trips, from arrival to leaving (s).
+    pub mean_trip_time_s: f64,
+    /// Mean of their delays against the free-flow time of the same route (s).
+    pub mean_delay_s: f64,
+    /// Lane changes completed.
+    pub lane_changes: u64,
+    /// Junction crossings completed.
+    pub crossings: u64,
+    /// Collisions (pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations (pairs × steps).
+    pub invariant_violations: u64,
+    /// Limit violations, road-end overruns and departures from the road.
+    pub limit_violations: u64,
+    /// Steps × vehicles inside A_S without a permission.
+    pub unpermitted_entries: u64,
+    /// Runs that deadlocked (0 or 1).
+    pub deadlocks: u64,
+    /// Mean and largest number of vehicles in the network at once.
+    pub mean_vehicles: f64,
+    /// Largest number of vehicles in the network at once.
+    pub max_vehicles: u64,
+    /// Simulated seconds.
+    pub sim_seconds: f64,
+    /// Wall-clock seconds.
+    pub wall_seconds: f64,
+    /// Simulated per wall-clock second.
+    pub realtime_factor: f64,
+}
+
+/// Runs the grid of `s` to its end.
+pub fn run(s: &NetworkSettings) -> Result<NetworkReport, String> {
+    let spec = s.world()?;
+    let t0 = std::time::Instant::now();
+    let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
+    let (mut sum, mut steps, mut most) = (0u64, 0u64, 0u64);
+    while !w.finished() {
+        w.step(&mut |_| {}).map_err(|e| e.to_string())?;
+        let n = w.vehicles().len() as u64;
+        sum += n;
+        steps += 1;
+        most = most.max(n);
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    let end = w.time();
+    let summary = w.summary(wall);
+    let trips = Trips::of(&w, end);
+    Ok(NetworkReport {
+        grid: format!("{}x{}", s.rows, s.cols),
+        rate_vph: s.rate_vph,
+        vehicles_spawned: trips.spawned,
+        trips_completed: trips.completed,
+        trips_in_progress: w.vehicles().len() as u64,
+        waiting_outside: w.waiting_since().len() as u64,
+        trips_due: trips.due,
+        due_completed_share: if trips.due == 0 {
+            1.0
+        } else {
+            trips.due_completed as f64 / trips.due as f64
+        },
+        mean_trip_time_s: trips.mean_time,
+        mean_delay_s: trips.mean_delay,
+        lane_changes: summary.lane_changes.changes as u64,
+        crossings: summary.crossed(),
+        collisions: summary.collisions,
+        invariant_violations: summary.invariant_violations,
+        limit_violations: summary.limit_violations + summary.road_end_overruns + summary.off_road,
+        unpermitted_entries: summary.unpermitted_entries(),
+        deadlocks: u64::from(summary.deadlock.is_some()),
+        mean_vehicles: sum as f64 / steps.max(1) as f64,
+        max_vehicles: most,
+        sim_seconds: end,
+        wall_seconds: wall,
+        realtime_factor: end / wall.max(1e-9),
+    })
+}
+
+/// The trips of a finished run.
+struct Trips {
+    spawned: u64,
+    completed: u64,
+    due: u64,
+    due_completed: u64,
+    mean_time: f64,
+    mean_delay: f64,
+}
+
+impl Trips {
+    fn of(w: &World<20>, end: f64) -> Self {
+        let mut t = Trips {
+            spawned: 0,
+            completed: 0,
+            due: 0,
+            due_completed: 0,
+            mean_time: 0.0,
+            mean_delay: 0.0,
+        };
+        let (mut time, mut delay) = (0.0, 0.0);
+        for v in w.all_vehicles() {
+            t.spawned += 1;
+            let free = v.log.free_flow_s.unwrap_or(0.0);
+            let is_due = v.log.entered_at + free + GRACE_S <= end;
+            t.due += u64::from(is_due);
+            if let Some(out) = v.log.left_at {
+                t.completed += 1;
+                t.due_completed += u64::from(is_due);
+                time += out - v.log.entered_at;
+                delay += (out - v.log.entered_at - free).max(0.0);
+            }
+        }
+        // Arrivals waiting outside since long before the end are due and not completed.
+        t.due += w
+            .waiting_since()
+            .iter()
+            .filter(|&&a| a + GRACE_S <= end)
+            .count() as u64;
+        t.mean_time = time / t.completed.max(1) as f64;
+        t.mean_delay = delay / t.completed.max(1) as f64;
+        t
+    }
+}
+
+impl core::fmt::Display for NetworkReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        writeln!(
+            f,
+            "grid {} at {:.0} veh/h per boundary inlet, {:.0} s simulated in {:.1} s ({:.1}x realtime)",
+            self.grid, self.rate_vph, self.sim_seconds, self.wall_seconds, self.realtime_factor
+        )?;
+        writeln!(
+            f,
+            "  vehicles: {} entered, {} trips completed, {} in progress, {} waiting outside; \
+             {:.0} in the network on average, {} at most",
+            self.vehicles_spawned,
+            self.trips_completed,
+            self.trips_in_progress,
+            self.waiting_outside,
+            self.mean_vehicles,
+            self.max_vehicles
+        )?;
+        writeln!(
+            f,
+            "  trips due: {}, {:.1} % completed; mean trip {:.1} s, mean delay {:.1} s",
+            self.trips_due,
+            100.0 * self.due_completed_share,
+            self.mean_trip_time_s,
+            self.mean_delay_s
+        )?;
+        writeln!(
+            f,
+            "  {} lane changes, {} crossings",
+            self.lane_changes, self.crossings
+        )?;
+        write!(
+            f,
+            "  safety: {} collisions, {} invariant violations, {} limit violations, {} unpermitted entries; {} deadlocks",
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.unpermitted_entries,
+            self.deadlocks
+        )
+    }
+}

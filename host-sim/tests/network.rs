@@ -1,0 +1,132 @@
+//! Road networks (issue 15): the shipped corridor and grid, in-process and as a fleet of
+//! CAN nodes, the loader's refusals, and the grid experiment's figures.
+
+mod common;
+
+use common::{assert_safe, builtin, load, run_world};
+use host_sim::bus::fleet::{self, Medium};
+use host_sim::world::network::Place;
+use host_sim::world::{SolverChoice, TraceRow, World};
+use std::process::Command;
+
+#[test]
+fn the_corridor_runs_to_its_end_changing_lanes_and_crossing() {
+    let spec = load("corridor.toml");
+    assert_eq!(spec.network.junctions.len(), 3);
+    let n = spec.vehicles.len();
+    let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
+    let mut rows: Vec<TraceRow> = Vec::new();
+    while !w.finished() {
+        w.step(&mut |r| rows.push(*r)).expect("in-process bus");
+    }
+    let s = w.summary(0.0);
+    assert_safe(&s);
+    assert!(s.completed && s.deadlock.is_none(), "{s:?}");
+    assert_eq!(s.unpermitted_entries(), 0);
+    // Every vehicle crossed at least one junction and left; some changed lanes first.
+    assert!(s.crossed() >= n as u64, "{}", s.crossed());
+    assert!(s.lane_changes.changes > 0);
+    assert_eq!(w.vehicles().len(), 0, "everyone left the network");
+    // The trace says where each row was: on segments and at junctions.
+    assert!(rows.iter().any(|r| matches!(r.place, Place::Segment(_))));
+    assert!(rows.iter().any(|r| matches!(r.place, Place::Junction(_))));
+}
+
+#[test]
+fn the_corridor_runs_as_a_fleet_of_can_nodes() {
+    let spec = load("corridor.toml");
+    let n = spec.vehicles.len();
+    let f = fleet::run(spec, SolverChoice::Ours, None, &Medium::Hub, &mut |_| {})
+        .expect("runs on the hub");
+    assert_safe(&f.run);
+    assert!(f.run.completed, "{:?}", f.run);
+    assert_eq!((f.tasks, f.managers), (n + 3, 3));
+    assert!(f.can.rejected.is_empty(), "{:?}", f.can.rejected);
+    assert!(f.messages.grants > 0 && f.messages.exits > 0);
+}
+
+#[test]
+fn vehicles_leave_the_grid_at_their_destinations() {
+    // At an exit a vehicle says it left the network (or its last state would stand as an
+    // obstacle for its followers, stranding them at the exit).
+    let mut spec = load("grid-3x3.toml");
+    spec.duration_s = 200.0;
+    spec.deadline_s = 200.0;
+    let s = run_world(spec);
+    assert_safe(&s);
+    assert_eq!(s.unpermitted_entries(), 0);
+    assert!(s.deadlock.is_none(), "{:?}", s.deadlock);
+    assert_eq!(s.unfinished, 0, "every trip due by the end completed");
+    assert!(s.completed);
+}
+
+#[test]
+fn segments_too_short_for_the_changes_a_route_needs_are_refused() {
+    let text = std::fs::read_to_string(builtin("corridor.toml"))
+        .expect("corridor")
+        .replace("x = 400.0", "x = 300.0")
+        .replace("x = 800.0", "x = 600.0");
+    let err = host_sim::scenario::parse(&text, &builtin("short-corridor.toml"))
+        .expect_err("3 lanes need two changes' room between intersections");
+    let msg = err.to_string();
+    assert!(msg.contains("short-corridor.toml:"), "{msg}");
+    assert!(msg.contains("lengthen the block"), "{msg}");
+}
+
+#[test]
+fn experiment_network_prints_its_figures() {
+    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args([
+            "experiment",
+            "network",
+            "--grid",
+            "2x2",
+            "--rate",
+            "240",
+            "--duration",
+            "200",
+            "--json",
+        ])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    for key in [
+        "vehicles_spawned",
+        "trips_completed",
+        "trips_in_progress",
+        "mean_trip_time_s",
+        "mean_delay_s",
+        "lane_changes",
+        "collisions",
+        "invariant_violations",
+        "unpermitted_entries",
+        "deadlocks",
+        "realtime_factor",
+    ] {
+        assert!(r.get(key).is_some(), "{key} missing: {r}");
+    }
+    for key in [
+        "collisions",
+        "invariant_violations",
+        "unpermitted_entries",
+        "deadlocks",
+    ] {
+        assert_eq!(r[key], 0, "{key}: {r}");
+    }
+    assert!(r["trips_completed"].as_u64().unwrap_or(0) > 10, "{r}");
+    assert!(
+        r["due_completed_share"].as_f64().unwrap_or(0.0) >= 0.95,
+        "{r}"
+    );
+    // A malformed grid is refused before anything runs.
+    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args(["experiment", "network", "--grid", "3by3"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+}
