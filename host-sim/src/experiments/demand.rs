@@ -9,7 +9,7 @@
 //! free-flow time over the same distance on its route at vImax: waiting outside, queueing
 //! on the inlet and waiting at the stop line all count. A rate is within an algorithm's
 //! capacity when the queues stay bounded, in every run: delays do not grow over the run
-//! ([`GROWTH_FACTOR`]: an overloaded junction's delays grow with the arrival time, a
+//! ([`GROWTH_SLOPE`]: an overloaded junction's delays grow with the arrival time, a
 //! stable one's are stationary), at most [`BOUNDED_QUEUE`] vehicles wait outside any
 //! lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have not crossed
 //! [`GRACE_S`] after they arrived.
@@ -29,10 +29,9 @@ pub const BOUNDED_QUEUE: usize = 5;
 pub const UNFINISHED_SHARE: f64 = 0.01;
 /// Arrivals less than this long before the end (s) are not required to have crossed.
 pub const GRACE_S: f64 = 120.0;
-/// Delays grow when the later arrivals' mean exceeds this factor of the earlier ones'…
-pub const GROWTH_FACTOR: f64 = 1.5;
-/// … plus this (s).
-pub const GROWTH_SLACK_S: f64 = 5.0;
+/// Delays grow when they rise by more than this many seconds per second of arrival time
+/// (10 % overload).
+pub const GROWTH_SLOPE: f64 = 0.1;
 
 /// One algorithm at one rate (over its seeds).
 #[derive(Debug, Clone, Serialize)]
@@ -196,20 +195,28 @@ fn arrivals(w: &World<20>, jn: Option<&Junction>) -> Vec<Arrival> {
     out
 }
 
-/// `true` if delays grow: arrivals of the second window [T/2, T − GRACE_S) wait
-/// markedly longer than those of the first [T/6, T/2) (past the warm-up). A stable queue
-/// has stationary delays; an overloaded one's grow with the arrival time.
+/// `true` if delays grow: the least-squares slope of delay against arrival time, over
+/// the arrivals from T/6 (past the warm-up) to T − [`GRACE_S`] (those still under way at
+/// the end count with the least their delay will be), exceeds [`GROWTH_SLOPE`]. A stable
+/// queue's delays are stationary (slope ≈ 0); an overloaded junction's grow by
+/// 1 − capacity/demand seconds per second.
 fn growing(arrivals: &[Arrival], end: f64) -> bool {
-    let mean = |lo: f64, hi: f64| {
-        let d: Vec<f64> = arrivals
-            .iter()
-            .filter(|a| a.at >= lo && a.at < hi)
-            .map(|a| a.delay)
-            .collect();
-        d.iter().sum::<f64>() / d.len().max(1) as f64
-    };
-    let (first, second) = (mean(end / 6.0, end / 2.0), mean(end / 2.0, end - GRACE_S));
-    second > GROWTH_FACTOR * first + GROWTH_SLACK_S
+    let pts: Vec<(f64, f64)> = arrivals
+        .iter()
+        .filter(|a| a.at >= end / 6.0 && a.at < end - GRACE_S)
+        .map(|a| (a.at, a.delay))
+        .collect();
+    let n = pts.len() as f64;
+    if n < 10.0 {
+        return false;
+    }
+    let (mx, my) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    sxx > 0.0 && sxy / sxx > GROWTH_SLOPE
 }
 
 fn one(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> RunOutcome {
@@ -248,6 +255,11 @@ fn one(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> RunOutcome 
 /// `seeds` runs of `duration` s each, on `threads` threads.
 pub fn run(rates: &[f64], duration: f64, seeds: u64, threads: usize) -> DemandReport {
     let t0 = std::time::Instant::now();
+    // Ascending: a capacity is the last rate before the first saturated one.
+    let mut rates = rates.to_vec();
+    rates.sort_by(f64::total_cmp);
+    rates.dedup();
+    let rates = rates.as_slice();
     let algorithms = [
         Algorithm::AllWayStop,
         Algorithm::Fifo,
@@ -282,9 +294,11 @@ pub fn run(rates: &[f64], duration: f64, seeds: u64, threads: usize) -> DemandRe
         .iter()
         .map(|&a| Capacity {
             algorithm: a.name(),
+            // The highest rate tested below the first that saturates it.
             capacity_vph_per_lane: results
                 .iter()
-                .filter(|x| x.algorithm == a.name() && x.bounded)
+                .filter(|x| x.algorithm == a.name())
+                .take_while(|x| x.bounded)
                 .map(|x| x.rate_vph_per_lane)
                 .fold(0.0, f64::max),
         })
