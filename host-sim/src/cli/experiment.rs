@@ -58,6 +58,22 @@ pub enum Experiment {
         /// algorithm (exit 1 if any cell saw an unsafe event).
         #[arg(long, conflicts_with_all = ["loss", "delay", "jitter", "throughput_seeds", "duration"])]
         grid: bool,
+        /// With --grid: its losses (rows), comma-separated.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "0,0.2,0.5,0.9,0.99",
+            requires = "grid"
+        )]
+        losses: Vec<f64>,
+        /// With --grid: its delays in s (columns), comma-separated.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "0,0.01,0.1,0.5,1",
+            requires = "grid"
+        )]
+        delays: Vec<f64>,
         /// Runs per workload and cell, with --grid.
         #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..), requires = "grid")]
         runs: u64,
@@ -197,12 +213,14 @@ pub fn run(e: Experiment) -> ExitCode {
             delay,
             jitter,
             grid,
+            losses,
+            delays,
             runs,
             plot,
             json,
         } => {
             if grid {
-                return fault_grid(runs, json, plot);
+                return fault_grid(&losses, &delays, runs, json, plot);
             }
             let args = FaultArgs {
                 loss,
@@ -296,40 +314,46 @@ fn network(s: &host_sim::experiments::network::NetworkSettings, json: bool) -> E
         Ok(r) => r,
         Err(e) => return bad_input(e),
     };
-    if json {
-        if let Err(code) = super::output::print_json(&r) {
-            return code;
-        }
-    } else if let Err(code) = super::output::say(&r.to_string()) {
-        return code;
-    }
     let safe =
         r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries == 0;
-    super::output::code(safe, r.deadlocks == 0 && r.due_completed_share >= 0.95)
+    finish(
+        &r,
+        json,
+        safe,
+        r.deadlocks == 0 && r.due_completed_share >= 0.95,
+    )
 }
 
-fn fault_grid(runs: u64, json: bool, plot: Option<PathBuf>) -> ExitCode {
+fn fault_grid(
+    losses: &[f64],
+    delays: &[f64],
+    runs: u64,
+    json: bool,
+    plot: Option<PathBuf>,
+) -> ExitCode {
+    use host_sim::experiments::fault_grid::{grid, Cell};
+    let cells = Cell::grid(losses, delays);
+    for c in &cells {
+        if let Err(e) = c.faults(1).validate() {
+            return bad_input(
+                e.replace("faults.loss", "--losses")
+                    .replace("faults.delay_s", "--delays"),
+            );
+        }
+    }
     if let Some(p) = &plot {
         if let Err(code) = check_plot(p) {
             return code;
         }
     }
-    use host_sim::experiments::fault_grid::{grid, Cell};
-    let r = grid(&Cell::all(), runs, 1, 0);
+    let r = grid(&cells, runs, 1, 0);
     if let Some(path) = &plot {
         match host_sim::output::plot::fault_grid(&r, path) {
             Ok(()) => eprintln!("wrote {}", path.display()),
             Err(e) => return bad_input(e),
         }
     }
-    if json {
-        if let Err(code) = super::output::print_json(&r) {
-            return code;
-        }
-    } else if let Err(code) = super::output::say(&r.to_string()) {
-        return code;
-    }
-    super::output::code(r.unsafe_cells == 0, true)
+    finish(&r, json, r.unsafe_cells == 0, true)
 }
 
 fn demand(rates: &[f64], duration: f64, seeds: u64, json: bool, plot: Option<PathBuf>) -> ExitCode {
@@ -355,14 +379,7 @@ fn demand(rates: &[f64], duration: f64, seeds: u64, json: bool, plot: Option<Pat
         .iter()
         .all(|x| x.collisions + x.invariant_violations + x.unpermitted_entries == 0);
     let live = r.results.iter().all(|x| x.deadlocks == 0);
-    if json {
-        if let Err(code) = super::output::print_json(&r) {
-            return code;
-        }
-    } else {
-        println!("{r}");
-    }
-    super::output::code(safe, live)
+    finish(&r, json, safe, live)
 }
 
 fn multilane(

@@ -65,6 +65,10 @@ enum Command {
         /// Draw trajectories and speeds to a .png or .svg file.
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
+        /// Write the viewer: one self-contained HTML page that plays the run (open it in
+        /// a browser; no network needed).
+        #[arg(long, value_name = "out.html")]
+        html: Option<PathBuf>,
         /// The planners' solver.
         #[arg(long, value_enum, default_value = "ours")]
         solver: SolverArg,
@@ -107,6 +111,7 @@ pub fn main() -> ExitCode {
             json,
             trace,
             plot,
+            html,
             solver,
             bus,
         } => run::run(run::RunArgs {
@@ -115,6 +120,7 @@ pub fn main() -> ExitCode {
             json,
             trace,
             plot,
+            html,
             solver: solver.choice(),
             bus,
         }),

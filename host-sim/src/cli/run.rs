@@ -4,6 +4,7 @@
 use super::output::{bad_input, check_plot, code, creatable, print_json, EXIT_BUS};
 use host_sim::output::plot::PlotData;
 use host_sim::output::trace::TraceWriter;
+use host_sim::output::viewer::Viewer;
 use host_sim::world::summary::Summary;
 use host_sim::world::{SolverChoice, TraceRow, World, WorldSpec};
 use std::io::{BufWriter, IsTerminal};
@@ -22,6 +23,8 @@ pub struct RunArgs {
     pub trace: Option<PathBuf>,
     /// PNG/SVG plot.
     pub plot: Option<PathBuf>,
+    /// The viewer page (HTML).
+    pub html: Option<PathBuf>,
     /// The multi-lane planners' solver.
     pub solver: SolverChoice,
     /// `in-process`, `can-hub`, or an interface.
@@ -32,6 +35,7 @@ pub struct RunArgs {
 struct Sinks {
     trace: Option<TraceWriter<BufWriter<std::fs::File>>>,
     plot: Option<PlotData>,
+    viewer: Option<Viewer>,
 }
 
 impl Sinks {
@@ -41,6 +45,9 @@ impl Sinks {
         }
         if let Some(p) = self.plot.as_mut() {
             p.add(r);
+        }
+        if let Some(v) = self.viewer.as_mut() {
+            v.add(r);
         }
     }
 }
@@ -61,6 +68,15 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
     if let Some(p) = &a.plot {
         check_plot(p)?;
     }
+    if let Some(p) = &a.html {
+        if p.extension().and_then(|e| e.to_str()) != Some("html") {
+            return Err(bad_input(format!(
+                "--html {}: must end in .html",
+                p.display()
+            )));
+        }
+        creatable(p, "--html")?;
+    }
     let spec = host_sim::scenario::load(&a.file).map_err(bad_input)?;
     if a.bus != "in-process" {
         super::fleet::fits_the_bus(&a.file, &spec)?;
@@ -78,7 +94,18 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
         None => None,
     };
     let plot = a.plot.as_ref().map(|_| PlotData::of(&spec.network));
-    Ok((spec, Sinks { trace, plot }))
+    let viewer = a
+        .html
+        .as_ref()
+        .map(|_| Viewer::new(&spec.network, host_sim::monitor::Limits::table_i().h));
+    Ok((
+        spec,
+        Sinks {
+            trace,
+            plot,
+            viewer,
+        },
+    ))
 }
 
 fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
@@ -115,6 +142,12 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
         }
         written.push(p.display().to_string());
     }
+    if let (Some(p), Some(v)) = (&a.html, &sinks.viewer) {
+        if let Err(e) = v.write(&name, p) {
+            return bad_input(format!("--html {}: {e}", p.display()));
+        }
+        written.push(p.display().to_string());
+    }
     if let Some(d) = &summary.deadlock {
         eprintln!("{}: {d}", summary.scenario);
     }
@@ -127,10 +160,11 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
             return code;
         }
     } else {
-        if let Some(f) = &fleet {
-            println!("{}", f.line());
+        let mut text = fleet.as_ref().map(|f| f.line() + "\n").unwrap_or_default();
+        text += &human(&summary, &written);
+        if let Err(code) = super::output::say(&text) {
+            return code;
         }
-        println!("{}", human(&summary, &written));
     }
     code(summary.unsafe_events() == 0, summary.completed)
 }

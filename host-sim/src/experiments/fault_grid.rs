@@ -103,10 +103,15 @@ pub struct Cell {
 impl Cell {
     /// Every cell: the grid, then the variants.
     pub fn all() -> Vec<Cell> {
-        let mut cells: Vec<Cell> = LOSSES
+        Self::grid(&LOSSES, &DELAYS)
+    }
+
+    /// The cells of `losses` × `delays`, then the variants.
+    pub fn grid(losses: &[f64], delays: &[f64]) -> Vec<Cell> {
+        let mut cells: Vec<Cell> = losses
             .iter()
             .flat_map(|&loss| {
-                DELAYS.iter().map(move |&delay_s| Cell {
+                delays.iter().map(move |&delay_s| Cell {
                     loss,
                     delay_s,
                     variant: "grid",
@@ -173,6 +178,10 @@ impl CellResult {
 /// The grid's result.
 #[derive(Debug, Clone, Serialize)]
 pub struct GridReport {
+    /// The grid's losses (rows).
+    pub losses: Vec<f64>,
+    /// The grid's delays (columns, s).
+    pub delays: Vec<f64>,
     /// Per cell and workload.
     pub cells: Vec<CellResult>,
     /// Cells (cell × workload) with an unsafe event: the target is 0.
@@ -231,7 +240,18 @@ pub fn grid(cells: &[Cell], runs: u64, seed: u64, threads: usize) -> GridReport 
             });
         }
     }
+    let axis = |f: fn(&Cell) -> f64| {
+        let mut v: Vec<f64> = Vec::new();
+        for c in cells.iter().filter(|c| c.variant == "grid") {
+            if !v.contains(&f(c)) {
+                v.push(f(c));
+            }
+        }
+        v
+    };
     GridReport {
+        losses: axis(|c| c.loss),
+        delays: axis(|c| c.delay_s),
         unsafe_cells: results.iter().filter(|r| r.unsafe_events() > 0).count() as u64,
         cells: results,
         runs,

@@ -92,3 +92,35 @@ pub fn compare(
         faulty_unsafe_events,
     }
 }
+
+impl core::fmt::Display for FaultComparison {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let fl = &self.faults;
+        writeln!(
+            f,
+            "faulty bus (loss {}, delay {} s, jitter {} s) against a perfect one, same seeds:",
+            fl.loss, fl.delay_s, fl.jitter_s
+        )?;
+        writeln!(
+            f,
+            "  multi-lane: {} of {} runs complete (perfect: {} of {}); completion time x{:.2}",
+            self.multilane_faulty.completed,
+            self.multilane_faulty.runs,
+            self.multilane_clean.completed,
+            self.multilane_clean.runs,
+            self.multilane_completion_ratio
+        )?;
+        for t in &self.throughput {
+            writeln!(
+                f,
+                "  {:<9} crossed {:.1} (perfect {:.1}); crossing time x{:.2}",
+                t.algorithm, t.crossed_faulty, t.crossed_clean, t.crossing_time_ratio
+            )?;
+        }
+        write!(
+            f,
+            "  unsafe events on the faulty bus: {}",
+            self.faulty_unsafe_events
+        )
+    }
+}

@@ -322,3 +322,60 @@ pub fn traffic_sweep(
         wall_seconds: t0.elapsed().as_secs_f64(),
     }
 }
+
+impl core::fmt::Display for MultilaneReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "multi-lane experiment (Fig. 6/7): {} runs, {} lane changes in {:.1} s ({:?} solver)\n  \
+             {} collisions, {} invariant violations, {} limit violations\n  \
+             {} of {} runs with every vehicle in its target lane; all done by {:.2} s at the latest \
+             (mean {:.2} s); longest change {:.1} m against the commitment distance (23) {:.1} m\n  \
+             fallback steps {}, yield steps {} of {} planner steps",
+            self.runs,
+            self.lane_changes,
+            self.wall_seconds,
+            self.solver,
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.completed,
+            self.runs,
+            self.max_completion_time_s,
+            self.mean_completion_time_s,
+            self.max_lane_change_distance_m,
+            self.bound_m,
+            self.fallback_steps,
+            self.yield_steps,
+            self.planner_steps
+        )
+    }
+}
+
+impl core::fmt::Display for TrafficReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "Theorem 2: {} random multi-lane cases, {} vehicles in {:.1} s\n  \
+             {} collisions, {} invariant violations, {} limit violations\n  \
+             {} lane changes; {} of {} vehicles in their target lane at the end\n  \
+             fallback steps {}, yield steps {} of {} planner steps",
+            self.cases,
+            self.vehicles,
+            self.wall_seconds,
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.lane_changes,
+            self.in_target_lane,
+            self.vehicles,
+            self.fallback_steps,
+            self.yield_steps,
+            self.planner_steps
+        )?;
+        if !self.failing_seeds.is_empty() {
+            write!(f, "\n  failing seeds: {:?}", self.failing_seeds)?;
+        }
+        Ok(())
+    }
+}

@@ -306,3 +306,25 @@ pub fn sweep(cases: u64, seed: u64) -> SweepSummary {
     total.wall_seconds = t0.elapsed().as_secs_f64();
     total
 }
+
+impl core::fmt::Display for SweepSummary {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "Theorem 1: {} random platoons, {} vehicles, {} planner steps in {:.1} s\n  \
+             {} collisions, {} invariant violations, {} limit violations; smallest gap {:.3} m\n  \
+             fallback steps: {} ({} standstills with no room, {} solver or verification)",
+            self.cases,
+            self.vehicles,
+            self.planner_steps,
+            self.wall_seconds,
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.min_gap_m,
+            self.fallback_steps,
+            self.fallback_no_room,
+            self.fallback_solver_or_verification
+        )
+    }
+}

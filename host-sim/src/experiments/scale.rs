@@ -129,3 +129,25 @@ pub fn run(
         fallback_steps: fb,
     }
 }
+
+impl core::fmt::Display for ScaleReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "{} vehicles on {} roads, {} threads: {:.1} s simulated in {:.2} s = {:.2}x real time, \
+             {:.0} planner steps/s\n  {} collisions, {} invariant violations, {} limit violations, \
+             {} fallback steps",
+            self.vehicles,
+            self.roads,
+            self.threads,
+            self.sim_seconds,
+            self.wall_seconds,
+            self.realtime_factor,
+            self.planner_steps_per_second,
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.fallback_steps
+        )
+    }
+}

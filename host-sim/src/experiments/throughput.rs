@@ -201,3 +201,31 @@ pub fn throughput(
         wall_seconds: t0.elapsed().as_secs_f64(),
     }
 }
+
+impl core::fmt::Display for ThroughputReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        writeln!(
+            f,
+            "throughput (Fig. 9): {} runs of {} s per algorithm, closed system, in {:.1} s",
+            self.seeds, self.duration_s, self.wall_seconds
+        )?;
+        writeln!(
+            f,
+            "{:<10} {:>8} {:>6} {:>10} {:>9} {:>7}",
+            "algorithm", "crossed", "±", "mean s", "max s", "unsafe"
+        )?;
+        for r in &self.results {
+            writeln!(
+                f,
+                "{:<10} {:>8.1} {:>6.1} {:>10.2} {:>9.2} {:>7}",
+                r.algorithm,
+                r.crossed_mean,
+                r.crossed_std,
+                r.crossing_time_mean_s,
+                r.crossing_time_max_s,
+                r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries
+            )?;
+        }
+        Ok(())
+    }
+}

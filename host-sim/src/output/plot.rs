@@ -675,7 +675,8 @@ fn draw_fault_grid<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    use crate::experiments::fault_grid::{DELAYS, LOSSES, VARIANTS};
+    use crate::experiments::fault_grid::VARIANTS;
+    let (losses, delays) = (r.losses.as_slice(), r.delays.as_slice());
     root.fill(&WHITE).map_err(e)?;
     let title = format!(
         "fault grid: completion per cell (colour), unsafe events (\"!n\", target none); {} runs per cell",
@@ -695,21 +696,32 @@ where
             .caption(*w, ("sans-serif", 18))
             .x_label_area_size(34)
             .y_label_area_size(70)
-            .build_cartesian_2d(0.0..DELAYS.len() as f64, 0.0..(LOSSES.len() + 1) as f64)
+            .build_cartesian_2d(
+                -0.5..(delays.len().max(VARIANTS.len() + 1)) as f64 - 0.5,
+                -0.5..losses.len() as f64 + 0.5,
+            )
             .map_err(e)?;
         chart
             .configure_mesh()
             .disable_mesh()
-            .x_labels(DELAYS.len())
-            .y_labels(LOSSES.len() + 1)
+            .x_labels(delays.len().max(VARIANTS.len() + 1))
+            .y_labels(losses.len() + 1)
             .x_label_formatter(&|x| {
-                DELAYS
-                    .get(*x as usize)
-                    .map_or(String::new(), |d| format!("{d} s"))
+                let i = x.round();
+                match delays.get(i as usize) {
+                    Some(d) if (x - i).abs() < 1e-6 && i >= 0.0 => format!("{d} s"),
+                    _ => String::new(),
+                }
             })
-            .y_label_formatter(&|y| match LOSSES.get(*y as usize) {
-                Some(l) => format!("loss {l}"),
-                None => "other".into(),
+            .y_label_formatter(&|y| {
+                let i = y.round();
+                if (y - i).abs() > 1e-6 || i < 0.0 {
+                    return String::new();
+                }
+                match losses.get(i as usize) {
+                    Some(l) => format!("loss {l}"),
+                    None => "other".into(),
+                }
             })
             .x_desc("delay")
             .draw()
@@ -717,18 +729,18 @@ where
         for c in r.cells.iter().filter(|c| c.workload == *w) {
             let (col, row) = match c.cell.variant {
                 "grid" => (
-                    DELAYS
+                    delays
                         .iter()
                         .position(|&d| d == c.cell.delay_s)
                         .unwrap_or(0),
-                    LOSSES.iter().position(|&l| l == c.cell.loss).unwrap_or(0),
+                    losses.iter().position(|&l| l == c.cell.loss).unwrap_or(0),
                 ),
                 v => (
                     VARIANTS.iter().position(|&x| x == v).unwrap_or(0) + 1,
-                    LOSSES.len(),
+                    losses.len(),
                 ),
             };
-            let (x, y) = (col as f64, row as f64);
+            let (x, y) = (col as f64 - 0.5, row as f64 - 0.5);
             let p = c.completion.clamp(0.0, 1.0);
             let fill = RGBColor((230.0 * (1.0 - p)) as u8 + 25, (200.0 * p) as u8 + 40, 60);
             chart

@@ -572,3 +572,16 @@ fn check_spacing(
     }
     Ok(())
 }
+
+/// The intersection format's tables and their keys (see [`super::keys`]).
+pub fn keys() -> Vec<(&'static str, &'static [&'static str])> {
+    use super::keys::fields;
+    vec![
+        ("intersection file", fields::<RawJunction>()),
+        ("[intersection]", fields::<LayoutToml>()),
+        (
+            "[[vehicle]] at an intersection",
+            fields::<JunctionVehicle>(),
+        ),
+    ]
+}

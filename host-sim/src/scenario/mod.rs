@@ -12,6 +12,7 @@
 pub mod common;
 pub mod error;
 pub mod junction;
+pub mod keys;
 pub mod network;
 pub mod road;
 

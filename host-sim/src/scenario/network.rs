@@ -780,3 +780,16 @@ fn check_spacing(vehicles: &[VehicleSpec], _net: &Network) -> Result<(), (usize,
     }
     Ok(())
 }
+
+/// The network format's tables and their keys (see [`super::keys`]).
+pub fn keys() -> Vec<(&'static str, &'static [&'static str])> {
+    use super::keys::fields;
+    vec![
+        ("network file", fields::<RawNetwork>()),
+        ("[grid]", fields::<GridToml>()),
+        ("[[intersection]]", fields::<IntersectionToml>()),
+        ("[[segment]]", fields::<SegmentToml>()),
+        ("[[vehicle]] in a network", fields::<NetVehicleToml>()),
+        ("[arrivals]", fields::<ArrivalsToml>()),
+    ]
+}

@@ -468,3 +468,14 @@ impl RoadVehicle {
         }
     }
 }
+
+/// The road format's tables and their keys (see [`super::keys`]).
+pub fn keys() -> Vec<(&'static str, &'static [&'static str])> {
+    use super::keys::fields;
+    vec![
+        ("road file", fields::<RawScenario>()),
+        ("[road]", fields::<Road>()),
+        ("[[vehicle]] on a road", fields::<RoadVehicle>()),
+        ("script phase", fields::<Phase>()),
+    ]
+}

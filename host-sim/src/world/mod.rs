@@ -128,7 +128,7 @@ pub struct TraceRow {
     pub x: f64,
     /// Centre y in the world (m).
     pub y: f64,
-    /// Heading (rad): relative to the road on a segment, in the world at a junction.
+    /// Heading in the world (rad; 0 = east, counter-clockwise).
     pub theta: f64,
     /// Speed commanded for [t, t+h) (m/s).
     pub v: f64,
@@ -142,6 +142,9 @@ pub struct TraceRow {
     pub mode: Mode,
     /// Where it is.
     pub place: Place,
+    /// At a junction: whether it holds its manager's permission (the trace file leaves
+    /// this out; the viewer shows it).
+    pub granted: Option<bool>,
 }
 
 /// Everything a world is made of, validated (a scenario file loads into one).

@@ -202,6 +202,8 @@ pub struct Vehicle<const N: usize> {
     pub last_status: Option<StepStatus<f64>>,
     /// It says it cooperates ([`crate::world::VehicleSpec::cooperative`]).
     pub cooperative: bool,
+    /// At a junction, whether it held its manager's permission at its last step.
+    pub granted: Option<bool>,
 }
 
 /// What the monitors and the other vehicles' sensors know of a vehicle at an instant:
@@ -333,6 +335,7 @@ impl<const N: usize> Vehicle<N> {
     pub fn new(id: u16, at: At, v: f64, driver: Driver<N>, trip: Trip, t: f64) -> Self {
         Self {
             cooperative: matches!(driver, Driver::Planner(_)),
+            granted: None,
             id,
             at,
             v,
@@ -758,6 +761,7 @@ impl<const N: usize> Vehicle<N> {
         let _ = c.hear_sensed(&ctx.returns.on_path);
         let _ = c.hear_mapped(&mapped);
         let permitted = c.permitted(layout, s, ctx.t);
+        self.granted = Some(permitted);
         counters.planner_steps += 1;
         let (v, why) = match c.step(layout, s, self.v, ctx.t) {
             Ok(cmd) => {
@@ -843,6 +847,10 @@ impl<const N: usize> Vehicle<N> {
             },
             mode: self.mode,
             place,
+            granted: match self.at {
+                At::Crossing { .. } => self.granted,
+                At::Lane { .. } => None,
+            },
         }
     }
 
