@@ -254,6 +254,15 @@ fn cantools_decodes_the_gateways_candump_log() {
     let exp_path = tmp.join("expected.jsonl");
     std::fs::write(&log_path, log).expect("write log");
     std::fs::write(&exp_path, expected).expect("write expected");
+    // Say what is missing instead of a Python traceback (README lists the prerequisite).
+    let probe = Command::new("python3")
+        .args(["-c", "import cantools"])
+        .output();
+    assert!(
+        probe.as_ref().is_ok_and(|o| o.status.success()),
+        "this test needs python3 with cantools: python3 -m pip install cantools ({:?})",
+        probe.map(|o| String::from_utf8_lossy(&o.stderr).into_owned())
+    );
     let out = Command::new("python3")
         .arg(dir.join("tools/check_candump.py"))
         .arg(dir.join("can-gateway.dbc"))

@@ -7,17 +7,25 @@
 //!
 //! - [`scenario`]: the scenario file format (roads, intersections, networks), validated;
 //! - [`world`]: the network, vehicles, managers and the one simulation loop;
-//! - [`bus`]: the bus trait, the in-process bus with faults, CAN media, fleets of tasks;
+//! - [`bus`]: the bus trait, its messages and node addresses, the in-process bus with faults;
+//! - [`fleet`]: CAN media (SocketCAN, an in-process frame hub) and a world run as a fleet
+//!   of tasks on them, one per vehicle and per junction manager;
 //! - [`monitor`]: ground-truth safety checks, liveness and the deadlock detector;
 //! - [`experiments`]: the paper's figures and the sweeps, each settings → result struct;
 //! - [`output`]: traces, plots and the viewer;
 //! - [`reference`]: the Clarabel reference, random instances, the planner benchmark.
+//!
+//! Modules depend on each other one way (`tests/layout.rs` checks it): `monitor` and
+//! `reference` on nothing; `bus` on `reference`; `world` on those three; `scenario` (the
+//! file formats, which build a world) on `world`; `fleet` and `experiments` on all of
+//! these; `output` on `experiments`; the binary's `cli` on everything.
 #![deny(missing_docs)]
 // `!(x > y)` is used on purpose: unlike `x <= y` it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bus;
 pub mod experiments;
+pub mod fleet;
 pub mod monitor;
 pub mod output;
 pub mod reference;

@@ -99,6 +99,13 @@ fn run_writes_json_trace_and_plots() {
         .output()
         .expect("runs");
     assert!(out.status.success());
+    // On a terminal (no --json) the summary says where the picture went.
+    let human = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        human.contains(&format!("wrote {}", svg.display())),
+        "{human}"
+    );
+    assert!(human.contains("SAFE"), "{human}");
     let text = std::fs::read_to_string(&svg).expect("svg written");
     assert!(text.starts_with("<svg") && text.contains("road-end"));
 }
@@ -119,6 +126,27 @@ fn bad_input_exits_2_and_runs_nothing() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains(".png or .svg"));
     assert!(!trace.exists());
+    // A plot into a directory that does not exist: refused before the run, no JSON.
+    let out = bin()
+        .arg("run")
+        .arg(scenario("stop-and-go.toml"))
+        .arg("--json")
+        .args(["--plot", "/nonexistent-dir/x.png"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(out.stdout.is_empty());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--plot /nonexistent-dir/x.png"), "{err}");
+    // Same for the viewer page.
+    let out = bin()
+        .arg("run")
+        .arg(scenario("road-end.toml"))
+        .args(["--html", "/nonexistent-dir/x.html"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--html /nonexistent-dir/x.html"));
     // Bad scenario: file:line: problem on stderr.
     let bad = tmp("bad.toml");
     std::fs::write(&bad, "name = \"x\"\nduration_s = 5.0\nwhat = 1\n").expect("write");

@@ -4,7 +4,7 @@
 mod common;
 
 use common::{assert_safe, builtin, load, run_world};
-use host_sim::bus::fleet::{self, Medium};
+use host_sim::fleet::{self, Medium};
 use host_sim::world::network::Place;
 use host_sim::world::{SolverChoice, TraceRow, World};
 use std::process::Command;

@@ -1,5 +1,6 @@
-//! The medium vehicles talk over: the [`Bus`] trait and its messages; the in-process bus
-//! with injected [`faults`]; CAN media ([`can`]); and a fleet of tasks on CAN ([`fleet`]).
+//! The medium vehicles talk over: the [`Bus`] trait, its messages and node addresses; the
+//! in-process bus with injected [`faults`]. CAN media and the fleet of tasks on them are
+//! in [`crate::fleet`], which builds on this and on the world.
 //!
 //! The medium vehicles talk over. Every vehicle learns about the others only from what
 //! the bus delivers to it. The in-process bus is the default: a broadcast medium with
@@ -13,9 +14,7 @@
 //! anything not newer: duplicates and messages overtaken by a newer one (what can-gateway's
 //! E2E check does with its alive counter on CAN).
 
-pub mod can;
 pub mod faults;
-pub mod fleet;
 pub mod inprocess;
 
 pub use faults::{FaultStats, Faults, Silent, LOSS_PERIODS};
@@ -23,6 +22,11 @@ pub use inprocess::InProcessBus;
 use planner_core::crossing::CrossingReport;
 use planner_core::VehicleState;
 use std::fmt;
+
+/// The bus node of junction `j`'s manager (vehicle ids stay below it).
+pub fn manager_node(j: usize) -> u16 {
+    0xFF00 | (j as u16 & 0xFF)
+}
 
 /// A message on the bus.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -99,7 +103,7 @@ impl Message {
     /// junction's manager sends.
     pub fn sender(&self) -> u16 {
         match *self {
-            Message::Grant { junction, .. } => crate::world::junction::manager_node(junction),
+            Message::Grant { junction, .. } => manager_node(junction),
             _ => self.subject().0,
         }
     }

@@ -1,7 +1,7 @@
 //! `host-sim run FILE --bus can-hub|IFACE`: the world as a fleet of tasks on CAN.
 
 use super::output::bad_input;
-use host_sim::bus::fleet::{self, FleetError, FleetSummary, Medium};
+use host_sim::fleet::{self, FleetError, FleetSummary, Medium};
 use host_sim::world::{SolverChoice, TraceRow, WorldSpec};
 use std::path::Path;
 use std::process::ExitCode;

@@ -6,10 +6,11 @@
 //! A case ends once every vehicle is in its target lane and stopped; it fails on any
 //! collision or violation, a vehicle not in its lane, or a deadlock.
 
-use super::multilane::{commitment_bound, safe_spacing};
+use super::multilane::safe_spacing;
 use super::sweep::{self, case_seed, Case, Failing, Totals};
 use crate::monitor::Limits;
 use crate::reference::instances::rng;
+use crate::scenario::road::commitment_bound;
 use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
 use crate::world::{Finish, LENGTH_M, START_MARGIN_M};

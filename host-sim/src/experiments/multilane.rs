@@ -3,16 +3,10 @@
 
 use crate::bus::Faults;
 use crate::monitor::Limits;
-use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
+use crate::scenario::road::{commitment_bound, Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
 use crate::world::summary::Summary;
-use crate::world::{
-    SolverChoice, TraceRow, World, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M, WIDTH_M,
-};
-use planner_core::free_space::FreeSpace;
-use planner_core::lane_change::commitment_distance;
-use planner_core::lanes::Band;
-use planner_core::{Params, Pose};
+use crate::world::{SolverChoice, TraceRow, World, LENGTH_M, START_MARGIN_M};
 use rand::Rng;
 use serde::Serialize;
 
@@ -101,49 +95,6 @@ pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> RoadSc
         Road { lanes, end_x: None },
         vehicles,
     )
-}
-
-/// The commitment distance (23) for vehicle `index` at its start: M lane changes
-/// times dS(v) + dC(v) at the paper's speed `v`, with ρ_t = max(ρ^{H+}, ρ^{H−}) of its
-/// free space toward the first lane it has to enter. `None` if it needs no change.
-pub fn commitment_bound(
-    vehicles: &[RoadVehicle],
-    road: &Road,
-    index: usize,
-    v: f64,
-) -> Option<f64> {
-    let p = Params::<f64>::table_i();
-    let spec = vehicles.get(index)?;
-    let target = spec.target_lane.unwrap_or(spec.lane);
-    let m = spec.lane.abs_diff(target);
-    if m == 0 {
-        return None;
-    }
-    let next = if target > spec.lane {
-        spec.lane + 1
-    } else {
-        spec.lane - 1
-    };
-    let lo = f64::from(spec.lane.min(next)) * LANE_WIDTH_M + 0.5 * WIDTH_M;
-    let hi = f64::from(spec.lane.max(next) + 1) * LANE_WIDTH_M - 0.5 * WIDTH_M;
-    let pose = Pose {
-        x: spec.x,
-        y: (f64::from(spec.lane) + 0.5) * LANE_WIDTH_M,
-        theta: 0.0,
-    };
-    // x̄ toward the nearest vehicle ahead in either lane (or the road end).
-    let lim = Limits::table_i();
-    let ahead = vehicles
-        .iter()
-        .filter(|o| o.x > spec.x && (o.lane == spec.lane || o.lane == next))
-        .map(|o| o.x - LENGTH_M - lim.d0)
-        .chain(road.end_x.map(|e| e - 0.5 * LENGTH_M - lim.d0))
-        .fold(f64::INFINITY, f64::min);
-    let gap = (ahead - spec.x).min(planner_core::planner::free_road_gap(&p, 20));
-    let fs = FreeSpace::new(&p, pose, spec.v, 0.0, Band { lo, hi }, gap).ok()?;
-    let rho = |k: f64| if k > 0.0 { 1.0 / k } else { f64::INFINITY };
-    let rho_t = rho(fs.arc_h.kappa_plus).max(rho(fs.arc_h.kappa_minus));
-    Some(commitment_distance(&p, m, v, rho_t, 0.0))
 }
 
 /// The `experiment multilane` result.

@@ -637,7 +637,7 @@ pub fn change_distance(v: f64) -> f64 {
         lanes: 2,
         end_x: None,
     };
-    crate::experiments::multilane::commitment_bound(&[spec], &road, 0, v).unwrap_or(f64::INFINITY)
+    super::road::commitment_bound(&[spec], &road, 0, v).unwrap_or(f64::INFINITY)
 }
 
 /// A vehicle of the file: on its segment's lane-change stretch, with its movements.

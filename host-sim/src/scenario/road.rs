@@ -31,8 +31,12 @@ use crate::bus::Faults;
 use crate::monitor::Limits;
 use crate::world::network::Network;
 use crate::world::vehicle::{At, Trip};
-use crate::world::{Arrivals, Finish, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M};
+use crate::world::{Arrivals, Finish, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M, WIDTH_M};
+use planner_core::free_space::FreeSpace;
+use planner_core::lane_change::commitment_distance;
+use planner_core::lanes::Band;
 use planner_core::Sensing;
+use planner_core::{Params, Pose};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::Path;
@@ -43,28 +47,7 @@ pub const MAX_VEHICLES: usize = crate::world::heard::VIEW_CAP;
 /// Most lanes a road may have.
 pub const MAX_LANES: u8 = 8;
 
-/// How a vehicle is driven.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum DriverKind {
-    /// Its own planner-core instance.
-    #[default]
-    Planner,
-    /// A fixed acceleration script (an adversarial but admissible driver).
-    Script,
-    /// Random admissible accelerations, seeded from the scenario seed and the id.
-    Random,
-}
-
-/// One phase of a scripted driver: hold `accel` until `until_s`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct Phase {
-    /// End of the phase (s).
-    pub until_s: f64,
-    /// Acceleration (m/s²), within [amin, amax].
-    pub accel: f64,
-}
+pub use crate::world::{DriverKind, Phase};
 
 /// The road.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -171,9 +154,7 @@ impl RoadScenario {
     /// Parses and validates scenario text; `path` only names it in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ScenarioError> {
         let e = Errors::new(text, path);
-        let err = |span: Option<Range<usize>>, problem: String| e.at(span, problem);
         let raw: RawScenario = toml::from_str(text).map_err(|x| e.toml(&x))?;
-        let lim = Limits::table_i();
         let header = RawHeader {
             duration_s: Some(raw.duration_s.clone()),
             horizon: raw.horizon.clone(),
@@ -185,184 +166,31 @@ impl RoadScenario {
         .validate(&e)?;
         let road_span = raw.road.span();
         let road = raw.road.into_inner();
-        if road.lanes == 0 || road.lanes > MAX_LANES {
-            return Err(err(
-                Some(road_span),
-                format!("road.lanes must be 1..={MAX_LANES}, got {}", road.lanes),
-            ));
-        }
-        if road.end_x.is_some_and(|x| !coord_ok(x)) {
-            return Err(err(
-                Some(road_span),
-                format!("road.end_x must be finite and within ±{MAX_COORD_M} m"),
-            ));
-        }
+        check_road(&road).map_err(|p| e.at(Some(road_span), p))?;
         if raw.vehicles.is_empty() {
-            return Err(err(
-                None,
-                "a scenario needs at least one [[vehicle]]".into(),
-            ));
+            return Err(e.at(None, "a scenario needs at least one [[vehicle]]"));
         }
         if raw.vehicles.len() > MAX_VEHICLES {
-            return Err(err(
-                None,
-                format!(
-                    "at most {MAX_VEHICLES} vehicles, got {}",
-                    raw.vehicles.len()
-                ),
-            ));
+            let n = raw.vehicles.len();
+            return Err(e.at(None, format!("at most {MAX_VEHICLES} vehicles, got {n}")));
         }
         let mut vehicles: Vec<(RoadVehicle, Range<usize>)> = Vec::new();
         for sv in raw.vehicles {
             let span = sv.span();
             let v = sv.into_inner();
-            let bad =
-                |problem: String| err(Some(span.clone()), format!("vehicle {}: {problem}", v.id));
-            if vehicles.iter().any(|(o, _)| o.id == v.id) {
-                return Err(bad("duplicate id".into()));
-            }
-            if !coord_ok(v.x) {
-                return Err(bad(format!(
-                    "x must be finite and within ±{MAX_COORD_M} m (where f64 keeps positions \
-                     far finer than the safety margins), got {}",
-                    v.x
-                )));
-            }
-            if !(v.v >= 0.0 && v.v <= lim.v_max) {
-                return Err(bad(format!("v must be in [0, {}], got {}", lim.v_max, v.v)));
-            }
-            if v.lane >= road.lanes {
-                return Err(bad(format!(
-                    "lane {} does not exist (road has {})",
-                    v.lane, road.lanes
-                )));
-            }
-            if let Some(t) = v.target_lane {
-                if t >= road.lanes {
-                    return Err(bad(format!("target_lane {t} does not exist")));
-                }
-                if t != v.lane && v.driver != DriverKind::Planner {
-                    return Err(bad(format!(
-                        "only planner-driven vehicles change lanes (driver is {:?})",
-                        v.driver
-                    )));
-                }
-            }
-            if v.goal_x.is_some_and(|g| !coord_ok(g)) {
-                return Err(bad(format!(
-                    "goal_x must be finite and within ±{MAX_COORD_M} m"
-                )));
-            }
-            if v.v_ref.is_some_and(|r| !(r >= 0.0 && r <= lim.v_max)) {
-                return Err(bad(format!("v_ref must be in [0, {}]", lim.v_max)));
-            }
-            match v.driver {
-                DriverKind::Script => {
-                    if v.script.is_empty() {
-                        return Err(bad("driver = \"script\" needs a non-empty script".into()));
-                    }
-                    let mut last = 0.0;
-                    for p in &v.script {
-                        if !(p.until_s > last && p.until_s.is_finite()) {
-                            return Err(bad("script phases need increasing until_s > 0".into()));
-                        }
-                        if !(p.accel >= -lim.brake && p.accel <= lim.a_max) {
-                            return Err(bad(format!(
-                                "script accel {} outside [{}, {}]",
-                                p.accel, -lim.brake, lim.a_max
-                            )));
-                        }
-                        last = p.until_s;
-                    }
-                }
-                _ if !v.script.is_empty() => {
-                    return Err(bad("script given but driver is not \"script\"".into()));
-                }
-                _ => {}
-            }
-            if let Some(end) = road.end_x {
-                if v.x + 0.5 * LENGTH_M >= end {
-                    return Err(bad(format!("starts beyond the road end x = {end}")));
-                }
-                if v.driver == DriverKind::Planner {
-                    let room = end - v.x - 0.5 * LENGTH_M - lim.d0;
-                    if !(room > lim.safe_distance(v.v) + START_MARGIN_M) {
-                        return Err(bad(format!(
-                            "cannot stop before the road end: {room:.3} m of room, needs more than \
-                             dS(v) = {:.3} m",
-                            lim.safe_distance(v.v)
-                        )));
-                    }
-                }
-            }
+            let dup = vehicles.iter().any(|(o, _)| o.id == v.id);
+            let checked = if dup {
+                Err("duplicate id".into())
+            } else {
+                check_vehicle(&v, &road)
+            };
+            checked.map_err(|p| e.at(Some(span.clone()), format!("vehicle {}: {p}", v.id)))?;
             vehicles.push((v, span));
         }
-        // Theorem 3 / (23): on a dead-end road a vehicle needing M lane changes must have
-        // M (dS(vmax) + dC(vmax)) of road left, or its changes are not guaranteed.
         if let Some(end) = road.end_x {
-            let specs: Vec<RoadVehicle> = vehicles.iter().map(|(v, _)| v.clone()).collect();
-            for (i, (v, span)) in vehicles.iter().enumerate() {
-                let bound =
-                    crate::experiments::multilane::commitment_bound(&specs, &road, i, lim.v_max);
-                if let Some(b) = bound {
-                    let room = end - v.x;
-                    if !(room >= b) {
-                        return Err(err(
-                            Some(span.clone()),
-                            format!(
-                                "vehicle {}: needs {} lane change(s) but starts {room:.1} m \
-                                 before the road end; the commitment distance (23) is {b:.1} m",
-                                v.id,
-                                v.lane.abs_diff(v.target_lane.unwrap_or(v.lane))
-                            ),
-                        ));
-                    }
-                }
-            }
+            check_commitment(&vehicles, &road, end).map_err(|(span, p)| e.at(Some(span), p))?;
         }
-        // Per lane, front to back: no overlap, the invariant for every planner-driven
-        // follower, and scripted/random drivers only at the front of their lane (they do
-        // not keep the invariant themselves).
-        for lane in 0..road.lanes {
-            let mut in_lane: Vec<&(RoadVehicle, Range<usize>)> =
-                vehicles.iter().filter(|(v, _)| v.lane == lane).collect();
-            in_lane.sort_by(|a, b| b.0.x.total_cmp(&a.0.x));
-            for pair in in_lane.windows(2) {
-                let (lead, (follow, span)) = (&pair[0].0, (&pair[1].0, &pair[1].1));
-                let gap = lead.x - follow.x - LENGTH_M;
-                if gap <= 0.0 {
-                    return Err(err(
-                        Some(span.clone()),
-                        format!(
-                            "vehicle {} overlaps vehicle {} in lane {lane}",
-                            follow.id, lead.id
-                        ),
-                    ));
-                }
-                if follow.driver != DriverKind::Planner {
-                    return Err(err(
-                        Some(span.clone()),
-                        format!(
-                            "vehicle {}: a {:?} driver must lead its lane (vehicle {} is ahead)",
-                            follow.id, follow.driver, lead.id
-                        ),
-                    ));
-                }
-                let need = lim.safe_distance(follow.v) + START_MARGIN_M;
-                if !(gap - lim.d0 > need) {
-                    return Err(err(
-                        Some(span.clone()),
-                        format!(
-                            "vehicle {} violates the safety invariant behind vehicle {}: bumper \
-                             gap {gap:.3} m, needs more than d0 + dS(v) = {:.3} m",
-                            follow.id,
-                            lead.id,
-                            lim.d0 + need
-                        ),
-                    ));
-                }
-            }
-        }
+        check_lanes(&vehicles, road.lanes).map_err(|(span, p)| e.at(Some(span), p))?;
         Ok(Self {
             name: raw.name,
             seed: raw.seed,
@@ -478,4 +306,214 @@ pub fn keys() -> Vec<(&'static str, &'static [&'static str])> {
         ("[[vehicle]] on a road", fields::<RoadVehicle>()),
         ("script phase", fields::<Phase>()),
     ]
+}
+
+/// The road table's limits.
+fn check_road(road: &Road) -> Result<(), String> {
+    if road.lanes == 0 || road.lanes > MAX_LANES {
+        return Err(format!(
+            "road.lanes must be 1..={MAX_LANES}, got {}",
+            road.lanes
+        ));
+    }
+    if road.end_x.is_some_and(|x| !coord_ok(x)) {
+        return Err(format!(
+            "road.end_x must be finite and within ±{MAX_COORD_M} m"
+        ));
+    }
+    Ok(())
+}
+
+/// One vehicle on its own: coordinates, speeds, lanes, its driver, and room to stop
+/// before a road end.
+fn check_vehicle(v: &RoadVehicle, road: &Road) -> Result<(), String> {
+    let lim = Limits::table_i();
+    if !coord_ok(v.x) {
+        return Err(format!(
+            "x must be finite and within ±{MAX_COORD_M} m (where f64 keeps positions far \
+             finer than the safety margins), got {}",
+            v.x
+        ));
+    }
+    if !(v.v >= 0.0 && v.v <= lim.v_max) {
+        return Err(format!("v must be in [0, {}], got {}", lim.v_max, v.v));
+    }
+    if v.lane >= road.lanes {
+        return Err(format!(
+            "lane {} does not exist (road has {})",
+            v.lane, road.lanes
+        ));
+    }
+    if let Some(t) = v.target_lane {
+        if t >= road.lanes {
+            return Err(format!("target_lane {t} does not exist"));
+        }
+        if t != v.lane && v.driver != DriverKind::Planner {
+            let d = v.driver;
+            return Err(format!(
+                "only planner-driven vehicles change lanes (driver is {d:?})"
+            ));
+        }
+    }
+    if v.goal_x.is_some_and(|g| !coord_ok(g)) {
+        return Err(format!("goal_x must be finite and within ±{MAX_COORD_M} m"));
+    }
+    if v.v_ref.is_some_and(|r| !(r >= 0.0 && r <= lim.v_max)) {
+        return Err(format!("v_ref must be in [0, {}]", lim.v_max));
+    }
+    check_script(v, &lim)?;
+    let Some(end) = road.end_x else { return Ok(()) };
+    if v.x + 0.5 * LENGTH_M >= end {
+        return Err(format!("starts beyond the road end x = {end}"));
+    }
+    let room = end - v.x - 0.5 * LENGTH_M - lim.d0;
+    if v.driver == DriverKind::Planner && !(room > lim.safe_distance(v.v) + START_MARGIN_M) {
+        return Err(format!(
+            "cannot stop before the road end: {room:.3} m of room, needs more than dS(v) = \
+             {:.3} m",
+            lim.safe_distance(v.v)
+        ));
+    }
+    Ok(())
+}
+
+/// A scripted driver has increasing phases within the acceleration limits; nobody else
+/// has a script.
+fn check_script(v: &RoadVehicle, lim: &Limits) -> Result<(), String> {
+    if v.driver != DriverKind::Script {
+        return match v.script.is_empty() {
+            true => Ok(()),
+            false => Err("script given but driver is not \"script\"".into()),
+        };
+    }
+    if v.script.is_empty() {
+        return Err("driver = \"script\" needs a non-empty script".into());
+    }
+    let mut last = 0.0;
+    for p in &v.script {
+        if !(p.until_s > last && p.until_s.is_finite()) {
+            return Err("script phases need increasing until_s > 0".into());
+        }
+        if !(p.accel >= -lim.brake && p.accel <= lim.a_max) {
+            let (lo, hi) = (-lim.brake, lim.a_max);
+            return Err(format!("script accel {} outside [{lo}, {hi}]", p.accel));
+        }
+        last = p.until_s;
+    }
+    Ok(())
+}
+
+/// Theorem 3 / (23): on a dead-end road a vehicle needing M lane changes must have
+/// M (dS(vmax) + dC(vmax)) of road left, or its changes are not guaranteed.
+fn check_commitment(
+    vehicles: &[(RoadVehicle, Range<usize>)],
+    road: &Road,
+    end: f64,
+) -> Result<(), (Range<usize>, String)> {
+    let lim = Limits::table_i();
+    let specs: Vec<RoadVehicle> = vehicles.iter().map(|(v, _)| v.clone()).collect();
+    for (i, (v, span)) in vehicles.iter().enumerate() {
+        let Some(b) = commitment_bound(&specs, road, i, lim.v_max) else {
+            continue;
+        };
+        let room = end - v.x;
+        if !(room >= b) {
+            let m = v.lane.abs_diff(v.target_lane.unwrap_or(v.lane));
+            return Err((
+                span.clone(),
+                format!(
+                    "vehicle {}: needs {m} lane change(s) but starts {room:.1} m before the \
+                     road end; the commitment distance (23) is {b:.1} m",
+                    v.id
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Per lane, front to back: no overlap, the invariant for every planner-driven follower,
+/// and scripted/random drivers only at the front of their lane (they do not keep the
+/// invariant themselves).
+fn check_lanes(
+    vehicles: &[(RoadVehicle, Range<usize>)],
+    lanes: u8,
+) -> Result<(), (Range<usize>, String)> {
+    let lim = Limits::table_i();
+    for lane in 0..lanes {
+        let mut in_lane: Vec<&(RoadVehicle, Range<usize>)> =
+            vehicles.iter().filter(|(v, _)| v.lane == lane).collect();
+        in_lane.sort_by(|a, b| b.0.x.total_cmp(&a.0.x));
+        for pair in in_lane.windows(2) {
+            let (lead, (follow, span)) = (&pair[0].0, (&pair[1].0, &pair[1].1));
+            let fail = |p: String| Err((span.clone(), p));
+            let gap = lead.x - follow.x - LENGTH_M;
+            if gap <= 0.0 {
+                return fail(format!(
+                    "vehicle {} overlaps vehicle {} in lane {lane}",
+                    follow.id, lead.id
+                ));
+            }
+            if follow.driver != DriverKind::Planner {
+                return fail(format!(
+                    "vehicle {}: a {:?} driver must lead its lane (vehicle {} is ahead)",
+                    follow.id, follow.driver, lead.id
+                ));
+            }
+            let need = lim.safe_distance(follow.v) + START_MARGIN_M;
+            if !(gap - lim.d0 > need) {
+                return fail(format!(
+                    "vehicle {} violates the safety invariant behind vehicle {}: bumper gap \
+                     {gap:.3} m, needs more than d0 + dS(v) = {:.3} m",
+                    follow.id,
+                    lead.id,
+                    lim.d0 + need
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The commitment distance (23) for vehicle `index` at its start: M lane changes
+/// times dS(v) + dC(v) at the paper's speed `v`, with ρ_t = max(ρ^{H+}, ρ^{H−}) of its
+/// free space toward the first lane it has to enter. `None` if it needs no change.
+pub fn commitment_bound(
+    vehicles: &[RoadVehicle],
+    road: &Road,
+    index: usize,
+    v: f64,
+) -> Option<f64> {
+    let p = Params::<f64>::table_i();
+    let spec = vehicles.get(index)?;
+    let target = spec.target_lane.unwrap_or(spec.lane);
+    let m = spec.lane.abs_diff(target);
+    if m == 0 {
+        return None;
+    }
+    let next = if target > spec.lane {
+        spec.lane + 1
+    } else {
+        spec.lane - 1
+    };
+    let lo = f64::from(spec.lane.min(next)) * LANE_WIDTH_M + 0.5 * WIDTH_M;
+    let hi = f64::from(spec.lane.max(next) + 1) * LANE_WIDTH_M - 0.5 * WIDTH_M;
+    let pose = Pose {
+        x: spec.x,
+        y: (f64::from(spec.lane) + 0.5) * LANE_WIDTH_M,
+        theta: 0.0,
+    };
+    // x̄ toward the nearest vehicle ahead in either lane (or the road end).
+    let lim = Limits::table_i();
+    let ahead = vehicles
+        .iter()
+        .filter(|o| o.x > spec.x && (o.lane == spec.lane || o.lane == next))
+        .map(|o| o.x - LENGTH_M - lim.d0)
+        .chain(road.end_x.map(|e| e - 0.5 * LENGTH_M - lim.d0))
+        .fold(f64::INFINITY, f64::min);
+    let gap = (ahead - spec.x).min(planner_core::planner::free_road_gap(&p, 20));
+    let fs = FreeSpace::new(&p, pose, spec.v, 0.0, Band { lo, hi }, gap).ok()?;
+    let rho = |k: f64| if k > 0.0 { 1.0 / k } else { f64::INFINITY };
+    let rho_t = rho(fs.arc_h.kappa_plus).max(rho(fs.arc_h.kappa_minus));
+    Some(commitment_distance(&p, m, v, rho_t, 0.0))
 }

@@ -17,10 +17,7 @@ pub const LEASE_S: f64 = 0.1;
 /// report.
 pub const LEFT_REPEAT_S: f64 = 0.5;
 
-/// The bus node of junction `j`'s manager (vehicle ids stay below it).
-pub fn manager_node(j: usize) -> u16 {
-    0xFF00 | (j as u16 & 0xFF)
-}
+pub use crate::bus::manager_node;
 
 /// One junction's manager on the bus.
 #[derive(Debug, Clone)]

@@ -35,9 +35,32 @@ use junction::ManagerNode;
 use network::{Network, Place};
 use planner_core::{IpmSolver, MpcSolver, Sensing, SingleLaneProblem, Solution, SolveError};
 use rand_chacha::ChaCha8Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use spawn::Stream;
 use vehicle::{Counters, PlannerSetup, Vehicle};
+
+/// How a vehicle is driven.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum DriverKind {
+    /// Its own planner-core instance.
+    #[default]
+    Planner,
+    /// A fixed acceleration script (an adversarial but admissible driver).
+    Script,
+    /// Random admissible accelerations, seeded from the scenario seed and the id.
+    Random,
+}
+
+/// One phase of a scripted driver: hold `accel` until `until_s`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Phase {
+    /// End of the phase (s).
+    pub until_s: f64,
+    /// Acceleration (m/s²), within [amin, amax].
+    pub accel: f64,
+}
 
 /// Vehicle length L (Table I).
 pub const LENGTH_M: f64 = 4.5;
@@ -196,9 +219,9 @@ pub struct VehicleSpec {
     /// Initial speed (m/s).
     pub v: f64,
     /// How it is driven.
-    pub driver: crate::scenario::DriverKind,
+    pub driver: DriverKind,
     /// Its script, for a scripted driver.
-    pub script: Vec<crate::scenario::Phase>,
+    pub script: Vec<Phase>,
     /// Its trip.
     pub trip: vehicle::Trip,
     /// It says over V2V that it cooperates (keeps the protocols: yields, keeps its
@@ -321,7 +344,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     }
 
     /// Tells the planners and managers the steps to which the bus rounds positions and
-    /// speeds (a CAN bus: [`crate::bus::can::RESOLUTION`]).
+    /// speeds (a CAN bus: [`crate::fleet::can::RESOLUTION`]).
     pub fn set_bus_resolution(&mut self, resolution: (f64, f64)) -> Result<(), String> {
         let ok = |r: f64| r.is_finite() && (0.0..1.0).contains(&r);
         if !(ok(resolution.0) && ok(resolution.1)) {

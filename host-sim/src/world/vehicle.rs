@@ -13,11 +13,11 @@
 use super::heard::{Reject, View, VIEW_CAP};
 use super::network::{End, Network, Place};
 use super::sensor::Sensed;
+use super::Phase;
 use super::{AnySolver, Mode, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M};
 use crate::bus::{Message, Received};
 use crate::monitor::Limits;
 use crate::reference::ClarabelSolver;
-use crate::scenario::Phase;
 use planner_core::crossing::{CrossingPlanner, CrossingReport};
 use planner_core::intersection::Movement;
 use planner_core::lane_change::LaneEvent;

@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use can_gateway::PlainFrame;
-use host_sim::bus::can::{CanPort, HubPort};
+use host_sim::fleet::can::{CanPort, HubPort};
 use host_sim::world::summary::Summary;
 use host_sim::world::{SolverChoice, World, WorldSpec};
 use std::io;

@@ -6,7 +6,7 @@ car and along its heading, in its mode's colour (pixel checks on the canvas, wit
 set by the test, so a wrong world-to-screen transform, heading or colour fails); play
 advances the time; hovering shows a vehicle's card.
 
-Usage: check_viewer.py PAGE.html TRACE.csv [SCREENSHOT.png]
+Usage: check_viewer.py PAGE.html TRACE.csv [SCREENSHOT.png [SCALE,X,Y[,FRACTION]]]
 Exit 0 when every check holds; 1 with the first failure."""
 import csv
 import math
@@ -29,7 +29,7 @@ def close(a, b, tol=12):
     return all(abs(x - y) <= tol for x, y in zip(a, b))
 
 
-def main(page_path, trace_path, shot=None):
+def main(page_path, trace_path, shot=None, view=None):
     rows = {}
     for r in csv.DictReader(open(trace_path)):
         rows.setdefault(round(float(r["t"]) * 100), {})[int(r["id"])] = r
@@ -103,8 +103,13 @@ def main(page_path, trace_path, shot=None):
         if not t1 > 0.2:
             fail(f"play did not advance the time: {t1}")
         if shot:
-            page.evaluate(f"window.viewer.seek({round(0.3 * end / dt) * dt})")
-            page.screenshot(path=shot)
+            at = 0.3
+            if view:  # "SCALE,X,Y[,FRACTION]": pixels per metre, the centre, when
+                parts = [float(p) for p in view.split(",")]
+                page.evaluate(f"window.viewer.setView({parts[0]}, {parts[1]}, {parts[2]})")
+                at = parts[3] if len(parts) > 3 else at
+            page.evaluate(f"window.viewer.seek({round(at * end / dt) * dt})")
+            page.screenshot(path=shot, clip={"x": 0, "y": 0, "width": w, "height": 670})
         browser.close()
     if errors:
         fail(f"console errors: {errors}")
@@ -116,7 +121,7 @@ def main(page_path, trace_path, shot=None):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) not in (3, 4):
+    if len(sys.argv) not in (3, 4, 5):
         print(__doc__)
         sys.exit(2)
     sys.exit(main(*sys.argv[1:]))

@@ -5,7 +5,7 @@
 //! - [`CanNode`]: one node's attachment (its port, alive counters, reassembler, counts);
 //! - [`CanBus`]: the message-level [`Bus`] over one node per vehicle, so that the
 //!   single-threaded simulator runs unchanged over CAN;
-//! - the fleet runner ([`crate::bus::fleet`]) gives every vehicle and every junction
+//! - the fleet runner ([`crate::fleet`]) gives every vehicle and every junction
 //!   manager its own task and node.
 //!
 //! Mapping of the simulator's messages onto can-gateway's ([`WireMap`]): on a straight

@@ -24,8 +24,9 @@
 //! which the planners and managers allow for, and the kernel's CAN stack. The kernel's
 //! receive time stamps measure the latency from publication to reception.
 
-use super::can::{CanError, CanNode, CanPort, CanStats, Hub, Polled, SocketCanPort, WireMap};
-use super::{Message, Received, Silent};
+pub mod can;
+
+use crate::bus::{Message, Received, Silent};
 use crate::monitor::liveness::DeadlockDetector;
 use crate::monitor::Limits;
 use crate::world::junction::ManagerNode;
@@ -35,6 +36,7 @@ use crate::world::step::{build_vehicle, step_place, Moved, WorldMonitor};
 use crate::world::summary::{summarize, Outcome, Summary};
 use crate::world::vehicle::{Counters, PlannerSetup, StepCtx, Vehicle, VehicleTruth};
 use crate::world::{SolverChoice, TraceRow, WorldSpec};
+use can::{CanError, CanNode, CanPort, CanStats, Hub, Polled, SocketCanPort, WireMap};
 use can_gateway::wire::{self, CLOCK_ADDRESS};
 use serde::Serialize;
 use std::fmt;
@@ -244,7 +246,7 @@ pub fn unsupported(spec: &WorldSpec) -> Option<String> {
     if let Some(e) = spec
         .vehicles
         .iter()
-        .find_map(|v| super::can::vehicle_address(v.id).err())
+        .find_map(|v| can::vehicle_address(v.id).err())
     {
         return Some(e.to_string());
     }
@@ -430,6 +432,7 @@ impl<const N: usize> Harness<N> {
         }
     }
 
+    /// Opens every node, runs the tasks and the time master to the end, and sums up.
     fn run<P: CanPort + 'static>(
         self,
         medium: &str,
@@ -445,6 +448,56 @@ impl<const N: usize> Harness<N> {
             .iter()
             .map(|v| build_vehicle::<N>(v, self.setup(), self.seed, &net))
             .collect();
+        let managers = self.managers(&net)?;
+        let nodes = Nodes::open(&mut open, &vehicles, &managers, &map)?;
+        let order: Vec<u16> = vehicles.iter().map(|v| v.id).collect();
+        let ctx = TaskCtx {
+            net: &net,
+            map: &map,
+            order: &order,
+            total: (self.spec.duration_s / self.lim.h).round() as u64,
+            with_managers: !managers.is_empty(),
+            lim: self.lim,
+            silent: self.spec.faults.silent,
+        };
+        let (n, m) = (vehicles.len(), managers.len());
+        let (ran, master) = std::thread::scope(|sc| {
+            let (tx, rx) = mpsc::channel::<Report>();
+            let Nodes {
+                clock,
+                vehicles: vnodes,
+                managers: mnodes,
+            } = nodes;
+            let mut master = Master::new(&self, &ctx, clock, rx);
+            let spawned = Tasks::spawn(
+                sc,
+                &mut master.clock,
+                &ctx,
+                &tx,
+                (vehicles, vnodes),
+                (managers, mnodes),
+            );
+            drop(tx);
+            let mut tasks = match spawned {
+                Ok(t) => t,
+                Err(e) => return (Err(e), master.into_parts()),
+            };
+            // The master releases the vehicles each period; the channels stay open until
+            // every task has ended.
+            master.go = std::mem::take(&mut tasks.go);
+            let mut result = master.periods(trace);
+            if result.is_err() {
+                let _ = end(&mut master.clock, master.tally.ticks as u32);
+            }
+            let ran = tasks.join(&mut result);
+            (result.map(|()| ran), master.into_parts())
+        });
+        let ran = ran?;
+        Ok(self.summary(medium, (n, m), ran, master, &net, t0))
+    }
+
+    /// Every junction's manager, at the bus's position resolution.
+    fn managers(&self, net: &Network) -> Result<Vec<ManagerNode>, FleetError> {
         let mut managers: Vec<ManagerNode> = net
             .junctions
             .iter()
@@ -456,251 +509,38 @@ impl<const N: usize> Harness<N> {
                 .set_position_resolution(RESOLUTION.0)
                 .map_err(|e| FleetError::Harness(format!("bus resolution: {e:?}")))?;
         }
-        // Every socket is open before anyone transmits, so that no node misses a frame.
-        let mut clock = CanNode::new(CLOCK_ADDRESS, open(Node::Clock).map_err(CanError::Io)?);
-        let mut vnodes = Vec::with_capacity(vehicles.len());
-        for v in &vehicles {
-            let port = open(Node::Vehicle(v.id)).map_err(CanError::Io)?;
-            vnodes.push(CanNode::vehicle(v.id, port)?);
-        }
-        let mut mnodes = Vec::with_capacity(managers.len());
-        for m in &managers {
-            let port = open(Node::Manager(m.junction)).map_err(CanError::Io)?;
-            mnodes.push(CanNode::new(map.manager_address(m.junction)?, port));
-        }
-        let total = (self.spec.duration_s / self.lim.h).round() as u64;
-        let order: Vec<u16> = vehicles.iter().map(|v| v.id).collect();
-        let with_managers = !managers.is_empty();
-        let (tx, rx) = mpsc::channel::<Report>();
-        let n = vehicles.len();
-        let m = managers.len();
-        let mut tally = Tally::default();
-        let mut monitor = WorldMonitor::new(&net);
-        let mut detector = DeadlockDetector::new(self.spec.deadlock_window_s);
-        let mut deadlock = None;
-        let mut periods = 0u64;
-        let (net_ref, map_ref, order_ref, lim) = (&net, &map, &order, self.lim);
-        let faults_silent = self.spec.faults.silent;
-        let outcome = std::thread::scope(|sc| -> Result<_, FleetError> {
-            let mut vhandles = Vec::with_capacity(n);
-            let mut go_tx = Vec::with_capacity(n);
-            for (index, (car, node)) in vehicles.into_iter().zip(vnodes).enumerate() {
-                let task_tx = tx.clone();
-                let (gtx, grx) = mpsc::channel::<Go>();
-                go_tx.push(gtx);
-                let id = car.id;
-                let ctx = TaskCtx {
-                    net: net_ref,
-                    map: map_ref,
-                    order: order_ref,
-                    total,
-                    with_managers,
-                    lim,
-                    silent: faults_silent,
-                };
-                vhandles.push(spawn(
-                    sc,
-                    &mut clock,
-                    &format!("vehicle-{id}"),
-                    move || vehicle_task(index, car, node, &ctx, &task_tx, &grx),
-                )?);
-            }
-            let mut mhandles = Vec::with_capacity(m);
-            for (mgr, node) in managers.into_iter().zip(mnodes) {
-                let task_tx = tx.clone();
-                let ctx = TaskCtx {
-                    net: net_ref,
-                    map: map_ref,
-                    order: order_ref,
-                    total,
-                    with_managers,
-                    lim,
-                    silent: faults_silent,
-                };
-                let j = mgr.junction;
-                mhandles.push(spawn(sc, &mut clock, &format!("manager-{j}"), move || {
-                    manager_task(mgr, node, &ctx, &task_tx)
-                })?);
-            }
-            drop(tx);
-            let mut sent: Vec<(u16, SystemTime, Kind)> = Vec::new();
-            let mut grants_at: Option<SystemTime> = None;
-            let mut last_tick: Option<SystemTime> = None;
-            let mut holders: Vec<Vec<(u16, u8)>> = vec![Vec::new(); m];
-            let mut result: Result<(), FleetError> = Ok(());
-            'periods: for k in 0..=total {
-                let t = k as f64 * lim.h;
-                let mut truths: Vec<Option<VehicleTruth>> = vec![None; n];
-                let mut rows: Vec<Option<TraceRow>> = vec![None; n];
-                let mut next_sent = Vec::with_capacity(n);
-                for _ in 0..n {
-                    match rx.recv_timeout(TIMEOUT) {
-                        Ok(Report::Vehicle {
-                            index,
-                            period,
-                            truth,
-                            row,
-                            published,
-                            heard,
-                            sync_rx,
-                            exit,
-                        }) if period == k => {
-                            if let Some(slot) = truths.get_mut(index) {
-                                *slot = truth;
-                            }
-                            if let Some(slot) = rows.get_mut(index) {
-                                *slot = row;
-                            }
-                            if let (Some((at, kind)), Some(id)) = (published, order_ref.get(index))
-                            {
-                                next_sent.push((*id, at, kind));
-                            }
-                            tally.heard(heard, &sent, grants_at);
-                            tally.exits += u64::from(exit);
-                            if let (Some(s), Some(r)) = (last_tick, sync_rx) {
-                                tally.sync.push(micros(s, r));
-                            }
-                        }
-                        Ok(Report::Failed { id, error }) => {
-                            result = Err(FleetError::Vehicle { id, error });
-                            break 'periods;
-                        }
-                        Ok(_) => {
-                            result = Err(FleetError::Harness(format!(
-                                "a report out of turn in period {k}"
-                            )));
-                            break 'periods;
-                        }
-                        Err(_) => {
-                            result = Err(FleetError::Timeout { period: k });
-                            break 'periods;
-                        }
-                    }
-                }
-                sent = next_sent;
-                let present: Vec<VehicleTruth> = truths.iter().flatten().copied().collect();
-                if k > 0 {
-                    for r in rows.iter().flatten() {
-                        trace(r);
-                    }
-                    monitor.check(&lim, net_ref, &present);
-                    let held = |j: usize| holders.get(j).cloned().unwrap_or_default();
-                    if let Some(d) = crate::world::wait::watch(
-                        &mut detector,
-                        t,
-                        &present,
-                        false,
-                        net_ref,
-                        &held,
-                        &lim,
-                    ) {
-                        deadlock = Some(d);
-                    }
-                }
-                periods = k + 1;
-                let gone = present.is_empty() && !net_ref.junctions.is_empty();
-                let last = k == total || deadlock.is_some() || gone;
-                if with_managers {
-                    let at = match tick(&mut clock, 2 * k, last) {
-                        Ok(at) => at,
-                        Err(e) => {
-                            result = Err(e);
-                            break;
-                        }
-                    };
-                    tally.ticks += 1;
-                    if last {
-                        break;
-                    }
-                    grants_at = None;
-                    for _ in 0..m {
-                        match rx.recv_timeout(TIMEOUT) {
-                            Ok(Report::Manager {
-                                junction,
-                                period,
-                                granted,
-                                holders: h,
-                                published,
-                                heard,
-                                sync_rx,
-                            }) if period == k => {
-                                monitor.granted(junction, &granted);
-                                tally.grants += granted.len() as u64;
-                                if !granted.is_empty() {
-                                    grants_at = Some(published);
-                                }
-                                if let Some(slot) = holders.get_mut(junction) {
-                                    *slot = h;
-                                }
-                                tally.heard(heard, &sent, None);
-                                tally.sync.push(micros(at, sync_rx));
-                            }
-                            Ok(Report::Failed { id, error }) => {
-                                result = Err(FleetError::Harness(format!("manager {id}: {error}")));
-                                break 'periods;
-                            }
-                            Ok(_) => {
-                                result = Err(FleetError::Harness(format!("a report out of turn while waiting for the managers' period {k}")));
-                                break 'periods;
-                            }
-                            Err(_) => {
-                                result = Err(FleetError::Timeout { period: k });
-                                break 'periods;
-                            }
-                        }
-                    }
-                }
-                // Sensor returns from ground truth at kh, as in the in-process world.
-                let seen = sense_all(
-                    net_ref,
-                    &present,
-                    &truths,
-                    self.spec.sensing.as_ref(),
-                    self.seed,
-                    k,
-                );
-                for (g, s) in go_tx.iter().zip(seen) {
-                    let _ = g.send(Go { sensed: s });
-                }
-                let plan = if with_managers { 2 * k + 1 } else { k };
-                match tick(&mut clock, plan, !with_managers && last) {
-                    Ok(at) => last_tick = Some(at),
-                    Err(e) => {
-                        result = Err(e);
-                        break;
-                    }
-                }
-                tally.ticks += 1;
-                if !with_managers && last {
-                    break;
-                }
-            }
-            if result.is_err() {
-                let _ = end(&mut clock, tally.ticks as u32);
-            }
-            let mut can = CanStats::default();
-            let mut counters = Counters::default();
-            let mut msgs = Messages::default();
-            let mut cars = Vec::with_capacity(n);
-            for (car, c, s, mm) in join(vhandles, &mut result) {
-                counters.add(&c);
-                can.add(&s);
-                msgs.states += mm.states;
-                msgs.requests += mm.requests;
-                cars.push(car);
-            }
-            for s in join(mhandles, &mut result) {
-                can.add(&s);
-            }
-            result.map(|()| (cars, counters, can, msgs))
-        })?;
-        let (cars, counters, can, mut msgs) = outcome;
+        Ok(managers)
+    }
+
+    /// The fleet's summary: the world's summary of the vehicles the tasks handed back,
+    /// and the bus's figures.
+    fn summary(
+        &self,
+        medium: &str,
+        (n, m): (usize, usize),
+        ran: Ran<N>,
+        master: MasterParts,
+        net: &Network,
+        t0: Instant,
+    ) -> FleetSummary {
+        let Ran {
+            cars,
+            counters,
+            can,
+            mut msgs,
+        } = ran;
+        let MasterParts {
+            tally,
+            findings,
+            deadlock,
+            periods,
+        } = master;
         msgs.grants = tally.grants;
         msgs.exits = tally.exits;
         let in_world = cars.iter().filter(|v| v.log.left_at.is_none()).count();
         let unfinished = cars
             .iter()
-            .filter(|v| v.log.left_at.is_none() && crate::world::step::unmet(v, &net))
+            .filter(|v| v.log.left_at.is_none() && crate::world::step::unmet(v, net))
             .count();
         let run = summarize(
             cars.iter(),
@@ -708,7 +548,7 @@ impl<const N: usize> Harness<N> {
                 spec: &self.spec,
                 in_world,
                 unfinished,
-                findings: &monitor.findings,
+                findings: &findings,
                 counters: &counters,
                 deadlock: deadlock.as_ref(),
                 t: periods.saturating_sub(1) as f64 * self.lim.h,
@@ -719,7 +559,7 @@ impl<const N: usize> Harness<N> {
                 wall_seconds: t0.elapsed().as_secs_f64(),
             },
         );
-        Ok(FleetSummary {
+        FleetSummary {
             run,
             medium: medium.to_string(),
             tasks: n + m,
@@ -732,7 +572,327 @@ impl<const N: usize> Harness<N> {
             request_latency: Latency::of(tally.request),
             grant_latency: Latency::of(tally.grant),
             sync_latency: Latency::of(tally.sync),
+        }
+    }
+}
+
+/// Every node's CAN port, opened before anyone transmits so that no node misses a frame.
+struct Nodes<P: CanPort> {
+    clock: CanNode<P>,
+    vehicles: Vec<CanNode<P>>,
+    managers: Vec<CanNode<P>>,
+}
+
+impl<P: CanPort> Nodes<P> {
+    fn open<const N: usize>(
+        open: &mut impl FnMut(Node) -> io::Result<P>,
+        vehicles: &[Vehicle<N>],
+        managers: &[ManagerNode],
+        map: &WireMap<'_>,
+    ) -> Result<Self, FleetError> {
+        let clock = CanNode::new(CLOCK_ADDRESS, open(Node::Clock).map_err(CanError::Io)?);
+        let mut vnodes = Vec::with_capacity(vehicles.len());
+        for v in vehicles {
+            let port = open(Node::Vehicle(v.id)).map_err(CanError::Io)?;
+            vnodes.push(CanNode::vehicle(v.id, port)?);
+        }
+        let mut mnodes = Vec::with_capacity(managers.len());
+        for m in managers {
+            let port = open(Node::Manager(m.junction)).map_err(CanError::Io)?;
+            mnodes.push(CanNode::new(map.manager_address(m.junction)?, port));
+        }
+        Ok(Self {
+            clock,
+            vehicles: vnodes,
+            managers: mnodes,
         })
+    }
+}
+
+/// What the vehicle tasks handed back at the end.
+#[derive(Default)]
+struct Ran<const N: usize> {
+    cars: Vec<Vehicle<N>>,
+    counters: Counters,
+    can: CanStats,
+    msgs: Messages,
+}
+
+/// The running tasks: one per vehicle (with the channel that releases it each period)
+/// and one per manager.
+struct Tasks<'scope, const N: usize> {
+    vehicles: Vec<std::thread::ScopedJoinHandle<'scope, Result<VehicleResult<N>, FleetError>>>,
+    go: Vec<mpsc::Sender<Go>>,
+    managers: Vec<std::thread::ScopedJoinHandle<'scope, Result<CanStats, FleetError>>>,
+}
+
+impl<'scope, const N: usize> Tasks<'scope, N> {
+    fn spawn<'env, P: CanPort + 'static>(
+        sc: &'scope std::thread::Scope<'scope, 'env>,
+        clock: &mut CanNode<P>,
+        ctx: &'scope TaskCtx<'scope>,
+        tx: &mpsc::Sender<Report>,
+        (cars, vnodes): (Vec<Vehicle<N>>, Vec<CanNode<P>>),
+        (mgrs, mnodes): (Vec<ManagerNode>, Vec<CanNode<P>>),
+    ) -> Result<Self, FleetError> {
+        let mut tasks = Self {
+            vehicles: Vec::with_capacity(cars.len()),
+            go: Vec::with_capacity(cars.len()),
+            managers: Vec::with_capacity(mgrs.len()),
+        };
+        for (index, (car, node)) in cars.into_iter().zip(vnodes).enumerate() {
+            let (task_tx, (gtx, grx)) = (tx.clone(), mpsc::channel::<Go>());
+            tasks.go.push(gtx);
+            let name = format!("vehicle-{}", car.id);
+            tasks.vehicles.push(spawn(sc, clock, &name, move || {
+                vehicle_task(index, car, node, ctx, &task_tx, &grx)
+            })?);
+        }
+        for (mgr, node) in mgrs.into_iter().zip(mnodes) {
+            let task_tx = tx.clone();
+            let name = format!("manager-{}", mgr.junction);
+            tasks.managers.push(spawn(sc, clock, &name, move || {
+                manager_task(mgr, node, ctx, &task_tx)
+            })?);
+        }
+        Ok(tasks)
+    }
+
+    /// Waits for every task; the first failure (if `result` has none yet) goes there.
+    fn join(self, result: &mut Result<(), FleetError>) -> Ran<N> {
+        let mut ran = Ran::default();
+        for (car, c, s, mm) in join(self.vehicles, result) {
+            ran.counters.add(&c);
+            ran.can.add(&s);
+            ran.msgs.states += mm.states;
+            ran.msgs.requests += mm.requests;
+            ran.cars.push(car);
+        }
+        for s in join(self.managers, result) {
+            ran.can.add(&s);
+        }
+        ran
+    }
+}
+
+/// The time master and the harness's view of one run: it collects every task's report
+/// for a period, runs the monitors on ground truth, ticks SYNC and hands out sensor
+/// returns.
+struct Master<'a, P: CanPort, const N: usize> {
+    harness: &'a Harness<N>,
+    ctx: &'a TaskCtx<'a>,
+    clock: CanNode<P>,
+    rx: mpsc::Receiver<Report>,
+    go: Vec<mpsc::Sender<Go>>,
+    tally: Tally,
+    monitor: WorldMonitor,
+    detector: DeadlockDetector,
+    deadlock: Option<crate::monitor::liveness::Deadlock>,
+    periods: u64,
+    /// Who published what when in the previous period (for the latencies).
+    sent: Vec<(u16, SystemTime, Kind)>,
+    grants_at: Option<SystemTime>,
+    last_tick: Option<SystemTime>,
+    /// Per junction, the permissions its manager holds (for the wait-for relation).
+    holders: Vec<Vec<(u16, u8)>>,
+}
+
+/// What the master hands back for the summary.
+struct MasterParts {
+    tally: Tally,
+    findings: crate::monitor::Findings,
+    deadlock: Option<crate::monitor::liveness::Deadlock>,
+    periods: u64,
+}
+
+/// One period's vehicle reports, in vehicle order.
+struct Truths {
+    truths: Vec<Option<VehicleTruth>>,
+    rows: Vec<Option<TraceRow>>,
+}
+
+impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
+    fn new(
+        harness: &'a Harness<N>,
+        ctx: &'a TaskCtx<'a>,
+        clock: CanNode<P>,
+        rx: mpsc::Receiver<Report>,
+    ) -> Self {
+        Self {
+            harness,
+            ctx,
+            clock,
+            rx,
+            go: Vec::new(),
+            tally: Tally::default(),
+            monitor: WorldMonitor::new(ctx.net),
+            detector: DeadlockDetector::new(harness.spec.deadlock_window_s),
+            deadlock: None,
+            periods: 0,
+            sent: Vec::new(),
+            grants_at: None,
+            last_tick: None,
+            holders: vec![Vec::new(); ctx.net.junctions.len()],
+        }
+    }
+
+    fn into_parts(self) -> MasterParts {
+        MasterParts {
+            tally: self.tally,
+            findings: self.monitor.findings,
+            deadlock: self.deadlock,
+            periods: self.periods,
+        }
+    }
+
+    /// Runs every period to the last.
+    fn periods(&mut self, trace: &mut dyn FnMut(&TraceRow)) -> Result<(), FleetError> {
+        for k in 0..=self.ctx.total {
+            if self.period(k, trace)? {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// Period k: the vehicles' reports, the monitors, the managers' turn, the sensor
+    /// returns and the planning tick. `Ok(true)` when the run is over.
+    fn period(&mut self, k: u64, trace: &mut dyn FnMut(&TraceRow)) -> Result<bool, FleetError> {
+        let Truths { truths, rows } = self.vehicle_reports(k)?;
+        let present: Vec<VehicleTruth> = truths.iter().flatten().copied().collect();
+        if k > 0 {
+            rows.iter().flatten().for_each(&mut *trace);
+            self.observe(k, &present);
+        }
+        self.periods = k + 1;
+        let gone = present.is_empty() && !self.ctx.net.junctions.is_empty();
+        let last = k == self.ctx.total || self.deadlock.is_some() || gone;
+        let with_managers = self.ctx.with_managers;
+        if with_managers {
+            let at = tick(&mut self.clock, 2 * k, last)?;
+            self.tally.ticks += 1;
+            if last {
+                return Ok(true);
+            }
+            self.manager_reports(k, at)?;
+        }
+        // Sensor returns from ground truth at kh, as in the in-process world.
+        let h = self.harness;
+        let seen = sense_all(
+            self.ctx.net,
+            &present,
+            &truths,
+            h.spec.sensing.as_ref(),
+            h.seed,
+            k,
+        );
+        for (g, s) in self.go.iter().zip(seen) {
+            let _ = g.send(Go { sensed: s });
+        }
+        let plan = if with_managers { 2 * k + 1 } else { k };
+        self.last_tick = Some(tick(&mut self.clock, plan, !with_managers && last)?);
+        self.tally.ticks += 1;
+        Ok(!with_managers && last)
+    }
+
+    /// The monitors and the deadlock detector on the ground truth of period k.
+    fn observe(&mut self, k: u64, present: &[VehicleTruth]) {
+        let (lim, net) = (&self.ctx.lim, self.ctx.net);
+        self.monitor.check(lim, net, present);
+        let holders = &self.holders;
+        let held = |j: usize| holders.get(j).cloned().unwrap_or_default();
+        let t = k as f64 * lim.h;
+        let watched =
+            crate::world::wait::watch(&mut self.detector, t, present, false, net, &held, lim);
+        if let Some(d) = watched {
+            self.deadlock = Some(d);
+        }
+    }
+
+    /// Every vehicle task's report for period k.
+    fn vehicle_reports(&mut self, k: u64) -> Result<Truths, FleetError> {
+        let n = self.ctx.order.len();
+        let mut out = Truths {
+            truths: vec![None; n],
+            rows: vec![None; n],
+        };
+        let mut next_sent = Vec::with_capacity(n);
+        for _ in 0..n {
+            match self.rx.recv_timeout(TIMEOUT) {
+                Ok(Report::Vehicle {
+                    index,
+                    period,
+                    truth,
+                    row,
+                    published,
+                    heard,
+                    sync_rx,
+                    exit,
+                }) if period == k => {
+                    if let (Some(slot), Some(r)) =
+                        (out.truths.get_mut(index), out.rows.get_mut(index))
+                    {
+                        (*slot, *r) = (truth, row);
+                    }
+                    if let (Some((at, kind)), Some(id)) = (published, self.ctx.order.get(index)) {
+                        next_sent.push((*id, at, kind));
+                    }
+                    self.tally.heard(heard, &self.sent, self.grants_at);
+                    self.tally.exits += u64::from(exit);
+                    if let (Some(s), Some(r)) = (self.last_tick, sync_rx) {
+                        self.tally.sync.push(micros(s, r));
+                    }
+                }
+                Ok(Report::Failed { id, error }) => return Err(FleetError::Vehicle { id, error }),
+                Ok(_) => {
+                    return Err(FleetError::Harness(format!(
+                        "a report out of turn in period {k}"
+                    )))
+                }
+                Err(_) => return Err(FleetError::Timeout { period: k }),
+            }
+        }
+        self.sent = next_sent;
+        Ok(out)
+    }
+
+    /// Every manager's report for period k (after SYNC(2k) at `at`).
+    fn manager_reports(&mut self, k: u64, at: SystemTime) -> Result<(), FleetError> {
+        self.grants_at = None;
+        for _ in 0..self.holders.len() {
+            match self.rx.recv_timeout(TIMEOUT) {
+                Ok(Report::Manager {
+                    junction,
+                    period,
+                    granted,
+                    holders,
+                    published,
+                    heard,
+                    sync_rx,
+                }) if period == k => {
+                    self.monitor.granted(junction, &granted);
+                    self.tally.grants += granted.len() as u64;
+                    if !granted.is_empty() {
+                        self.grants_at = Some(published);
+                    }
+                    if let Some(slot) = self.holders.get_mut(junction) {
+                        *slot = holders;
+                    }
+                    self.tally.heard(heard, &self.sent, None);
+                    self.tally.sync.push(micros(at, sync_rx));
+                }
+                Ok(Report::Failed { id, error }) => {
+                    return Err(FleetError::Harness(format!("manager {id}: {error}")))
+                }
+                Ok(_) => {
+                    return Err(FleetError::Harness(format!(
+                        "a report out of turn while waiting for the managers' period {k}"
+                    )))
+                }
+                Err(_) => return Err(FleetError::Timeout { period: k }),
+            }
+        }
+        Ok(())
     }
 }
 
