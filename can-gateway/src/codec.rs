@@ -149,7 +149,7 @@ impl StateWire {
     fn of<F: Real>(s: &VehicleState<F>) -> Result<Self, EncodeError> {
         let pi = core::f64::consts::PI;
         let th = s.theta.to_f64();
-        // Wrap into (−π, π] so any heading fits the i16 field.
+        // Wrap into [−π, π) so any heading fits the i16 field (π itself goes out as −π).
         let th = th - 2.0 * pi * libm_floor((th + pi) / (2.0 * pi));
         // β in the low nibble; flags in the high one (bit 4: does not cooperate).
         let flags = if s.cooperative { 0 } else { NOT_COOPERATIVE };
@@ -942,5 +942,205 @@ mod tests {
         let f = TestFrame::new(ExtendedId::new(raw).unwrap(), &[0; 8]).unwrap();
         assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::UnknownKind(12)));
         assert!(r.slots.is_empty());
+    }
+
+    /// Survivors of `cargo mutants -f can-gateway/src/codec.rs` (docs/mutants.md), each
+    /// killed here: range checks on encoding, the heading's wrap, the decoder's bounds,
+    /// remote frames, staleness of `Located`, and every field of the junction messages.
+    mod mutation_audit {
+        use super::*;
+
+        fn decode_one(
+            m: &Message<f64>,
+            sa: u8,
+            r: &mut Reassembler<8>,
+            counter: u8,
+        ) -> Result<Option<Message<f64>>, DecodeError> {
+            let frames: Frames<TestFrame> = encode(m, sa, counter).unwrap();
+            let mut last = Ok(None);
+            for f in &frames {
+                last = r.push::<f64, _>(f);
+            }
+            last
+        }
+
+        #[test]
+        fn finite_values_outside_a_field_are_refused() {
+            let mut s = state();
+            s.v = -1.0;
+            let e = encode::<f64, TestFrame>(&Message::State(s), 7, 0).unwrap_err();
+            assert_eq!(e, EncodeError::OutOfRange(Field::Speed));
+            s = state();
+            s.x = 3.0e7; // beyond i32 at 0.01 m
+            let e = encode::<f64, TestFrame>(&Message::State(s), 7, 0).unwrap_err();
+            assert_eq!(e, EncodeError::OutOfRange(Field::X));
+        }
+
+        #[test]
+        fn tracks_must_fit_their_nibbles() {
+            for (heading, lane, ok) in
+                [(3, 15, true), (4, 0, false), (0, 16, false), (4, 16, false)]
+            {
+                let mut req = request(9);
+                req.inlet = TrackWire { heading, lane };
+                let got = encode::<f64, TestFrame>(&Message::Request(req), 9, 0);
+                assert_eq!(got.is_ok(), ok, "heading {heading} lane {lane}");
+                if !ok {
+                    assert_eq!(
+                        got.unwrap_err(),
+                        EncodeError::OutOfRange(Field::TrackHeading)
+                    );
+                }
+            }
+            // Both nibbles arrive where they were put.
+            let mut req = request(9);
+            req.inlet = TrackWire {
+                heading: 3,
+                lane: 15,
+            };
+            let mut r = Reassembler::<8>::new();
+            let Ok(Some(Message::Request(got))) = decode_one(&Message::Request(req), 9, &mut r, 0)
+            else {
+                panic!("a request");
+            };
+            assert_eq!(got.inlet, req.inlet);
+        }
+
+        #[test]
+        fn headings_wrap_into_minus_pi_to_pi() {
+            let pi = core::f64::consts::PI;
+            for (theta, want) in [
+                (3.0 * pi + 0.25, -pi + 0.25),
+                (2.0 * pi + 0.5, 0.5),
+                (-2.0 * pi - 0.5, -0.5),
+                (pi, -pi),
+                (-pi, -pi),
+                (1.0, 1.0),
+            ] {
+                let mut s = state();
+                s.theta = theta;
+                let mut r = Reassembler::<8>::new();
+                let Ok(Some(Message::State(got))) = decode_one(&Message::State(s), 7, &mut r, 0)
+                else {
+                    panic!("a state");
+                };
+                assert!(
+                    (got.theta - want).abs() <= HEADING_RES,
+                    "{theta} → {}, want {want}",
+                    got.theta
+                );
+            }
+            assert_eq!(libm_floor(1.0), 1.0);
+            assert_eq!(libm_floor(-0.5), -1.0);
+            assert_eq!(libm_floor(2.5), 2.0);
+        }
+
+        fn wire_state(heading: i16, speed: u16) -> StateWire {
+            StateWire {
+                x: 0,
+                y: 0,
+                heading,
+                speed,
+                yaw: 0,
+                lanes: 0xF1,
+                beta_flags: NO_LANE,
+                stamp: 1,
+            }
+        }
+
+        #[test]
+        fn decoded_headings_and_speeds_are_bounded() {
+            let pi = core::f64::consts::PI;
+            let at_pi = (pi / HEADING_RES).round() as i16;
+            assert!(wire_state(at_pi, 0).state::<f64>(7).is_ok());
+            assert!(wire_state(-at_pi, 0).state::<f64>(7).is_ok());
+            assert_eq!(
+                wire_state(at_pi + 2, 0).state::<f64>(7).err(),
+                Some(DecodeError::OutOfRange(Field::Heading))
+            );
+            assert_eq!(
+                wire_state(i16::MAX, 0).state::<f64>(7).err(),
+                Some(DecodeError::OutOfRange(Field::Heading))
+            );
+            let limit = (SPEED_LIMIT / SPEED_RES).round() as u16;
+            assert!(wire_state(0, limit).state::<f64>(7).is_ok());
+            assert_eq!(
+                wire_state(0, limit + 1).state::<f64>(7).err(),
+                Some(DecodeError::OutOfRange(Field::Speed))
+            );
+            assert_eq!(speed(limit), Ok(SPEED_LIMIT));
+            assert_eq!(speed(limit + 1), Err(DecodeError::OutOfRange(Field::Speed)));
+        }
+
+        #[test]
+        fn remote_frames_are_not_ours() {
+            let id = ExtendedId::new(frame_id(MessageKind::Grant, 0, MANAGER_ADDRESS)).unwrap();
+            let f = TestFrame::new_remote(id, 8).unwrap();
+            let mut r = Reassembler::<2>::new();
+            assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::NotOurs));
+            assert!(r.slots.is_empty());
+        }
+
+        #[test]
+        fn an_older_located_state_is_stale() {
+            let mut r = Reassembler::<8>::new();
+            let mut st = state();
+            st.id = 7;
+            st.stamp = 20.0;
+            let newer = Message::Located {
+                segment: 1,
+                state: st,
+            };
+            assert!(matches!(decode_one(&newer, 7, &mut r, 1), Ok(Some(_))));
+            st.stamp = 10.0;
+            let older = Message::Located {
+                segment: 1,
+                state: st,
+            };
+            assert_eq!(decode_one(&older, 7, &mut r, 2), Err(DecodeError::Stale));
+        }
+
+        #[test]
+        fn junction_messages_keep_every_field() {
+            let mut req = request(9);
+            req.s = 1000.25; // beyond 16 bits at 0.01 m: the third byte counts
+            req.arrival = 123.456;
+            req.v = 13.9;
+            let m = Message::JunctionRequest {
+                junction: 2,
+                request: req,
+            };
+            let mut r = Reassembler::<8>::new();
+            let Ok(Some(Message::JunctionRequest {
+                junction,
+                request: got,
+            })) = decode_one(&m, 9, &mut r, 0)
+            else {
+                panic!("a junction request");
+            };
+            assert_eq!(
+                (junction, got.id, got.inlet, got.outlet),
+                (2, 9, req.inlet, req.outlet)
+            );
+            assert!((got.s - req.s).abs() < 0.006, "{}", got.s);
+            assert!(
+                (got.arrival - req.arrival).abs() < 0.0006,
+                "{}",
+                got.arrival
+            );
+            assert!((got.v - req.v).abs() < 0.011, "{}", got.v);
+            // The plain request too.
+            let Ok(Some(Message::Request(got))) = decode_one(&Message::Request(req), 9, &mut r, 1)
+            else {
+                panic!("a request");
+            };
+            assert!((got.s - req.s).abs() < 0.006 && (got.arrival - req.arrival).abs() < 0.0006);
+            let exit = Message::JunctionExit {
+                junction: 2,
+                id: 9,
+                at: 77.125,
+            };
+            assert_eq!(decode_one(&exit, 9, &mut r, 2), Ok(Some(exit)));
+        }
     }
 }

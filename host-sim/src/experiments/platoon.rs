@@ -131,34 +131,9 @@ pub fn run(spec: &PlatoonSpec) -> PlatoonOutcome {
 fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     let lim = Limits::table_i();
     let params = Params::<F>::table_i();
-    let pf64 = Params::<f64>::table_i();
     let mut rng = crate::reference::instances::rng(spec.seed);
-    let n = spec.vehicles.max(2);
-    let length = pf64.length();
-    // Initial state: leader at the front; each follower behind its predecessor by the
-    // extent, d0, dS(v) and the f32 safety margin, plus a random extra: the invariant
-    // holds, with the planners' margins, at t = 0.
-    let margin = f64::from(f32::SAFETY_MARGIN_M) + 0.01;
-    let mut cars: Vec<Truth> = Vec::with_capacity(n);
-    let mut x = 0.0;
-    for i in 0..n {
-        let v = rng.random_range(0.0..lim.v_max);
-        if i > 0 {
-            x -= length + lim.d0 + lim.safe_distance(v) + margin + rng.random_range(0.0..20.0);
-        }
-        cars.push(Truth {
-            x,
-            y: 0.5 * crate::world::LANE_WIDTH_M,
-            theta: 0.0,
-            length,
-            width: pf64.width(),
-            lane: 0,
-            keeps_invariant: i > 0,
-            v,
-            v_before: v,
-            mapped: false,
-        });
-    }
+    let mut cars = initial_platoon(spec, &lim, &mut rng);
+    let n = cars.len();
     let mut planners: Vec<Planner<F, HORIZON>> = (1..n)
         .map(|_| Planner::new(params, CostWeights::default()).expect("default weights are valid"))
         .collect();
@@ -197,44 +172,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
             (v0 + lim.a_max * lim.h).min(lim.v_max),
         );
         for (i, planner) in planners.iter_mut().enumerate() {
-            let me = &cars[i + 1];
-            let obs = Observation {
-                x: F::from_f64(me.x),
-                v_prev: F::from_f64(me.v),
-                vehicles: &seen,
-                stop_line: None,
-                target_x: F::ZERO,
-                v_ref: params.v_max(),
-            };
-            let cmd = match planner.step(&obs) {
-                Ok(c) => {
-                    if let StepStatus::Fallback(why) = c.status {
-                        out.fallback_steps += 1;
-                        match why {
-                            FallbackReason::InvariantViolated => out.fallback_invariant += 1,
-                            FallbackReason::NoRoom => out.fallback_no_room += 1,
-                            FallbackReason::Solver(e) => {
-                                out.fallback_solver += 1;
-                                if std::env::var_os("PLATOON_DEBUG").is_some() {
-                                    eprintln!("solver {e:?} at v={:?} gap={:?}", me.v, c.gap);
-                                }
-                            }
-                            // A single-lane planner has neither the lane sets nor steering.
-                            FallbackReason::Verification(_)
-                            | FallbackReason::Yield
-                            | FallbackReason::Lateral => out.fallback_verification += 1,
-                        }
-                    }
-                    c.v.to_f64()
-                }
-                // Bad input cannot happen here; brake if it ever does.
-                Err(_) => {
-                    out.fallback_steps += 1;
-                    (me.v - lim.brake * lim.h).max(0.0)
-                }
-            };
-            out.planner_steps += 1;
-            commands[i + 1] = cmd;
+            commands[i + 1] = follower_command(planner, &cars[i + 1], &seen, &lim, &mut out);
         }
         for (c, &v) in cars.iter_mut().zip(commands.iter()) {
             c.v_before = c.v;
@@ -245,6 +183,82 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     findings.check(&lim, &cars, None, 1);
     out.findings = findings;
     out
+}
+
+/// The platoon at t = 0: the leader at the front; each follower behind its predecessor
+/// by the extent, d0, dS(v) and the f32 safety margin, plus a random extra — so the
+/// invariant holds, with the planners' margins, from the start.
+fn initial_platoon(spec: &PlatoonSpec, lim: &Limits, rng: &mut impl Rng) -> Vec<Truth> {
+    let pf64 = Params::<f64>::table_i();
+    let n = spec.vehicles.max(2);
+    let length = pf64.length();
+    let margin = f64::from(f32::SAFETY_MARGIN_M) + 0.01;
+    let mut cars: Vec<Truth> = Vec::with_capacity(n);
+    let mut x = 0.0;
+    for i in 0..n {
+        let v = rng.random_range(0.0..lim.v_max);
+        if i > 0 {
+            x -= length + lim.d0 + lim.safe_distance(v) + margin + rng.random_range(0.0..20.0);
+        }
+        cars.push(Truth {
+            x,
+            y: 0.5 * crate::world::LANE_WIDTH_M,
+            theta: 0.0,
+            length,
+            width: pf64.width(),
+            lane: 0,
+            keeps_invariant: i > 0,
+            v,
+            v_before: v,
+            mapped: false,
+        });
+    }
+    cars
+}
+
+/// One follower's planner step on what it sees, counted into `out` by outcome.
+fn follower_command<F: Real>(
+    planner: &mut Planner<F, HORIZON>,
+    me: &Truth,
+    seen: &[Vehicle<F>],
+    lim: &Limits,
+    out: &mut PlatoonOutcome,
+) -> f64 {
+    let obs = Observation {
+        x: F::from_f64(me.x),
+        v_prev: F::from_f64(me.v),
+        vehicles: seen,
+        stop_line: None,
+        target_x: F::ZERO,
+        v_ref: planner.params().v_max(),
+    };
+    out.planner_steps += 1;
+    let c = match planner.step(&obs) {
+        Ok(c) => c,
+        // Bad input cannot happen here; brake if it ever does.
+        Err(_) => {
+            out.fallback_steps += 1;
+            return (me.v - lim.brake * lim.h).max(0.0);
+        }
+    };
+    if let StepStatus::Fallback(why) = c.status {
+        out.fallback_steps += 1;
+        match why {
+            FallbackReason::InvariantViolated => out.fallback_invariant += 1,
+            FallbackReason::NoRoom => out.fallback_no_room += 1,
+            FallbackReason::Solver(e) => {
+                out.fallback_solver += 1;
+                if std::env::var_os("PLATOON_DEBUG").is_some() {
+                    eprintln!("solver {e:?} at v={:?} gap={:?}", me.v, c.gap);
+                }
+            }
+            // A single-lane planner has neither the lane sets nor steering.
+            FallbackReason::Verification(_) | FallbackReason::Yield | FallbackReason::Lateral => {
+                out.fallback_verification += 1
+            }
+        }
+    }
+    c.v.to_f64()
 }
 
 /// Summary of a Theorem 1 sweep.

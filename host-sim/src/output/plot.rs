@@ -491,29 +491,7 @@ where
     let root = root.titled(title, ("sans-serif", 26)).map_err(e)?;
     let (left, right) = root.split_horizontally(900);
     let boxes: Vec<[(f64, f64); 5]> = net.segments.iter().map(segment_box).collect();
-    let pts = boxes.iter().flatten();
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for &(x, y) in pts {
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
-    }
-    for j in &net.junctions {
-        let r = j.layout.spec.half_size + j.layout.spec.comm_margin;
-        x0 = x0.min(j.centre.0 - r);
-        x1 = x1.max(j.centre.0 + r);
-        y0 = y0.min(j.centre.1 - r);
-        y1 = y1.max(j.centre.1 + r);
-    }
-    if !x0.is_finite() {
-        return Err(PlotError("nothing to plot".into()));
-    }
+    let (x0, x1, y0, y1) = network_bounds(net, &boxes)?;
     // Equal scales: the longer side sets both.
     let span = (x1 - x0).max(y1 - y0) + 20.0;
     let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
@@ -546,26 +524,7 @@ where
         .map_err(e)?;
     }
     for j in &net.junctions {
-        let sq = |h: f64| {
-            vec![
-                (j.centre.0 - h, j.centre.1 - h),
-                (j.centre.0 + h, j.centre.1 - h),
-                (j.centre.0 + h, j.centre.1 + h),
-                (j.centre.0 - h, j.centre.1 + h),
-                (j.centre.0 - h, j.centre.1 - h),
-            ]
-        };
-        let a = j.layout.spec.half_size;
-        xy.draw_series(std::iter::once(PathElement::new(
-            sq(a + j.layout.spec.comm_margin),
-            BLACK.mix(0.25),
-        )))
-        .map_err(e)?;
-        xy.draw_series(std::iter::once(PathElement::new(
-            sq(a),
-            RED.stroke_width(2),
-        )))
-        .map_err(e)?;
+        draw_junction(&mut xy, j)?;
     }
     let t1 = data
         .series
@@ -589,6 +548,63 @@ where
         .map(|j| j.layout.spec.v_limit)
         .fold(0.0, f64::max);
     speed_panel(data, &right, t1, vmax * 1.2)
+}
+
+/// The extent (x0, x1, y0, y1) of a network's segment boxes and junctions' A_C.
+fn network_bounds(
+    net: &crate::world::network::Network,
+    boxes: &[[(f64, f64); 5]],
+) -> Result<(f64, f64, f64, f64), PlotError> {
+    let mut b = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    let mut grow = |x: f64, y: f64| {
+        b = (b.0.min(x), b.1.max(x), b.2.min(y), b.3.max(y));
+    };
+    for &(x, y) in boxes.iter().flatten() {
+        grow(x, y);
+    }
+    for j in &net.junctions {
+        let r = j.layout.spec.half_size + j.layout.spec.comm_margin;
+        grow(j.centre.0 - r, j.centre.1 - r);
+        grow(j.centre.0 + r, j.centre.1 + r);
+    }
+    if !b.0.is_finite() {
+        return Err(PlotError("nothing to plot".into()));
+    }
+    Ok(b)
+}
+
+/// A junction's A_C (grey) and A_S (red) squares.
+fn draw_junction<DB: DrawingBackend>(
+    xy: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    j: &crate::world::network::Junction,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    let sq = |h: f64| {
+        vec![
+            (j.centre.0 - h, j.centre.1 - h),
+            (j.centre.0 + h, j.centre.1 - h),
+            (j.centre.0 + h, j.centre.1 + h),
+            (j.centre.0 - h, j.centre.1 + h),
+            (j.centre.0 - h, j.centre.1 - h),
+        ]
+    };
+    let a = j.layout.spec.half_size;
+    let outer = PathElement::new(sq(a + j.layout.spec.comm_margin), BLACK.mix(0.25));
+    xy.draw_series(std::iter::once(outer)).map_err(e)?;
+    let inner = PathElement::new(sq(a), RED.stroke_width(2));
+    xy.draw_series(std::iter::once(inner)).map_err(e)?;
+    Ok(())
 }
 
 /// Mean delay against demand, one curve per algorithm, with each algorithm's capacity
@@ -727,46 +743,60 @@ where
             .draw()
             .map_err(e)?;
         for c in r.cells.iter().filter(|c| c.workload == *w) {
-            let (col, row) = match c.cell.variant {
-                "grid" => (
-                    delays
-                        .iter()
-                        .position(|&d| d == c.cell.delay_s)
-                        .unwrap_or(0),
-                    losses.iter().position(|&l| l == c.cell.loss).unwrap_or(0),
-                ),
-                v => (
-                    VARIANTS.iter().position(|&x| x == v).unwrap_or(0) + 1,
-                    losses.len(),
-                ),
-            };
-            let (x, y) = (col as f64 - 0.5, row as f64 - 0.5);
-            let p = c.completion.clamp(0.0, 1.0);
-            let fill = RGBColor((230.0 * (1.0 - p)) as u8 + 25, (200.0 * p) as u8 + 40, 60);
-            chart
-                .draw_series(std::iter::once(Rectangle::new(
-                    [(x + 0.03, y + 0.03), (x + 0.97, y + 0.97)],
-                    fill.filled(),
-                )))
-                .map_err(e)?;
-            let bad = c.unsafe_events();
-            let label = match c.cell.variant {
-                "grid" => format!("{:.0}%", 100.0 * p),
-                v => format!("{v} {:.0}%", 100.0 * p),
-            };
-            let text = if bad > 0 {
-                format!("{label} !{bad}")
-            } else {
-                label
-            };
-            chart
-                .draw_series(std::iter::once(Text::new(
-                    text,
-                    (x + 0.08, y + 0.62),
-                    ("sans-serif", 13).into_font().color(&BLACK),
-                )))
-                .map_err(e)?;
+            draw_grid_cell(&mut chart, c, losses, delays)?;
         }
     }
+    Ok(())
+}
+
+/// One cell of a workload's heat map: its colour by completion, its label, and "!n" for
+/// n unsafe events. Loss × delay cells sit at their row and column; the other variants
+/// in a row of their own above.
+fn draw_grid_cell<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    c: &crate::experiments::fault_grid::CellResult,
+    losses: &[f64],
+    delays: &[f64],
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    use crate::experiments::fault_grid::VARIANTS;
+    let (col, row) = match c.cell.variant {
+        "grid" => (
+            delays
+                .iter()
+                .position(|&d| d == c.cell.delay_s)
+                .unwrap_or(0),
+            losses.iter().position(|&l| l == c.cell.loss).unwrap_or(0),
+        ),
+        v => (
+            VARIANTS.iter().position(|&x| x == v).unwrap_or(0) + 1,
+            losses.len(),
+        ),
+    };
+    let (x, y) = (col as f64 - 0.5, row as f64 - 0.5);
+    let p = c.completion.clamp(0.0, 1.0);
+    let fill = RGBColor((230.0 * (1.0 - p)) as u8 + 25, (200.0 * p) as u8 + 40, 60);
+    let cell = Rectangle::new([(x + 0.03, y + 0.03), (x + 0.97, y + 0.97)], fill.filled());
+    chart.draw_series(std::iter::once(cell)).map_err(e)?;
+    let bad = c.unsafe_events();
+    let label = match c.cell.variant {
+        "grid" => format!("{:.0}%", 100.0 * p),
+        v => format!("{v} {:.0}%", 100.0 * p),
+    };
+    let text = if bad > 0 {
+        format!("{label} !{bad}")
+    } else {
+        label
+    };
+    let font = ("sans-serif", 13).into_font().color(&BLACK);
+    chart
+        .draw_series(std::iter::once(Text::new(text, (x + 0.08, y + 0.62), font)))
+        .map_err(e)?;
     Ok(())
 }

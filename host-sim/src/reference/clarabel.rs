@@ -75,30 +75,32 @@ fn dense_to_csc(rows: usize, cols: usize, m: &[Vec<f64>], upper_only: bool) -> C
     CscMatrix::new(rows, cols, colptr, rowval, nzval)
 }
 
-/// Builds the conic form of `pr`.
-pub fn conic_data<const N: usize>(pr: &SingleLaneProblem<f64, N>) -> ConicData {
-    let n = N;
-    let w = pr.weights;
-    // v = D z and Δv = D2 z − v_prev e_0, written as dense rows.
-    let d_row = |k: usize| {
-        let mut r = vec![0.0; n];
-        r[k] = 1.0;
-        if k >= 1 {
-            r[k - 1] = -1.0;
-        }
-        r
-    };
-    let d2_row = |k: usize| {
-        let mut r = vec![0.0; n];
-        r[k] = 1.0;
-        if k >= 1 {
-            r[k - 1] = -2.0;
-        }
-        if k >= 2 {
-            r[k - 2] = 1.0;
-        }
-        r
-    };
+/// Row k of D (v = D z): z_k − z_{k−1}.
+fn d_row(n: usize, k: usize) -> Vec<f64> {
+    let mut r = vec![0.0; n];
+    r[k] = 1.0;
+    if k >= 1 {
+        r[k - 1] = -1.0;
+    }
+    r
+}
+
+/// Row k of D2 (Δv = D2 z − v_prev e_0): z_k − 2 z_{k−1} + z_{k−2}.
+fn d2_row(n: usize, k: usize) -> Vec<f64> {
+    let mut r = vec![0.0; n];
+    r[k] = 1.0;
+    if k >= 1 {
+        r[k - 1] = -2.0;
+    }
+    if k >= 2 {
+        r[k - 2] = 1.0;
+    }
+    r
+}
+
+/// The cost of (10) in z as dense (P, q): a sum of weighted squares.
+fn cost<const N: usize>(pr: &SingleLaneProblem<f64, N>) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let (n, w) = (N, pr.weights);
     let mut p = vec![vec![0.0; n]; n];
     let mut q = vec![0.0; n];
     let mut add_sq = |row: &[f64], target: f64, weight: f64| {
@@ -114,25 +116,28 @@ pub fn conic_data<const N: usize>(pr: &SingleLaneProblem<f64, N>) -> ConicData {
     last[n - 1] = pr.h;
     add_sq(&last, pr.target, w.target_position);
     for k in 0..n {
-        add_sq(&d_row(k), pr.v_ref, w.reference_speed);
-        add_sq(
-            &d2_row(k),
-            if k == 0 { pr.v_prev } else { 0.0 },
-            w.smoothness,
-        );
+        add_sq(&d_row(n, k), pr.v_ref, w.reference_speed);
+        let first = if k == 0 { pr.v_prev } else { 0.0 };
+        add_sq(&d2_row(n, k), first, w.smoothness);
     }
-    let mut a = Vec::new();
-    let mut b = Vec::new();
+    (p, q)
+}
+
+/// The constraints of (10) as dense rows A z ≤ b (the nonnegative cone's 4N rows: speed
+/// and acceleration bounds), then N second-order cones of 3 rows (the safety constraint).
+fn constraints<const N: usize>(pr: &SingleLaneProblem<f64, N>) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let n = N;
+    let (mut a, mut b) = (Vec::new(), Vec::new());
     let neg = |r: Vec<f64>| r.into_iter().map(|x| -x).collect::<Vec<_>>();
     for k in 0..n {
         let first = if k == 0 { pr.v_prev } else { 0.0 };
-        a.push(d_row(k));
+        a.push(d_row(n, k));
         b.push(pr.hi[k]);
-        a.push(neg(d_row(k)));
+        a.push(neg(d_row(n, k)));
         b.push(-pr.lo[k]);
-        a.push(d2_row(k));
+        a.push(d2_row(n, k));
         b.push(pr.dv_max + first);
-        a.push(neg(d2_row(k)));
+        a.push(neg(d2_row(n, k)));
         b.push(-pr.dv_min - first);
     }
     let bb = pr.brake;
@@ -155,6 +160,14 @@ pub fn conic_data<const N: usize>(pr: &SingleLaneProblem<f64, N>) -> ConicData {
         a.push(t_row);
         b.push(c0 - 2.0 * bb);
     }
+    (a, b)
+}
+
+/// Builds the conic form of `pr`.
+pub fn conic_data<const N: usize>(pr: &SingleLaneProblem<f64, N>) -> ConicData {
+    let n = N;
+    let (p, mut q) = cost(pr);
+    let (a, mut b) = constraints(pr);
     let mut cones = vec![SupportedConeT::NonnegativeConeT(4 * n)];
     cones.extend((0..n).map(|_| SupportedConeT::SecondOrderConeT(3)));
     // Shift to δ = z − z_c: q' = q + P z_c, b' = b − A z_c.
