@@ -412,10 +412,8 @@ fn worst_relative<F: Real, const N: usize>(
 ) -> Option<Violation<F>> {
     let lin = speed_slack(p);
     let mut found = None;
-    let exact = SingleLaneProblem {
-        hi: problem.hi_exact,
-        ..problem.clone()
-    };
+    let mut exact = problem.clone();
+    exact.hi = problem.hi_exact;
     exact.for_each_constraint(v, |amount, kind, step| {
         let slack = match kind {
             ConstraintKind::Safety => F::VERIFY_SLACK_M,
