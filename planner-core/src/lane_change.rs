@@ -1168,3 +1168,39 @@ pub fn d_c<F: Real>(p: &Params<F>, v: F, rho: F, theta: F) -> F {
 pub fn commitment_distance<F: Real>(p: &Params<F>, m: u8, v: F, rho: F, theta: F) -> F {
     F::from_usize(usize::from(m)) * (safety::d_s(p, v) + d_c(p, v, rho, theta))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unaware_vehicle_reaches_at_most_amax_then_vmax() {
+        let p = Params::<f64>::table_i();
+        let (a, vm) = (p.a_max(), p.v_max());
+        let (reach, v1) = unaware_reach(&p, 10.0, 1.0);
+        assert!((reach - (10.0 + 0.5 * a)).abs() < 1e-12 && (v1 - (10.0 + a)).abs() < 1e-12);
+        let (reach, v1) = unaware_reach(&p, 0.0, 0.5);
+        assert!((reach - 0.125 * a).abs() < 1e-12 && (v1 - 0.5 * a).abs() < 1e-12);
+        // Near vmax the cap binds, on the distance and the speed.
+        let (reach, v1) = unaware_reach(&p, vm - 0.1, 10.0);
+        assert!((reach - 10.0 * vm).abs() < 1e-9 && v1 == vm);
+    }
+
+    #[test]
+    fn yielding_is_decided_on_where_the_other_vehicle_is_now() {
+        // Its data is 0.5 s old: it was 1 m behind, at 20 m/s it is now 9 m ahead.
+        let ego = Key {
+            x: 100.0,
+            v: 10.0,
+            lane: 0,
+            id: 1,
+        };
+        let mut c = Other::v2v(2, 99.0, 20.0, 4.5, 0, 0.5);
+        c.beta = Some(1);
+        let now = Other { x: 109.0, ..c };
+        let then = in_yield_set(&ego, None, Some(1), &c);
+        let want = in_yield_set(&ego, None, Some(1), &now);
+        assert_ne!(then, want, "the test needs the age to matter");
+        assert_eq!(yields_to(&ego, None, Some(1), &c, 0.0), want);
+    }
+}

@@ -8,7 +8,9 @@ use planner_core::lane_change::{
 use planner_core::lanes::{Band, Other, Road};
 use planner_core::safety::{d_s, max_braking_command};
 use planner_core::unicycle::{chord, step, Pose};
-use planner_core::{CostWeights, FallbackReason, LaneInputError, Params, StepStatus};
+use planner_core::{
+    CostWeights, FallbackReason, InputError, LaneInputError, Params, Real, StepStatus,
+};
 use proptest::prelude::*;
 
 fn p() -> Params<f64> {
@@ -328,6 +330,36 @@ fn bad_input_is_rejected_and_changes_nothing() {
         Err(LaneInputError::NoSuchLane)
     );
     assert_eq!((pl.lane(), pl.alpha(), pl.beta()), (0, None, None));
+    // A road end must be a finite coordinate in range, and so must every neighbour's
+    // values; a finite road end far ahead is fine.
+    let mut end = o;
+    end.road.end_x = Some(5000.0);
+    assert!(pl.step(&end).is_ok());
+    let mut pl = LanePlanner::<f64, 20>::new(p(), CostWeights::default(), 0).unwrap();
+    let mut bad = o;
+    bad.road.end_x = Some(f64::NAN);
+    assert_eq!(pl.step(&bad), Err(LaneInputError::NotFinite));
+    let mut bad = o;
+    bad.road.end_x = Some(2.0 * f64::MAX_COORD_M);
+    assert_eq!(
+        pl.step(&bad),
+        Err(LaneInputError::Speed(InputError::OutOfRange))
+    );
+    for field in 0..4 {
+        let mut c = other(2, 30.0, 10.0, 1);
+        match field {
+            0 => c.x = f64::NAN,
+            1 => c.v = f64::INFINITY,
+            2 => c.length = f64::NAN,
+            _ => c.age = f64::NAN,
+        }
+        let cs = [c];
+        assert_eq!(
+            pl.step(&obs(0.0, 1.8, 15.0, &cs, 2)),
+            Err(LaneInputError::NotFinite),
+            "{field}"
+        );
+    }
     // The fallback certificate rejects a tail that leaves the band.
     let lane0 = Band { lo: 0.0, hi: 3.6 };
     let heading_out = Pose {
