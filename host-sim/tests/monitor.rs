@@ -159,6 +159,11 @@ fn collisions_of_rotated_rectangles_are_seen() {
         road(&[a, car(LENGTH_M + MM, centre(1), 10.0)], None).collisions,
         0
     );
+    // Exactly touching counts (the separating-axis test is strict).
+    assert_eq!(
+        road(&[a, car(LENGTH_M, centre(1), 10.0)], None).collisions,
+        1
+    );
     // Rotated 45° beside it: the corner reaches in, or its bounding boxes overlap while
     // the rectangles do not.
     let mut b = car(3.6, centre(1) + 2.2, 10.0);

@@ -1203,4 +1203,24 @@ mod tests {
         assert_ne!(then, want, "the test needs the age to matter");
         assert_eq!(yields_to(&ego, None, Some(1), &c, 0.0), want);
     }
+
+    #[test]
+    fn margins_are_what_their_docs_say() {
+        let p = Params::<f64>::table_i();
+        let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
+        pl.set_notify_latency(0.1).expect("valid");
+        pl.set_sensing(Some(Sensing::radar())).expect("valid");
+        let v = 12.0;
+        let tau = 0.5;
+        let (reach, v_up) = unaware_reach(&p, v, tau);
+        let margin = reach + safety::d_s(&p, v_up) - safety::d_s(&p, v);
+        assert!((pl.unaware_margin(v, tau) - margin).abs() < 1e-12);
+        assert!(margin > reach, "a faster vehicle needs more room to stop");
+        // τ = max(h, 2 (notify − h)) = 0.18 s; errors 0.1 m and 0.1 m/s.
+        let t = 2.0 * (0.1 - p.h());
+        let (e, ev) = (0.1, 0.1);
+        let want =
+            2.0 * e + pl.unaware_margin(v + ev, t) + safety::d_s(&p, v + ev) - safety::d_s(&p, v);
+        assert!((pl.entry_allowance(v) - want).abs() < 1e-12);
+    }
 }

@@ -604,3 +604,67 @@ fn successive_changes_complete_near_the_centre_line() {
         );
     }
 }
+
+/// Survivors of the mutation audit in `LanePlanner::check` and the road end's gap
+/// (docs/mutants.md).
+#[test]
+fn input_limits_sit_exactly_where_the_docs_say() {
+    let p = p();
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+    let o = obs(0.0, 1.8, 15.0, &[], 0);
+    let far = 2.0 * f64::MAX_COORD_M;
+    let oor = Err(LaneInputError::Speed(InputError::OutOfRange));
+    let mut bad = o;
+    bad.pose.x = far;
+    assert_eq!(pl.step(&bad), oor);
+    for c in [
+        other(2, far, 10.0, 1),
+        Other::v2v(2, 30.0, 10.0, far, 1, 0.0),
+    ] {
+        let cs = [c];
+        assert_eq!(pl.step(&obs(0.0, 1.8, 15.0, &cs, 0)), oor);
+    }
+    let zero = [Other::v2v(2, 30.0, 10.0, 0.0, 1, 0.0)];
+    assert_eq!(
+        pl.step(&obs(0.0, 1.8, 15.0, &zero, 0)),
+        Err(LaneInputError::Speed(InputError::BadLength))
+    );
+    // A lane exactly as wide as the vehicle is too narrow.
+    let mut narrow = o;
+    narrow.road.lane_width = p.width();
+    narrow.pose.y = 0.5 * p.width();
+    assert_eq!(pl.step(&narrow), Err(LaneInputError::LaneTooNarrow));
+    // The band: the rectangle may touch the lane's edges, not cross them.
+    let hw = 0.5 * p.width();
+    for (y, ok) in [
+        (hw, true),
+        (hw - 1e-6, false),
+        (3.6 - hw, true),
+        (3.6 - hw + 1e-6, false),
+    ] {
+        let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+        let mut at = o;
+        at.pose.y = y;
+        let got = pl.step(&at);
+        assert_eq!(got.is_ok(), ok, "y = {y}: {got:?}");
+        if !ok {
+            assert_eq!(got, Err(LaneInputError::OutsideBand));
+        }
+    }
+}
+
+#[test]
+fn the_road_end_is_an_obstacle_at_its_extent_adjusted_position() {
+    let p = p();
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).unwrap();
+    let mut o = obs(40.0, 1.8, 10.0, &[], 0);
+    o.road.end_x = Some(80.0);
+    // After the first steps (the notification bound of the start) the gap is the road
+    // end's, x_R − L/2 − d0 − x (37.25 m: below the free-road cap of the horizon).
+    let mut c = pl.step(&o).unwrap();
+    for _ in 0..50 {
+        c = pl.step(&o).unwrap();
+    }
+    let want = 80.0 - 0.5 * p.length() - p.d0() - 40.0;
+    assert!((c.gap - want).abs() < 1e-9, "{} against {want}", c.gap);
+}
