@@ -1223,4 +1223,167 @@ mod tests {
             2.0 * e + pl.unaware_margin(v + ev, t) + safety::d_s(&p, v + ev) - safety::d_s(&p, v);
         assert!((pl.entry_allowance(v) - want).abs() < 1e-12);
     }
+
+    /// The lane [0, 3.6] m and the table's vehicle.
+    fn lane0() -> Band<f64> {
+        Band { lo: 0.0, hi: 3.6 }
+    }
+
+    /// The half-extent across the road, computed here: ½ (L |sin θ| + W |cos θ|).
+    fn ext(p: &Params<f64>, theta: f64) -> f64 {
+        0.5 * (p.length() * theta.sin().abs() + p.width() * theta.cos().abs())
+    }
+
+    #[test]
+    fn a_pose_is_in_its_band_to_the_edge_and_not_beyond() {
+        let p = Params::<f64>::table_i();
+        for theta in [0.0, 0.1, -0.2] {
+            let e = ext(&p, theta);
+            let at = |y: f64| pose_ok(&p, Pose { x: 0.0, y, theta }, lane0());
+            assert!(at(e + 1e-9) && at(3.6 - e - 1e-9), "{theta}");
+            assert!(!at(e - 1e-6) && !at(3.6 - e + 1e-6), "{theta}");
+        }
+        let two = Band { lo: 0.0, hi: 7.2 };
+        let tilted = |theta: f64| {
+            pose_ok(
+                &p,
+                Pose {
+                    x: 0.0,
+                    y: 3.6,
+                    theta,
+                },
+                two,
+            )
+        };
+        assert!(tilted(p.theta_max() - 1e-9) && !tilted(p.theta_max() + 1e-6));
+        assert!(tilted(p.theta_min() + 1e-9) && !tilted(p.theta_min() - 1e-6));
+    }
+
+    #[test]
+    fn overlapping_means_reaching_into_the_lanes_interior() {
+        let p = Params::<f64>::table_i();
+        let upper = Band { lo: 3.6, hi: 7.2 };
+        for theta in [0.0, 0.15] {
+            let e = ext(&p, theta);
+            let at = |y: f64| overlaps(&p, Pose { x: 0.0, y, theta }, upper);
+            assert!(
+                !at(3.6 - e - 1e-6),
+                "touching from below is not overlapping"
+            );
+            assert!(at(3.6 - e + 1e-6) && at(5.4) && at(7.2 + e - 1e-6));
+            assert!(!at(7.2 + e + 1e-6) && !at(-20.0) && !at(30.0));
+        }
+    }
+
+    #[test]
+    fn the_braking_tail_enters_a_lane_only_while_moving() {
+        let p = Params::<f64>::table_i();
+        let upper = Band { lo: 7.2, hi: 10.8 };
+        // Heading for the lane above at 0.5 rad, 1 cm short of it: straightening at ρmin
+        // swings the front corner up faster than the rear comes down (above ~0.35 rad),
+        // so at speed it gets in.
+        let theta = 0.5;
+        let pose = Pose {
+            x: 0.0,
+            y: 7.2 - ext(&p, theta) - 0.01,
+            theta,
+        };
+        let enters = first_overlap(&p, pose, 20.0, upper);
+        assert!(matches!(enters, Some(j) if j > 0 && j < 20), "{enters:?}");
+        // Standing still it never does.
+        assert_eq!(first_overlap(&p, pose, 0.0, upper), None);
+        // Already in: step 0.
+        let inside = Pose { y: 7.0, ..pose };
+        assert_eq!(first_overlap(&p, inside, 20.0, upper), Some(0));
+    }
+
+    /// The two lanes of a change, [0, 7.2] m.
+    fn two_lanes() -> Band<f64> {
+        Band { lo: 0.0, hi: 7.2 }
+    }
+
+    /// A pose inside the two lanes near their upper edge, heading out at `theta`, at
+    /// speed `v`, whose braking tail leaves them (found by scanning y; asserted to exist).
+    fn leaving_pose(p: &Params<f64>, theta: f64, v: f64) -> Pose<f64> {
+        (0..400)
+            .map(|i| Pose {
+                x: 0.0,
+                y: 7.2 - ext(p, theta) - 0.001 * f64::from(i),
+                theta,
+            })
+            .find(|&q| pose_ok(p, q, two_lanes()) && !braking_tail_ok(p, q, v, two_lanes()))
+            .expect("a pose inside whose braking tail leaves the lanes")
+    }
+
+    #[test]
+    fn the_fallback_certificate_follows_the_tail_to_standstill() {
+        let p = Params::<f64>::table_i();
+        let q = leaving_pose(&p, 0.5, 25.0);
+        // The tail really leaves: simulate it here.
+        let (mut r, mut v, mut left) = (q, 25.0, false);
+        while v > 0.0 {
+            v = safety::max_braking_command(&p, v);
+            r = step(r, v, straighten(&p, r.theta, v), p.h());
+            left |= !pose_ok(&p, r, two_lanes());
+        }
+        assert!(left);
+        // Straight and inside: certified at once; standing still and tilted: too.
+        assert!(braking_tail_ok(
+            &p,
+            Pose {
+                theta: 0.0,
+                y: 3.6,
+                ..q
+            },
+            25.0,
+            two_lanes()
+        ));
+        assert!(braking_tail_ok(&p, q, 0.0, two_lanes()));
+    }
+
+    #[test]
+    fn a_plan_is_verified_with_its_turning_radius_and_the_tail_after_its_first_step() {
+        const N: usize = 20;
+        let p = Params::<f64>::table_i();
+        let v = [20.0; N];
+        let straight = Pose {
+            x: 0.0,
+            y: 1.8,
+            theta: 0.0,
+        };
+        // ρ ≥ ρmin: |ω| ≤ v / ρmin, to the rounding.
+        let turn = |k: f64| {
+            let mut w = [0.0; N];
+            w[0] = k * 20.0 / p.rho_min();
+            w[1] = -w[0];
+            w
+        };
+        assert!(verify_lateral(&p, straight, &v, &turn(1.0), lane0()));
+        assert!(!verify_lateral(&p, straight, &v, &turn(1.01), lane0()));
+        // A plan turning toward the upper edge, ending at 0.5 rad next to it: every state
+        // inside, the tail from the state after its first step (nearly straight) certified,
+        // the tail from its last state not — the certificate is the first step's.
+        let two = two_lanes();
+        // ρ = 20 / 2.5 = 8 m ≥ ρmin; θ grows by 0.025 per step to 0.5.
+        let w = [2.5; N];
+        for i in 0..600 {
+            let q0 = Pose {
+                x: 0.0,
+                y: 1.0 + 0.01 * f64::from(i),
+                theta: 0.0,
+            };
+            let mut q = q0;
+            let mut inside = true;
+            for &wk in &w {
+                q = step(q, 20.0, wk, p.h());
+                inside &= pose_ok(&p, q, two);
+            }
+            let q1 = step(q0, 20.0, w[0], p.h());
+            if inside && braking_tail_ok(&p, q1, 20.0, two) && !braking_tail_ok(&p, q, 20.0, two) {
+                assert!(verify_lateral(&p, q0, &v, &w, two));
+                return;
+            }
+        }
+        panic!("no plan whose last state's tail leaves while its first state's does not");
+    }
 }

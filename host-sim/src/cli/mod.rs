@@ -93,6 +93,16 @@ enum Command {
     /// Theorems 4–5 sweep: random queues at the intersection under every algorithm, every
     /// vehicle to cross.
     Crossings(sweep::LivenessArgs),
+    /// Combines the shards of one sweep (each run with `--shard I/N`) into exactly the
+    /// unsharded result: counts add, maxima take the max, means are weighted by cases.
+    Merge {
+        /// The shards' JSON outputs, one per shard.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// The paper's experiments.
     #[command(subcommand)]
     Experiment(experiment::Experiment),
@@ -128,6 +138,7 @@ pub fn main() -> ExitCode {
         Command::Traffic(a) => sweep::traffic(a),
         Command::Deadends(a) => sweep::deadends(a),
         Command::Crossings(a) => sweep::crossings(a),
+        Command::Merge { files, json } => sweep::merge(&files, json),
         Command::Experiment(e) => experiment::run(e),
         Command::Scale(a) => bench::scale(a),
         Command::BenchPlanner(a) => bench::bench(a),

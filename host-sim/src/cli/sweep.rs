@@ -1,7 +1,10 @@
 //! The theorems' sweeps: `platoons` (Theorem 1), `traffic` (Theorem 2), `deadends`
 //! (Theorem 3), `crossings` (Theorems 4 and 5).
 
-use super::output::{check_duration, finish};
+use super::output::{check_duration, code, finish, print_json, say, EXIT_BAD_INPUT};
+use host_sim::experiments::shard::{self, Header, Output, Shard};
+use serde_json::{json, Value};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// `host-sim platoons`.
@@ -16,6 +19,9 @@ pub struct PlatoonsArgs {
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
+    /// Run only shard I of N (0-based) and print it as JSON for `host-sim merge`.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
 }
 
 /// `host-sim traffic`.
@@ -33,14 +39,24 @@ pub struct TrafficArgs {
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
+    /// Run only shard I of N (0-based) and print it as JSON for `host-sim merge`.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
 }
 
 /// Theorem 1 sweep.
 pub fn platoons(a: PlatoonsArgs) -> ExitCode {
-    let s = host_sim::experiments::platoon::sweep(a.cases, a.seed);
+    let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    let s = host_sim::experiments::platoon::sweep_range(first, end, a.seed);
     let safe =
-        s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == a.cases;
-    finish(&s, a.json, safe, true)
+        s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == end - first;
+    match a.shard {
+        Some(sh) => {
+            let settings = json!({"cases": a.cases, "seed": a.seed});
+            emit("platoons", settings, sh, (first, end), &s, code(safe, true))
+        }
+        None => finish(&s, a.json, safe, true),
+    }
 }
 
 /// Theorem 2 sweep.
@@ -48,13 +64,18 @@ pub fn traffic(a: TrafficArgs) -> ExitCode {
     if let Err(code) = check_duration(a.duration, 3600.0) {
         return code;
     }
-    let r = host_sim::experiments::multilane::traffic_sweep(a.cases, a.seed, a.duration, 0);
-    finish(
-        &r,
-        a.json,
-        r.collisions + r.invariant_violations + r.limit_violations == 0,
-        true,
-    )
+    let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    // Case i's seed is seed + i: it depends on the index alone.
+    let r =
+        host_sim::experiments::multilane::traffic_sweep(end - first, a.seed + first, a.duration, 0);
+    let safe = r.collisions + r.invariant_violations + r.limit_violations == 0;
+    match a.shard {
+        Some(sh) => {
+            let settings = json!({"cases": a.cases, "seed": a.seed, "duration": a.duration});
+            emit("traffic", settings, sh, (first, end), &r, code(safe, true))
+        }
+        None => finish(&r, a.json, safe, true),
+    }
 }
 
 /// `host-sim deadends` and `host-sim crossings`.
@@ -69,18 +90,135 @@ pub struct LivenessArgs {
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
+    /// Run only shard I of N (0-based) and print it as JSON for `host-sim merge`.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
 }
 
 /// Theorem 3 sweep.
 pub fn deadends(a: LivenessArgs) -> ExitCode {
-    let r = host_sim::experiments::deadends::sweep(a.cases, 0, a.seed, 0);
-    report(&r, a.json, &r.totals, &r.failing)
+    let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    let r = host_sim::experiments::deadends::sweep(end - first, first, a.seed, 0);
+    liveness("deadends", &a, (first, end), &r, &r.totals, &r.failing)
 }
 
 /// Theorems 4–5 sweep.
 pub fn crossings(a: LivenessArgs) -> ExitCode {
-    let r = host_sim::experiments::crossings::sweep(a.cases, 0, a.seed, 0);
-    report(&r, a.json, &r.totals, &r.failing)
+    let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    let r = host_sim::experiments::crossings::sweep(end - first, first, a.seed, 0);
+    liveness("crossings", &a, (first, end), &r, &r.totals, &r.failing)
+}
+
+/// A liveness sweep's answer: its shard's JSON, or the report.
+fn liveness<T: serde::Serialize + std::fmt::Debug>(
+    sweep: &str,
+    a: &LivenessArgs,
+    range: (u64, u64),
+    r: &T,
+    t: &host_sim::experiments::sweep::Totals,
+    failing: &[host_sim::experiments::sweep::Failing],
+) -> ExitCode {
+    match a.shard {
+        Some(sh) => {
+            let settings = json!({"cases": a.cases, "seed": a.seed});
+            emit(sweep, settings, sh, range, r, liveness_code(t))
+        }
+        None => report(r, a.json, t, failing),
+    }
+}
+
+fn liveness_code(t: &host_sim::experiments::sweep::Totals) -> ExitCode {
+    let safe =
+        t.collisions + t.invariant_violations + t.limit_violations + t.unpermitted_entries == 0;
+    code(safe, t.unfinished + t.deadlocks == 0)
+}
+
+/// Prints a shard's output (always JSON: it is for `host-sim merge`).
+fn emit<T: serde::Serialize>(
+    sweep: &str,
+    settings: Value,
+    shard: Shard,
+    (first, end): (u64, u64),
+    result: &T,
+    exit: ExitCode,
+) -> ExitCode {
+    let result = match serde_json::to_value(result) {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_BAD_INPUT);
+        }
+    };
+    let header = Header {
+        sweep: sweep.into(),
+        settings,
+        shard,
+        first,
+        end,
+    };
+    match print_json(&Output { header, result }) {
+        Ok(()) => exit,
+        Err(code) => code,
+    }
+}
+
+/// `host-sim merge FILES…`: the shards of one sweep, combined into its unsharded result.
+pub fn merge(files: &[PathBuf], json: bool) -> ExitCode {
+    let mut parts = Vec::with_capacity(files.len());
+    for f in files {
+        let text = match std::fs::read_to_string(f) {
+            Ok(t) => t,
+            Err(e) => return bad(&format!("{}: {e}", f.display())),
+        };
+        match serde_json::from_str::<Output>(&text) {
+            Ok(p) => parts.push(p),
+            Err(e) => return bad(&format!("{}: not a shard's output ({e})", f.display())),
+        }
+    }
+    let sweep = parts
+        .first()
+        .map(|p| p.header.sweep.clone())
+        .unwrap_or_default();
+    let merged = match shard::merge(parts) {
+        Ok(m) => m,
+        Err(e) => return bad(&format!("cannot merge: {e}")),
+    };
+    let n = |k: &str| merged.get(k).and_then(Value::as_u64).unwrap_or(0);
+    let unsafe_events = n("collisions") + n("invariant_violations") + n("limit_violations");
+    let exit = code(
+        unsafe_events + n("unpermitted_entries") == 0,
+        n("unfinished") + n("deadlocks") == 0,
+    );
+    let printed = if json {
+        print_json(&merged)
+    } else {
+        say(&format!(
+            "{sweep}, {} shards merged:\n{}",
+            files.len(),
+            human(&merged)
+        ))
+    };
+    match printed {
+        Ok(()) => exit,
+        Err(code) => code,
+    }
+}
+
+/// The top-level numbers of a merged result, one per line.
+fn human(v: &Value) -> String {
+    let Some(m) = v.as_object() else {
+        return v.to_string();
+    };
+    m.iter()
+        .filter(|(_, x)| x.is_number())
+        .map(|(k, x)| format!("  {k}: {x}"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn bad(msg: &str) -> ExitCode {
+    eprintln!("error: {msg}");
+    ExitCode::from(EXIT_BAD_INPUT)
 }
 
 /// Prints a liveness sweep (the failing cases' scenario files after a human summary) and

@@ -176,7 +176,7 @@ pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> CrossingsRepo
         totals: Totals::of(results.iter().filter(live)),
         algorithms,
         seed,
-        failing: sweep::failing(results.iter().filter(live), 20),
+        failing: sweep::failing(results.iter().filter(live), sweep::KEEP_FAILING),
         wall_seconds: t0.elapsed().as_secs_f64(),
     }
 }

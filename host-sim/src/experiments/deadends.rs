@@ -131,7 +131,7 @@ pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> DeadendsRepor
             .map(|c| c.summary.lane_changes.changes as u64)
             .sum(),
         seed,
-        failing: sweep::failing(results.iter(), 20),
+        failing: sweep::failing(results.iter(), sweep::KEEP_FAILING),
         wall_seconds: t0.elapsed().as_secs_f64(),
     }
 }

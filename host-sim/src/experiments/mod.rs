@@ -11,5 +11,6 @@ pub mod network;
 pub mod par;
 pub mod platoon;
 pub mod scale;
+pub mod shard;
 pub mod sweep;
 pub mod throughput;

@@ -291,8 +291,13 @@ pub struct SweepSummary {
 /// Runs `cases` random platoons of a sweep on all cores: (spec, outcome) per case, in
 /// case order.
 pub fn run_cases(cases: u64, seed: u64) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
-    super::par::map_indexed(cases as usize, 0, |i| {
-        let spec = random_spec(i as u64, seed);
+    run_range(0, cases, seed)
+}
+
+/// Runs the platoons `first..end` of a sweep on all cores, in case order.
+pub fn run_range(first: u64, end: u64, seed: u64) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
+    super::par::map_indexed(end.saturating_sub(first) as usize, 0, |i| {
+        let spec = random_spec(first + i as u64, seed);
         let out = run(&spec);
         (spec, out)
     })
@@ -300,12 +305,17 @@ pub fn run_cases(cases: u64, seed: u64) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
 
 /// Runs `cases` random platoons on all cores and sums up what the monitor saw.
 pub fn sweep(cases: u64, seed: u64) -> SweepSummary {
+    sweep_range(0, cases, seed)
+}
+
+/// [`sweep`] over the platoons `first..end` only (a shard).
+pub fn sweep_range(first: u64, end: u64, seed: u64) -> SweepSummary {
     let t0 = std::time::Instant::now();
     let mut total = SweepSummary {
         min_gap_m: f64::INFINITY,
         ..Default::default()
     };
-    for (spec, out) in run_cases(cases, seed) {
+    for (spec, out) in run_range(first, end, seed) {
         total.cases += 1;
         total.vehicles += spec.vehicles as u64;
         total.planner_steps += out.planner_steps;

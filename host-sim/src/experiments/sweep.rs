@@ -172,6 +172,9 @@ pub fn reason(c: &Case) -> String {
     why.join(", ")
 }
 
+/// How many failing cases a sweep's report keeps (each with its scenario file).
+pub const KEEP_FAILING: usize = 20;
+
 /// The failing cases among `cases` (at most `keep`), each with its scenario file.
 pub fn failing<'a>(cases: impl Iterator<Item = &'a Case>, keep: usize) -> Vec<Failing> {
     cases
