@@ -88,7 +88,7 @@ echo "${HOST_SIM_ARGS:-}" > "$r/work/args"
 
 echo "== boot linux $kver under qemu-system-x86_64 (TCG)"
 start=$(date +%s)
-timeout 900 qemu-system-x86_64 -accel tcg -cpu max -smp 2 -m 512 -nographic -no-reboot \
+timeout 1800 qemu-system-x86_64 -accel tcg -cpu max -smp 2 -m 512 -nographic -no-reboot \
   -kernel "$kernel" -initrd "$out/initramfs.gz" \
   -append "console=ttyS0 panic=-1 quiet loglevel=3" > "$out/console.log" 2>&1 || true
 tr -d '\r' < "$out/console.log" > "$out/console.txt"
