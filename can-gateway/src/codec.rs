@@ -950,20 +950,6 @@ mod tests {
     mod mutation_audit {
         use super::*;
 
-        fn decode_one(
-            m: &Message<f64>,
-            sa: u8,
-            r: &mut Reassembler<8>,
-            counter: u8,
-        ) -> Result<Option<Message<f64>>, DecodeError> {
-            let frames: Frames<TestFrame> = encode(m, sa, counter).unwrap();
-            let mut last = Ok(None);
-            for f in &frames {
-                last = r.push::<f64, _>(f);
-            }
-            last
-        }
-
         #[test]
         fn finite_values_outside_a_field_are_refused() {
             let mut s = state();
@@ -999,7 +985,7 @@ mod tests {
                 lane: 15,
             };
             let mut r = Reassembler::<8>::new();
-            let Ok(Some(Message::Request(got))) = decode_one(&Message::Request(req), 9, &mut r, 0)
+            let Ok(Some(Message::Request(got))) = push_all(&mut r, &Message::Request(req), 9, 0)
             else {
                 panic!("a request");
             };
@@ -1020,7 +1006,7 @@ mod tests {
                 let mut s = state();
                 s.theta = theta;
                 let mut r = Reassembler::<8>::new();
-                let Ok(Some(Message::State(got))) = decode_one(&Message::State(s), 7, &mut r, 0)
+                let Ok(Some(Message::State(got))) = push_all(&mut r, &Message::State(s), 7, 0)
                 else {
                     panic!("a state");
                 };
@@ -1091,13 +1077,13 @@ mod tests {
                 segment: 1,
                 state: st,
             };
-            assert!(matches!(decode_one(&newer, 7, &mut r, 1), Ok(Some(_))));
+            assert!(matches!(push_all(&mut r, &newer, 7, 1), Ok(Some(_))));
             st.stamp = 10.0;
             let older = Message::Located {
                 segment: 1,
                 state: st,
             };
-            assert_eq!(decode_one(&older, 7, &mut r, 2), Err(DecodeError::Stale));
+            assert_eq!(push_all(&mut r, &older, 7, 2), Err(DecodeError::Stale));
         }
 
         #[test]
@@ -1114,7 +1100,7 @@ mod tests {
             let Ok(Some(Message::JunctionRequest {
                 junction,
                 request: got,
-            })) = decode_one(&m, 9, &mut r, 0)
+            })) = push_all(&mut r, &m, 9, 0)
             else {
                 panic!("a junction request");
             };
@@ -1130,7 +1116,7 @@ mod tests {
             );
             assert!((got.v - req.v).abs() < 0.011, "{}", got.v);
             // The plain request too.
-            let Ok(Some(Message::Request(got))) = decode_one(&Message::Request(req), 9, &mut r, 1)
+            let Ok(Some(Message::Request(got))) = push_all(&mut r, &Message::Request(req), 9, 1)
             else {
                 panic!("a request");
             };
@@ -1140,7 +1126,7 @@ mod tests {
                 id: 9,
                 at: 77.125,
             };
-            assert_eq!(decode_one(&exit, 9, &mut r, 2), Ok(Some(exit)));
+            assert_eq!(push_all(&mut r, &exit, 9, 2), Ok(Some(exit)));
         }
     }
 }

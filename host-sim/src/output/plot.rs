@@ -578,13 +578,16 @@ fn network_bounds(
     Ok(b)
 }
 
+/// A chart with metres on both axes.
+type XyChart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
 /// A junction's A_C (grey) and A_S (red) squares.
 fn draw_junction<DB: DrawingBackend>(
-    xy: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
+    xy: &mut XyChart<'_, DB>,
     j: &crate::world::network::Junction,
 ) -> Result<(), PlotError>
 where
@@ -753,11 +756,7 @@ where
 /// n unsafe events. Loss × delay cells sit at their row and column; the other variants
 /// in a row of their own above.
 fn draw_grid_cell<DB: DrawingBackend>(
-    chart: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
+    chart: &mut XyChart<'_, DB>,
     c: &crate::experiments::fault_grid::CellResult,
     losses: &[f64],
     delays: &[f64],
