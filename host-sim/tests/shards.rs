@@ -25,15 +25,16 @@ fn dir(name: &str) -> PathBuf {
     d
 }
 
-/// Runs `sweep` with `args` in `n` shards, each its own process, concurrently.
-fn shards(sweep: &str, args: &[&str], n: u64) -> Vec<PathBuf> {
-    let d = dir(sweep);
+/// Runs `sweep` (one or more command words) with `args` in `n` shards, each its own
+/// process, concurrently.
+fn shards(sweep: &[&str], args: &[&str], n: u64) -> Vec<PathBuf> {
+    let d = dir(&sweep.join("-"));
     let children: Vec<(PathBuf, std::process::Child)> = (0..n)
         .map(|i| {
             let path = d.join(format!("shard-{i}.json"));
             let file = std::fs::File::create(&path).expect("shard file");
             let child = bin()
-                .arg(sweep)
+                .args(sweep)
                 .args(args)
                 .args(["--shard", &format!("{i}/{n}"), "--json"])
                 .stdout(file)
@@ -92,12 +93,16 @@ fn same(key: &str, a: &Value, b: &Value) {
 }
 
 fn check(sweep: &str, args: &[&str]) {
-    let mut whole: Vec<&str> = vec![sweep];
+    check_command(&[sweep], args);
+}
+
+fn check_command(sweep: &[&str], args: &[&str]) {
+    let mut whole: Vec<&str> = sweep.to_vec();
     whole.extend_from_slice(args);
     whole.push("--json");
     let unsharded = json_of(&whole);
     let files = shards(sweep, args, 4);
-    same(sweep, &merged(&files), &unsharded);
+    same(&sweep.join(" "), &merged(&files), &unsharded);
 }
 
 #[test]
@@ -114,6 +119,31 @@ fn four_traffic_shards_merge_into_the_unsharded_sweep() {
 }
 
 #[test]
+fn four_experiment_shards_merge_into_the_unsharded_experiments() {
+    // Means, standard deviations and ratios are not sums of parts: these merge the runs
+    // and aggregate them once. Three multi-lane runs in four shards leave one empty.
+    check_command(
+        &["experiment", "multilane"],
+        &["--seeds", "3", "--seed", "4"],
+    );
+    check_command(
+        &["experiment", "throughput"],
+        &["--seeds", "2", "--duration", "15", "--loss", "0.2"],
+    );
+    check_command(
+        &["experiment", "faults"],
+        &[
+            "--seeds",
+            "2",
+            "--throughput-seeds",
+            "1",
+            "--duration",
+            "15",
+        ],
+    );
+}
+
+#[test]
 fn four_liveness_shards_merge_into_the_unsharded_sweeps() {
     check("deadends", &["--cases", "6", "--seed", "2"]);
     check("crossings", &["--cases", "4", "--seed", "2"]);
@@ -121,8 +151,8 @@ fn four_liveness_shards_merge_into_the_unsharded_sweeps() {
 
 #[test]
 fn shards_that_do_not_belong_together_are_refused() {
-    let a = shards("platoons", &["--cases", "4", "--seed", "1"], 2);
-    let b = shards("deadends", &["--cases", "2", "--seed", "1"], 2);
+    let a = shards(&["platoons"], &["--cases", "4", "--seed", "1"], 2);
+    let b = shards(&["deadends"], &["--cases", "2", "--seed", "1"], 2);
     let refused = |files: &[&Path], says: &str| {
         let out = bin().arg("merge").args(files).output().expect("runs");
         assert_eq!(out.status.code(), Some(2), "{files:?}");
@@ -133,7 +163,7 @@ fn shards_that_do_not_belong_together_are_refused() {
     refused(&[&a[0], &a[0]], "shard 0 is given twice");
     refused(&[&a[0]], "shard 1 is missing");
     refused(&[&a[0], &b[1]], "different sweeps");
-    let c = shards("platoons", &["--cases", "4", "--seed", "2"], 2);
+    let c = shards(&["platoons"], &["--cases", "4", "--seed", "2"], 2);
     refused(&[&a[0], &c[1]], "other settings");
     let junk = dir("junk").join("junk.json");
     std::fs::write(&junk, "{}").expect("write");

@@ -3,6 +3,8 @@
 use super::output::{bad_input, check_duration, check_plot, finish};
 use super::SolverArg;
 use host_sim::bus::Faults;
+use host_sim::experiments::faults::{compare, FaultSettings};
+use host_sim::experiments::shard::{MultilaneSettings, Runs, Shard, ThroughputSettings};
 use host_sim::output::plot::PlotData;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -28,6 +30,10 @@ pub enum Experiment {
         /// Draw a Fig. 9-style bar chart to a .png or .svg file.
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
+        /// Run only shard I of N (0-based) of the runs and print them as JSON for
+        /// `host-sim merge`.
+        #[arg(long, value_name = "I/N", conflicts_with = "plot")]
+        shard: Option<Shard>,
         #[command(flatten)]
         faults: FaultArgs,
     },
@@ -81,6 +87,10 @@ pub enum Experiment {
         /// events printed in each cell) to a .png or .svg.
         #[arg(long, value_name = "out.png|out.svg", requires = "grid")]
         plot: Option<PathBuf>,
+        /// Run only shard I of N (0-based) of the runs (both buses, both experiments) and
+        /// print them as JSON for `host-sim merge`; not with --grid.
+        #[arg(long, value_name = "I/N", conflicts_with = "grid")]
+        shard: Option<Shard>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -149,6 +159,10 @@ pub enum Experiment {
         /// Draw the first run's trajectories (Fig. 7 style) to a .png or .svg file.
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
+        /// Run only shard I of N (0-based) of the runs and print them as JSON for
+        /// `host-sim merge`.
+        #[arg(long, value_name = "I/N", conflicts_with = "plot")]
+        shard: Option<Shard>,
         /// The planners' solver.
         #[arg(long, value_enum, default_value = "ours")]
         solver: SolverArg,
@@ -204,7 +218,11 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
             solver,
             faults,
-        } => multilane(seeds, seed, json, plot, solver, faults),
+            shard,
+        } => match shard {
+            Some(sh) => multilane_shard(seeds, seed, solver, faults, sh),
+            None => multilane(seeds, seed, json, plot, solver, faults),
+        },
         Experiment::Faults {
             seeds,
             throughput_seeds,
@@ -218,6 +236,7 @@ pub fn run(e: Experiment) -> ExitCode {
             runs,
             plot,
             json,
+            shard,
         } => {
             if grid {
                 return fault_grid(&losses, &delays, runs, json, plot);
@@ -229,22 +248,7 @@ pub fn run(e: Experiment) -> ExitCode {
                 duplicate: 0.0,
                 reorder: 0.0,
             };
-            let faults = match args.faults() {
-                Ok(f) => f,
-                Err(e) => return bad_input(e),
-            };
-            if let Err(code) = check_duration(duration, 3600.0) {
-                return code;
-            }
-            let r = host_sim::experiments::faults::compare(
-                faults,
-                seeds,
-                throughput_seeds,
-                duration,
-                0,
-            );
-            let live = r.multilane_faulty.completed == r.multilane_faulty.runs;
-            finish(&r, json, r.faulty_unsafe_events == 0, live)
+            faults(args, seeds, throughput_seeds, duration, json, shard)
         }
         Experiment::Throughput {
             duration,
@@ -253,7 +257,11 @@ pub fn run(e: Experiment) -> ExitCode {
             json,
             plot,
             faults,
-        } => throughput(duration, seeds, seed, json, plot, faults),
+            shard,
+        } => match shard {
+            Some(sh) => throughput_shard(duration, seeds, seed, faults, sh),
+            None => throughput(duration, seeds, seed, json, plot, faults),
+        },
         Experiment::Network {
             grid,
             rate,
@@ -457,4 +465,152 @@ fn throughput(
         }),
         true,
     )
+}
+
+/// Runs `f` on a shard's range of `cases` runs and prints them for `host-sim merge`;
+/// exits as the sweep would (unsafe → 1) on the shard's runs.
+fn shard_of<T: serde::Serialize>(
+    name: &str,
+    settings: impl serde::Serialize,
+    cases: u64,
+    sh: Shard,
+    f: impl FnOnce((u64, u64)) -> Vec<T>,
+    unsafe_events: impl Fn(&T) -> u64,
+) -> ExitCode {
+    let settings = match serde_json::to_value(settings) {
+        Ok(v) => v,
+        Err(e) => return bad_input(e.to_string()),
+    };
+    let t0 = std::time::Instant::now();
+    let range = sh.range(cases);
+    let runs = f(range);
+    let safe = runs.iter().map(&unsafe_events).sum::<u64>() == 0;
+    let out = Runs {
+        runs,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    };
+    super::sweep::emit(
+        name,
+        settings,
+        sh,
+        range,
+        &out,
+        super::output::code(safe, true),
+    )
+}
+
+fn multilane_shard(
+    seeds: u64,
+    seed: u64,
+    solver: SolverArg,
+    faults: FaultArgs,
+    sh: Shard,
+) -> ExitCode {
+    let faults = match faults.faults() {
+        Ok(f) => f,
+        Err(e) => return bad_input(e),
+    };
+    let solver = solver.choice();
+    let settings = MultilaneSettings {
+        seeds,
+        seed,
+        solver,
+        faults,
+    };
+    shard_of(
+        "multilane",
+        settings,
+        seeds,
+        sh,
+        |r| host_sim::experiments::multilane::multilane_cases(r, seed, solver, faults, 0),
+        |c| c.collisions + c.invariant_violations + c.limit_violations,
+    )
+}
+
+fn throughput_shard(
+    duration: f64,
+    seeds: u64,
+    seed: u64,
+    faults: FaultArgs,
+    sh: Shard,
+) -> ExitCode {
+    use host_sim::experiments::throughput::throughput_cases;
+    let faults = match faults.faults() {
+        Ok(f) => f,
+        Err(e) => return bad_input(e),
+    };
+    if let Err(code) = check_duration(duration, 3600.0) {
+        return code;
+    }
+    let settings = ThroughputSettings {
+        seeds,
+        seed,
+        duration,
+        faults,
+    };
+    let cases = seeds * planner_core::crossing::Algorithm::ALL.len() as u64;
+    shard_of(
+        "throughput",
+        settings,
+        cases,
+        sh,
+        |r| throughput_cases(seeds, seed, r, duration, faults, 0),
+        |c| c.collisions + c.invariant_violations + c.limit_violations + c.unpermitted_entries,
+    )
+}
+
+fn faults_shard(s: &FaultSettings, sh: Shard) -> ExitCode {
+    use host_sim::experiments::faults::FaultCase;
+    shard_of(
+        "faults",
+        s,
+        s.cases(),
+        sh,
+        |r| s.run(r, 0),
+        |c| match c {
+            // Only the faulty bus's events count, as in the unsharded comparison.
+            FaultCase::Multilane { faulty, run } => {
+                u64::from(*faulty)
+                    * (run.collisions + run.invariant_violations + run.limit_violations)
+            }
+            FaultCase::Throughput { faulty, run } => {
+                u64::from(*faulty)
+                    * (run.collisions
+                        + run.invariant_violations
+                        + run.limit_violations
+                        + run.unpermitted_entries)
+            }
+        },
+    )
+}
+
+fn faults(
+    args: FaultArgs,
+    seeds: u64,
+    throughput_seeds: u64,
+    duration: f64,
+    json: bool,
+    shard: Option<Shard>,
+) -> ExitCode {
+    let faults = match args.faults() {
+        Ok(f) => f,
+        Err(e) => return bad_input(e),
+    };
+    if let Err(code) = check_duration(duration, 3600.0) {
+        return code;
+    }
+    let settings = FaultSettings {
+        faults,
+        seeds,
+        throughput_seeds,
+        duration,
+    };
+    match shard {
+        Some(sh) => faults_shard(&settings, sh),
+        None => {
+            let r = compare(faults, seeds, throughput_seeds, duration, 0);
+            let live = r.multilane_faulty.completed == r.multilane_faulty.runs;
+            finish(&r, json, r.faulty_unsafe_events == 0, live)
+        }
+    }
 }

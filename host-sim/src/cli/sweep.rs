@@ -134,7 +134,7 @@ fn liveness_code(t: &host_sim::experiments::sweep::Totals) -> ExitCode {
 }
 
 /// Prints a shard's output (always JSON: it is for `host-sim merge`).
-fn emit<T: serde::Serialize>(
+pub(super) fn emit<T: serde::Serialize>(
     sweep: &str,
     settings: Value,
     shard: Shard,
@@ -183,12 +183,7 @@ pub fn merge(files: &[PathBuf], json: bool) -> ExitCode {
         Ok(m) => m,
         Err(e) => return bad(&format!("cannot merge: {e}")),
     };
-    let n = |k: &str| merged.get(k).and_then(Value::as_u64).unwrap_or(0);
-    let unsafe_events = n("collisions") + n("invariant_violations") + n("limit_violations");
-    let exit = code(
-        unsafe_events + n("unpermitted_entries") == 0,
-        n("unfinished") + n("deadlocks") == 0,
-    );
+    let exit = merged_exit(&merged);
     let printed = if json {
         print_json(&merged)
     } else {
@@ -202,6 +197,40 @@ pub fn merge(files: &[PathBuf], json: bool) -> ExitCode {
         Ok(()) => exit,
         Err(code) => code,
     }
+}
+
+/// The exit code the unsharded run would give: unsafe events anywhere in the result (for
+/// `experiment faults`, on the faulty bus only), unfinished vehicles or deadlocks, runs
+/// that did not complete their lane changes.
+fn merged_exit(v: &Value) -> ExitCode {
+    fn unsafe_events(v: &Value) -> u64 {
+        const UNSAFE: [&str; 4] = [
+            "collisions",
+            "invariant_violations",
+            "limit_violations",
+            "unpermitted_entries",
+        ];
+        match v {
+            Value::Object(m) => m
+                .iter()
+                .map(|(k, x)| match x.as_u64() {
+                    Some(n) if UNSAFE.contains(&k.as_str()) => n,
+                    _ => unsafe_events(x),
+                })
+                .sum(),
+            Value::Array(a) => a.iter().map(unsafe_events).sum(),
+            _ => 0,
+        }
+    }
+    let n = |v: &Value, k: &str| v.get(k).and_then(Value::as_u64).unwrap_or(0);
+    let events = match v.get("faulty_unsafe_events").and_then(Value::as_u64) {
+        Some(e) => e,
+        None => unsafe_events(v),
+    };
+    let runs = v.get("multilane_faulty").unwrap_or(v);
+    let live =
+        n(v, "unfinished") + n(v, "deadlocks") == 0 && n(runs, "completed") == n(runs, "runs");
+    code(events == 0, live)
 }
 
 /// The top-level numbers of a merged result, one per line.

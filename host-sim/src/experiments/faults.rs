@@ -2,11 +2,12 @@
 //! complete on a faulty bus? Both are run on the same seeds over a perfect bus and over
 //! one injecting the given faults, in one command, and compared.
 
-use super::multilane::{experiment, MultilaneReport};
-use super::throughput::{throughput, ThroughputReport};
+use super::multilane::{multilane_cases, multilane_report, MultilaneCase, MultilaneReport};
+use super::throughput::{throughput_cases, throughput_report, ThroughputCase, ThroughputReport};
 use crate::bus::Faults;
 use crate::world::SolverChoice;
-use serde::Serialize;
+use planner_core::crossing::Algorithm;
+use serde::{Deserialize, Serialize};
 
 /// One algorithm's throughput, perfect vs faulty bus.
 #[derive(Debug, Clone, Serialize)]
@@ -42,6 +43,113 @@ pub struct FaultComparison {
     pub faulty_unsafe_events: u64,
 }
 
+/// One run of the comparison: a multi-lane or a throughput run, on the perfect bus or the
+/// faulty one. A shard of `experiment faults` prints these; `host-sim merge` aggregates
+/// them as the unsharded run does.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum FaultCase {
+    /// A multi-lane run.
+    Multilane {
+        /// On the faulty bus.
+        faulty: bool,
+        /// The run.
+        run: MultilaneCase,
+    },
+    /// A throughput run.
+    Throughput {
+        /// On the faulty bus.
+        faulty: bool,
+        /// The run.
+        run: ThroughputCase,
+    },
+}
+
+/// What the comparison runs: `seeds` multi-lane runs and `throughput_seeds` throughput
+/// runs of `duration` s per algorithm, each on both buses.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FaultSettings {
+    /// The faulty bus's faults.
+    pub faults: Faults,
+    /// Multi-lane runs (seeds 1..=K).
+    pub seeds: u64,
+    /// Throughput runs per algorithm (seeds 1..=K).
+    pub throughput_seeds: u64,
+    /// Simulated seconds per throughput run.
+    pub duration: f64,
+}
+
+impl FaultSettings {
+    /// Runs in all: the multi-lane runs, then the throughput runs, each block on the
+    /// perfect bus first.
+    pub fn cases(&self) -> u64 {
+        2 * self.seeds + 2 * self.throughput_seeds * Algorithm::ALL.len() as u64
+    }
+
+    /// Runs `first..end` of [`Self::cases`]: run i is the same run whatever the range.
+    pub fn run(&self, (first, end): (u64, u64), threads: usize) -> Vec<FaultCase> {
+        let solver = SolverChoice::Ours;
+        let m = self.seeds;
+        let t = self.throughput_seeds * Algorithm::ALL.len() as u64;
+        // Each block is the part of [first, end) that falls in it, shifted to its start.
+        let part =
+            |lo: u64, len: u64| (first.clamp(lo, lo + len) - lo, end.clamp(lo, lo + len) - lo);
+        let bus = |faulty: bool| if faulty { self.faults } else { Faults::NONE };
+        let mut out = Vec::new();
+        for (k, faulty) in [false, true].into_iter().enumerate() {
+            let range = part(k as u64 * m, m);
+            let runs = multilane_cases(range, 1, solver, bus(faulty), threads);
+            out.extend(
+                runs.into_iter()
+                    .map(|run| FaultCase::Multilane { faulty, run }),
+            );
+        }
+        for (k, faulty) in [false, true].into_iter().enumerate() {
+            let range = part(2 * m + k as u64 * t, t);
+            let (n, d) = (self.throughput_seeds, self.duration);
+            let runs = throughput_cases(n, 1, range, d, bus(faulty), threads);
+            out.extend(
+                runs.into_iter()
+                    .map(|run| FaultCase::Throughput { faulty, run }),
+            );
+        }
+        out
+    }
+
+    /// The comparison over `cases` (in [`Self::run`] order).
+    pub fn report(&self, cases: &[FaultCase], wall_seconds: f64) -> FaultComparison {
+        let multilane = |bus: bool| -> Vec<MultilaneCase> {
+            cases
+                .iter()
+                .filter_map(|c| match c {
+                    FaultCase::Multilane { faulty, run } if *faulty == bus => Some(run.clone()),
+                    _ => None,
+                })
+                .collect()
+        };
+        let throughput = |bus: bool| -> Vec<ThroughputCase> {
+            cases
+                .iter()
+                .filter_map(|c| match c {
+                    FaultCase::Throughput { faulty, run } if *faulty == bus => Some(run.clone()),
+                    _ => None,
+                })
+                .collect()
+        };
+        let solver = SolverChoice::Ours;
+        let (n, d) = (self.throughput_seeds, self.duration);
+        // The four parts ran interleaved on one pool: each reports the whole comparison's time.
+        let w = wall_seconds;
+        comparison(
+            self.faults,
+            multilane_report(&multilane(false), solver, Faults::NONE, w),
+            multilane_report(&multilane(true), solver, self.faults, w),
+            throughput_report(&throughput(false), n, d, Faults::NONE, w),
+            throughput_report(&throughput(true), n, d, self.faults, w),
+        )
+    }
+}
+
 /// Runs both experiments on both buses: `seeds` multi-lane runs and `throughput_seeds`
 /// throughput runs of `duration` s per algorithm.
 pub fn compare(
@@ -51,11 +159,25 @@ pub fn compare(
     duration: f64,
     threads: usize,
 ) -> FaultComparison {
-    let solver = SolverChoice::Ours;
-    let multilane_clean = experiment(seeds, 1, solver, Faults::NONE, threads);
-    let multilane_faulty = experiment(seeds, 1, solver, faults, threads);
-    let throughput_clean = throughput(throughput_seeds, 1, duration, Faults::NONE, threads);
-    let throughput_faulty = throughput(throughput_seeds, 1, duration, faults, threads);
+    let t0 = std::time::Instant::now();
+    let s = FaultSettings {
+        faults,
+        seeds,
+        throughput_seeds,
+        duration,
+    };
+    let cases = s.run((0, s.cases()), threads);
+    s.report(&cases, t0.elapsed().as_secs_f64())
+}
+
+/// The comparison of the four reports.
+fn comparison(
+    faults: Faults,
+    multilane_clean: MultilaneReport,
+    multilane_faulty: MultilaneReport,
+    throughput_clean: ThroughputReport,
+    throughput_faulty: ThroughputReport,
+) -> FaultComparison {
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
     let rows = throughput_clean
         .results

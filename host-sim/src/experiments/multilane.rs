@@ -8,7 +8,7 @@ use crate::scenario::DriverKind;
 use crate::world::summary::Summary;
 use crate::world::{SolverChoice, TraceRow, World, LENGTH_M, START_MARGIN_M};
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The paper's speed v0 in the multi-lane experiment (m/s).
 pub const V0: f64 = 15.0;
@@ -152,6 +152,100 @@ pub fn run_one(
     w.summary(t0.elapsed().as_secs_f64())
 }
 
+/// One multi-lane run: what [`multilane_report`] needs of it. A shard of
+/// `experiment multilane` prints these, and `host-sim merge` aggregates them as the
+/// unsharded run does, so the merged report is the unsharded one.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MultilaneCase {
+    /// The run's seed.
+    pub seed: u64,
+    /// Collisions (pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations.
+    pub invariant_violations: u64,
+    /// When every lane change was done, if all were (s).
+    pub done_at_s: Option<f64>,
+    /// Longest x-distance from intention to completed change (m).
+    pub max_distance_m: f64,
+    /// The commitment distance (23) of the vehicle needing most changes, at v0 (m).
+    pub bound_m: f64,
+    /// Lane changes completed.
+    pub lane_changes: u64,
+    /// Limit violations and road departures.
+    pub limit_violations: u64,
+    /// Certified-fallback steps.
+    pub fallback_steps: u64,
+    /// Yield steps.
+    pub yield_steps: u64,
+    /// Planner steps.
+    pub planner_steps: u64,
+}
+
+/// Runs the paper's experiment for the runs `first..end` (seed `first_seed + i` for
+/// run i: a run depends on its index alone).
+pub fn multilane_cases(
+    (first, end): (u64, u64),
+    first_seed: u64,
+    solver: SolverChoice,
+    faults: Faults,
+    threads: usize,
+) -> Vec<MultilaneCase> {
+    super::par::map_indexed(end.saturating_sub(first) as usize, threads, |i| {
+        let seed = first_seed + first + i as u64;
+        let sc = paper_scenario(seed);
+        let bound_m = (0..sc.vehicles.len())
+            .filter_map(|k| commitment_bound(&sc.vehicles, &sc.road, k, V0))
+            .fold(0.0, f64::max);
+        let mut world = sc.world();
+        world.faults = faults;
+        world.sensing = (!faults.is_none()).then(planner_core::Sensing::radar);
+        let s = run_one(world, solver, &mut |_| {});
+        MultilaneCase {
+            seed,
+            collisions: s.collisions,
+            invariant_violations: s.invariant_violations,
+            done_at_s: s.lane_changes.all_done_at_s,
+            max_distance_m: s.lane_changes.max_distance_m,
+            bound_m,
+            lane_changes: s.lane_changes.changes as u64,
+            limit_violations: s.limit_violations + s.off_road,
+            fallback_steps: s.fallback_steps,
+            yield_steps: s.yield_steps,
+            planner_steps: s.planner_steps,
+        }
+    })
+}
+
+/// The report over `cases` (in run order).
+pub fn multilane_report(
+    cases: &[MultilaneCase],
+    solver: SolverChoice,
+    faults: Faults,
+    wall_seconds: f64,
+) -> MultilaneReport {
+    let times: Vec<f64> = cases.iter().filter_map(|c| c.done_at_s).collect();
+    let sum = |f: fn(&MultilaneCase) -> u64| cases.iter().map(f).sum::<u64>();
+    let max = |f: fn(&MultilaneCase) -> f64| cases.iter().map(f).fold(0.0, f64::max);
+    MultilaneReport {
+        runs: cases.len() as u64,
+        collisions: sum(|c| c.collisions),
+        invariant_violations: sum(|c| c.invariant_violations),
+        completed: times.len() as u64,
+        max_completion_time_s: times.iter().copied().fold(0.0, f64::max),
+        mean_completion_time_s: times.iter().fold(0.0, |a, t| a + t) / times.len().max(1) as f64,
+        max_lane_change_distance_m: max(|c| c.max_distance_m),
+        bound_m: max(|c| c.bound_m),
+        lane_changes: sum(|c| c.lane_changes),
+        limit_violations: sum(|c| c.limit_violations),
+        fallback_steps: sum(|c| c.fallback_steps),
+        yield_steps: sum(|c| c.yield_steps),
+        planner_steps: sum(|c| c.planner_steps),
+        solver,
+        faults,
+        wall_seconds,
+    }
+}
+
 /// `host-sim experiment multilane`: the paper's experiment on `seeds` seeds.
 pub fn experiment(
     seeds: u64,
@@ -161,48 +255,8 @@ pub fn experiment(
     threads: usize,
 ) -> MultilaneReport {
     let t0 = std::time::Instant::now();
-    let results = super::par::map_indexed(seeds as usize, threads, |i| {
-        let seed = first_seed + i as u64;
-        let sc = paper_scenario(seed);
-        let bound = (0..sc.vehicles.len())
-            .filter_map(|k| commitment_bound(&sc.vehicles, &sc.road, k, V0))
-            .fold(0.0, f64::max);
-        let mut world = sc.world();
-        world.faults = faults;
-        world.sensing = (!faults.is_none()).then(planner_core::Sensing::radar);
-        (run_one(world, solver, &mut |_| {}), bound)
-    });
-    let times: Vec<f64> = results
-        .iter()
-        .filter_map(|(s, _)| s.lane_changes.all_done_at_s)
-        .collect();
-    MultilaneReport {
-        runs: seeds,
-        collisions: results.iter().map(|(s, _)| s.collisions).sum(),
-        invariant_violations: results.iter().map(|(s, _)| s.invariant_violations).sum(),
-        completed: times.len() as u64,
-        max_completion_time_s: times.iter().copied().fold(0.0, f64::max),
-        mean_completion_time_s: times.iter().fold(0.0, |a, t| a + t) / times.len().max(1) as f64,
-        max_lane_change_distance_m: results
-            .iter()
-            .map(|(s, _)| s.lane_changes.max_distance_m)
-            .fold(0.0, f64::max),
-        bound_m: results.iter().map(|(_, b)| *b).fold(0.0, f64::max),
-        lane_changes: results
-            .iter()
-            .map(|(s, _)| s.lane_changes.changes as u64)
-            .sum(),
-        limit_violations: results
-            .iter()
-            .map(|(s, _)| s.limit_violations + s.off_road)
-            .sum(),
-        fallback_steps: results.iter().map(|(s, _)| s.fallback_steps).sum(),
-        yield_steps: results.iter().map(|(s, _)| s.yield_steps).sum(),
-        planner_steps: results.iter().map(|(s, _)| s.planner_steps).sum(),
-        solver,
-        faults,
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    }
+    let cases = multilane_cases((0, seeds), first_seed, solver, faults, threads);
+    multilane_report(&cases, solver, faults, t0.elapsed().as_secs_f64())
 }
 
 /// The Theorem 2 sweep's result.

@@ -166,7 +166,84 @@ pub fn merge(mut parts: Vec<Output>) -> Result<Value, MergeError> {
     for next in it {
         acc = combine("", &acc, &next)?;
     }
-    Ok(acc)
+    match first.sweep.as_str() {
+        "multilane" | "throughput" | "faults" => report_of_runs(&first, &acc),
+        _ => Ok(acc),
+    }
+}
+
+/// What a shard of an experiment prints: its runs, each as the experiment's aggregation
+/// needs it, so that the merge aggregates all runs at once exactly as the unsharded
+/// experiment does (its means, standard deviations and ratios are not sums of parts).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Runs<T> {
+    /// The shard's runs, in run order.
+    pub runs: Vec<T>,
+    /// The shard's wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// `experiment multilane`'s settings.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct MultilaneSettings {
+    /// Runs.
+    pub seeds: u64,
+    /// First seed.
+    pub seed: u64,
+    /// Solver.
+    pub solver: crate::world::SolverChoice,
+    /// Faults.
+    pub faults: crate::bus::Faults,
+}
+
+/// `experiment throughput`'s settings.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct ThroughputSettings {
+    /// Runs per algorithm.
+    pub seeds: u64,
+    /// First seed.
+    pub seed: u64,
+    /// Simulated seconds per run.
+    pub duration: f64,
+    /// Faults.
+    pub faults: crate::bus::Faults,
+}
+
+/// An experiment's merged runs → its report, as the unsharded experiment prints it.
+fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
+    use super::{faults, multilane, throughput};
+    fn parse<T: serde::de::DeserializeOwned>(what: &str, v: &Value) -> Result<T, MergeError> {
+        serde_json::from_value(v.clone()).map_err(|e| MergeError::Shape(format!("{what}: {e}")))
+    }
+    let report = match h.sweep.as_str() {
+        "multilane" => {
+            let s: MultilaneSettings = parse("settings", &h.settings)?;
+            let r: Runs<multilane::MultilaneCase> = parse("runs", merged)?;
+            serde_json::to_value(multilane::multilane_report(
+                &r.runs,
+                s.solver,
+                s.faults,
+                r.wall_seconds,
+            ))
+        }
+        "throughput" => {
+            let s: ThroughputSettings = parse("settings", &h.settings)?;
+            let r: Runs<throughput::ThroughputCase> = parse("runs", merged)?;
+            serde_json::to_value(throughput::throughput_report(
+                &r.runs,
+                s.seeds,
+                s.duration,
+                s.faults,
+                r.wall_seconds,
+            ))
+        }
+        _ => {
+            let s: faults::FaultSettings = parse("settings", &h.settings)?;
+            let r: Runs<faults::FaultCase> = parse("runs", merged)?;
+            serde_json::to_value(s.report(&r.runs, r.wall_seconds))
+        }
+    };
+    report.map_err(|e| MergeError::Shape(e.to_string()))
 }
 
 /// Combines two results of the same shape, field by field (see the module's doc).

@@ -12,7 +12,7 @@ use planner_core::crossing::Algorithm;
 use planner_core::intersection::{Layout, LayoutSpec};
 use planner_core::Params;
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The Fig. 8 start: one vehicle on each of the 8 inlets, random routes, at vImax,
 /// staggered along their inlets.
@@ -135,6 +135,127 @@ pub struct ThroughputReport {
     pub wall_seconds: f64,
 }
 
+/// One throughput run (an algorithm on a seed): what [`throughput_report`] needs of it.
+/// A shard of `experiment throughput` prints these; `host-sim merge` aggregates them as
+/// the unsharded run does.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ThroughputCase {
+    /// The algorithm's name ([`Algorithm::name`]).
+    pub algorithm: String,
+    /// The run's seed.
+    pub seed: u64,
+    /// Vehicles crossed.
+    pub crossed: u64,
+    /// Mean time through A_C (s).
+    pub crossing_time_mean_s: f64,
+    /// Longest time through A_C (s).
+    pub crossing_time_max_s: f64,
+    /// Collisions.
+    pub collisions: u64,
+    /// Invariant violations.
+    pub invariant_violations: u64,
+    /// Limit violations.
+    pub limit_violations: u64,
+    /// Entries into A_S without a permission.
+    pub unpermitted_entries: u64,
+    /// Certified-fallback steps.
+    pub fallback_steps: u64,
+}
+
+/// The runs of the throughput experiment, algorithm by algorithm, seeds
+/// `first_seed..first_seed + seeds` each: run i is `(ALL[i / seeds], first_seed + i % seeds)`.
+pub fn throughput_jobs(seeds: u64, first_seed: u64) -> Vec<(Algorithm, u64)> {
+    Algorithm::ALL
+        .iter()
+        .flat_map(|&a| (0..seeds).map(move |k| (a, first_seed + k)))
+        .collect()
+}
+
+/// Runs the throughput runs `first..end` of [`throughput_jobs`].
+pub fn throughput_cases(
+    seeds: u64,
+    first_seed: u64,
+    (first, end): (u64, u64),
+    duration: f64,
+    faults: Faults,
+    threads: usize,
+) -> Vec<ThroughputCase> {
+    let jobs = throughput_jobs(seeds, first_seed);
+    let jobs = &jobs[(first as usize).min(jobs.len())..(end as usize).min(jobs.len())];
+    super::par::map_indexed(jobs.len(), threads, |i| {
+        let (a, seed) = jobs[i];
+        let s = throughput_run(a, seed, duration, faults);
+        ThroughputCase {
+            algorithm: a.name().into(),
+            seed,
+            crossed: s.crossed(),
+            crossing_time_mean_s: s.crossing_time_mean_s(),
+            crossing_time_max_s: s.crossing_time_max_s(),
+            collisions: s.collisions,
+            invariant_violations: s.invariant_violations,
+            limit_violations: s.limit_violations,
+            unpermitted_entries: s.unpermitted_entries(),
+            fallback_steps: s.fallback_steps,
+        }
+    })
+}
+
+/// One algorithm's row over its runs.
+fn row(algorithm: &'static str, mine: &[&ThroughputCase]) -> ThroughputRow {
+    let n = mine.len().max(1) as f64;
+    let mean = mine.iter().map(|c| c.crossed as f64).sum::<f64>() / n;
+    let var = mine
+        .iter()
+        .map(|c| (c.crossed as f64 - mean).powi(2))
+        .sum::<f64>()
+        / (n - 1.0).max(1.0);
+    let total: f64 = mine.iter().map(|c| c.crossed as f64).sum::<f64>().max(1.0);
+    ThroughputRow {
+        algorithm,
+        crossed_mean: mean,
+        crossed_std: var.sqrt(),
+        crossing_time_mean_s: mine
+            .iter()
+            .map(|c| c.crossing_time_mean_s * c.crossed as f64)
+            .sum::<f64>()
+            / total,
+        crossing_time_max_s: mine
+            .iter()
+            .map(|c| c.crossing_time_max_s)
+            .fold(0.0, f64::max),
+        collisions: mine.iter().map(|c| c.collisions).sum(),
+        invariant_violations: mine.iter().map(|c| c.invariant_violations).sum(),
+        limit_violations: mine.iter().map(|c| c.limit_violations).sum(),
+        unpermitted_entries: mine.iter().map(|c| c.unpermitted_entries).sum(),
+        fallback_steps: mine.iter().map(|c| c.fallback_steps).sum(),
+    }
+}
+
+/// The report over `cases` (in [`throughput_jobs`] order), one row per algorithm.
+pub fn throughput_report(
+    cases: &[ThroughputCase],
+    seeds: u64,
+    duration: f64,
+    faults: Faults,
+    wall_seconds: f64,
+) -> ThroughputReport {
+    let results = Algorithm::ALL
+        .iter()
+        .map(|a| {
+            let mine: Vec<&ThroughputCase> =
+                cases.iter().filter(|c| c.algorithm == a.name()).collect();
+            row(a.name(), &mine)
+        })
+        .collect();
+    ThroughputReport {
+        results,
+        seeds,
+        duration_s: duration,
+        faults,
+        wall_seconds,
+    }
+}
+
 /// Fig. 9: every algorithm on the same seeds.
 pub fn throughput(
     seeds: u64,
@@ -144,62 +265,9 @@ pub fn throughput(
     threads: usize,
 ) -> ThroughputReport {
     let t0 = std::time::Instant::now();
-    let jobs: Vec<(Algorithm, u64)> = Algorithm::ALL
-        .iter()
-        .flat_map(|&a| (0..seeds).map(move |k| (a, first_seed + k)))
-        .collect();
-    let runs = super::par::map_indexed(jobs.len(), threads, |i| {
-        let (a, s) = jobs[i];
-        (a, throughput_run(a, s, duration, faults))
-    });
-    let results = Algorithm::ALL
-        .iter()
-        .map(|&a| {
-            let mine: Vec<&Summary> = runs
-                .iter()
-                .filter(|(b, _)| *b == a)
-                .map(|(_, s)| s)
-                .collect();
-            let n = mine.len().max(1) as f64;
-            let mean = mine.iter().map(|s| s.crossed() as f64).sum::<f64>() / n;
-            let var = mine
-                .iter()
-                .map(|s| (s.crossed() as f64 - mean).powi(2))
-                .sum::<f64>()
-                / (n - 1.0).max(1.0);
-            let total: f64 = mine
-                .iter()
-                .map(|s| s.crossed() as f64)
-                .sum::<f64>()
-                .max(1.0);
-            ThroughputRow {
-                algorithm: a.name(),
-                crossed_mean: mean,
-                crossed_std: var.sqrt(),
-                crossing_time_mean_s: mine
-                    .iter()
-                    .map(|s| s.crossing_time_mean_s() * s.crossed() as f64)
-                    .sum::<f64>()
-                    / total,
-                crossing_time_max_s: mine
-                    .iter()
-                    .map(|s| s.crossing_time_max_s())
-                    .fold(0.0, f64::max),
-                collisions: mine.iter().map(|s| s.collisions).sum(),
-                invariant_violations: mine.iter().map(|s| s.invariant_violations).sum(),
-                limit_violations: mine.iter().map(|s| s.limit_violations).sum(),
-                unpermitted_entries: mine.iter().map(|s| s.unpermitted_entries()).sum(),
-                fallback_steps: mine.iter().map(|s| s.fallback_steps).sum(),
-            }
-        })
-        .collect();
-    ThroughputReport {
-        results,
-        seeds,
-        duration_s: duration,
-        faults,
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    }
+    let all = (0, seeds * Algorithm::ALL.len() as u64);
+    let cases = throughput_cases(seeds, first_seed, all, duration, faults, threads);
+    throughput_report(&cases, seeds, duration, faults, t0.elapsed().as_secs_f64())
 }
 
 impl core::fmt::Display for ThroughputReport {

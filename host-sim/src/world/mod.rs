@@ -109,7 +109,7 @@ impl Mode {
 }
 
 /// Which solver the multi-lane planners use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SolverChoice {
     /// planner-core's interior-point solver.
