@@ -142,3 +142,14 @@ fn nine_vehicles_at_a_dead_end_all_reach_their_lanes() {
     assert_eq!(s.lane_changes.in_target_lane, 9, "{:?}", s.lane_changes);
     assert_eq!(s.road_end_overruns, 0);
 }
+
+#[test]
+fn a_change_bent_off_its_curve_still_centres_before_the_road_end() {
+    // Issue 14, deadends case 536 of 2,000: vehicle 2 ended at the road end 0.75 m off
+    // lane 2's centre, its change never completed (a deadlock).
+    let s = run_world(load("deadend-536.toml"));
+    assert_eq!(s.unsafe_events(), 0);
+    assert!(s.deadlock.is_none(), "{:?}", s.deadlock);
+    assert_eq!(s.lane_changes.in_target_lane, 25, "{:?}", s.lane_changes);
+    assert_eq!(s.road_end_overruns, 0);
+}

@@ -722,6 +722,25 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         }
     }
 
+    /// A change under way whose S-curve has been driven but that has not come within
+    /// [`CENTRED_M`] of lane `m`'s centre (a fallback or a yield bent it off its curve):
+    /// a new S-curve from where the vehicle is to the centre, over [`recentre_length`].
+    /// Without it the lateral QP alone closes the rest only over hundreds of metres, and
+    /// a vehicle near a road end stops there short of the centre, unable to steer at
+    /// standstill (issue 14's dead-end sweep, case 536 of 2,000).
+    fn rejoin(&mut self, obs: &LaneObservation<'_, F>, m: u8) {
+        let centre = obs.road.lane_centre(m);
+        let driven = self.reference.is_none_or(|r| obs.pose.x >= r.x0 + r.len);
+        if driven && (obs.pose.y - centre).abs() > F::HALF * F::from_f64(CENTRED_M) {
+            self.reference = Some(Reference {
+                x0: obs.pose.x,
+                y0: obs.pose.y,
+                y1: centre,
+                len: recentre_length(obs.v_prev),
+            });
+        }
+    }
+
     /// With no change under way: the S-curve back to the centre line ([`RECENTRE_M`]),
     /// dropped once driven.
     fn recentre(&mut self, obs: &LaneObservation<'_, F>) {
@@ -760,6 +779,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
                 self.reference = None;
                 return Some(LaneEvent::Completed(m));
             }
+            self.rejoin(obs, m);
             return None;
         }
         if obs.target_lane == self.lane {
