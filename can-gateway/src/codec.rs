@@ -5,6 +5,7 @@
 //! frame that yields an error leaves the reassembler exactly as it was.
 
 use crate::crc;
+use crate::secoc::{self, AuthError, FreshnessRx, Key, KeyStore, TRAILER_LEN};
 use crate::wire::{
     frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, CLOCK_ADDRESS,
     HEADING_RES, MANAGER_ADDRESS, MANAGER_LAST, MAX_FRAMES, NO_LANE, POS_RES, SPEED_LIMIT,
@@ -85,6 +86,8 @@ pub enum DecodeError {
     Stale,
     /// The reassembler tracks as many senders as it can hold.
     Full,
+    /// A secured message's authenticator was refused ([`crate::secoc`]).
+    Auth(AuthError),
 }
 
 fn q<F: Real>(x: F, res: f64, lo: f64, hi: f64, field: Field) -> Result<i64, EncodeError> {
@@ -356,6 +359,59 @@ pub fn encode<F: Real, Fr: Frame>(
     Ok(out)
 }
 
+/// The frames of a secured message: the message's frames, then its authenticator frame.
+pub type SecuredFrames<Fr> = Vec<Fr, { MAX_FRAMES + 1 }>;
+
+/// Encodes `msg` as [`encode`] does and appends the authenticator frame: index = the
+/// kind's frame count, the same alive counter, then the trailer of [`crate::secoc`] (the
+/// low 16 bits of `fv`, the truncated AES-128-CMAC under `key` over the Data ID, counter,
+/// the message frames' 7-byte payloads and `fv`), zero-padded to 8 bytes.
+pub fn encode_secured<F: Real, Fr: Frame>(
+    msg: &Message<F>,
+    sa: u8,
+    counter: u8,
+    key: &Key,
+    fv: u64,
+) -> Result<SecuredFrames<Fr>, EncodeError> {
+    let kind = msg.kind();
+    let plain: Frames<Fr> = encode(msg, sa, counter)?;
+    let mut bytes = [0u8; MAX_FRAMES * CHUNK];
+    for (i, f) in plain.iter().enumerate() {
+        if let (Some(dst), Some(src)) =
+            (bytes.get_mut(i * CHUNK..(i + 1) * CHUNK), f.data().get(1..))
+        {
+            dst.copy_from_slice(src);
+        }
+    }
+    let body = bytes.get(..kind.frames() * CHUNK).unwrap_or(&[]);
+    let t = secoc::trailer(key, secoc::data_id(kind as u8, sa), counter, body, fv);
+    let index = kind.frames() as u8;
+    let mut data = [0u8; 8];
+    data[0] = index << 4 | (counter & 0x0F);
+    if let Some(dst) = data.get_mut(1..1 + TRAILER_LEN) {
+        dst.copy_from_slice(&t);
+    }
+    let mut out = SecuredFrames::new();
+    for f in plain {
+        out.push(f).map_err(|_| EncodeError::Frame)?;
+    }
+    let id = ExtendedId::new(frame_id(kind, index, sa)).ok_or(EncodeError::Frame)?;
+    let f = Fr::new(Id::Extended(id), &data).ok_or(EncodeError::Frame)?;
+    out.push(f).map_err(|_| EncodeError::Frame)?;
+    Ok(out)
+}
+
+/// What a secured receiver verifies with: the senders' keys, its freshness record and
+/// its clock (ms).
+pub struct Verifier<'a, const K: usize, const R: usize> {
+    /// Keys by source address.
+    pub keys: &'a KeyStore<K>,
+    /// The last accepted freshness per sender and kind.
+    pub freshness: &'a mut FreshnessRx<R>,
+    /// The receiver's time on the shared clock (ms).
+    pub now_ms: u64,
+}
+
 /// Reassembly and acceptance state for one sender and kind.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Slot {
@@ -403,13 +459,32 @@ impl<const CAP: usize> Reassembler<CAP> {
         &mut self,
         frame: &Fr,
     ) -> Result<Option<Message<F>>, DecodeError> {
+        self.take::<F, Fr, 0, 0>(frame, None)
+    }
+
+    /// Takes one received frame of a secured stream: a message is accepted only after
+    /// its authenticator frame (see [`encode_secured`]) verifies under `v`; until then,
+    /// and on any error, nothing is accepted and nothing recorded.
+    pub fn push_secured<F: Real, Fr: Frame, const K: usize, const R: usize>(
+        &mut self,
+        frame: &Fr,
+        v: Verifier<'_, K, R>,
+    ) -> Result<Option<Message<F>>, DecodeError> {
+        self.take(frame, Some(v))
+    }
+
+    fn take<F: Real, Fr: Frame, const K: usize, const R: usize>(
+        &mut self,
+        frame: &Fr,
+        auth: Option<Verifier<'_, K, R>>,
+    ) -> Result<Option<Message<F>>, DecodeError> {
         let raw = match frame.id() {
             Id::Extended(e) if !frame.is_remote_frame() => e.as_raw(),
             _ => return Err(DecodeError::NotOurs),
         };
         let (code, index, sa) = split_id(raw).ok_or(DecodeError::ForeignId)?;
         let kind = MessageKind::from_code(code).ok_or(DecodeError::UnknownKind(code))?;
-        let n = kind.frames();
+        let n = kind.frames() + usize::from(auth.is_some());
         if usize::from(index) >= n {
             return Err(DecodeError::BadFrameIndex);
         }
@@ -441,8 +516,20 @@ impl<const CAP: usize> Reassembler<CAP> {
             _ => return Err(DecodeError::OutOfSequence),
         };
         let at = usize::from(index) * CHUNK;
-        if let (Some(dst), Some(src)) = (slot.bytes.get_mut(at..at + CHUNK), data.get(1..)) {
-            dst.copy_from_slice(src);
+        let mut trailer = [0u8; TRAILER_LEN];
+        if usize::from(index) < kind.frames() {
+            if let (Some(dst), Some(src)) = (slot.bytes.get_mut(at..at + CHUNK), data.get(1..)) {
+                dst.copy_from_slice(src);
+            }
+        } else if let Some(src) = data.get(1..1 + TRAILER_LEN) {
+            // The authenticator frame: its trailer, and zero padding.
+            trailer.copy_from_slice(src);
+            if data
+                .get(1 + TRAILER_LEN..)
+                .is_some_and(|p| p.iter().any(|b| *b != 0))
+            {
+                return Err(DecodeError::BadLength);
+            }
         }
         let seen = seen | 1 << index;
         let mut result = None;
@@ -450,7 +537,7 @@ impl<const CAP: usize> Reassembler<CAP> {
             slot.partial = Some((counter, seen));
         } else {
             slot.partial = None;
-            let total = n * CHUNK;
+            let total = kind.frames() * CHUNK;
             let body = slot.bytes.get(..total - 1).unwrap_or(&[]);
             let crc = slot.bytes.get(total - 1).copied().unwrap_or(0);
             if message_crc(kind, sa, counter, body) != crc {
@@ -492,6 +579,16 @@ impl<const CAP: usize> Reassembler<CAP> {
                     return Err(DecodeError::Stale);
                 }
                 slot.last_stamp = Some(stamp);
+            }
+            if pos.is_none() && self.slots.is_full() {
+                return Err(DecodeError::Full);
+            }
+            // Last, as the only check that records something outside this slot.
+            if let Some(v) = auth {
+                let all = slot.bytes.get(..total).unwrap_or(&[]);
+                v.freshness
+                    .verify(v.keys, kind as u8, sa, counter, all, &trailer, v.now_ms)
+                    .map_err(DecodeError::Auth)?;
             }
             slot.last_counter = Some(counter);
             result = Some(msg);
@@ -820,6 +917,212 @@ mod tests {
             last = r.push::<f64, _>(f);
         }
         last
+    }
+
+    mod secured {
+        use super::*;
+        use crate::secoc::{derive_key, FreshnessRx, Key, KeyStore};
+
+        const MASTER: Key = Key([7; 16]);
+
+        fn keys() -> KeyStore<8> {
+            let mut k = KeyStore::new();
+            for sa in [9u8, 8, MANAGER_ADDRESS, CLOCK_ADDRESS] {
+                k.insert(sa, derive_key(&MASTER, sa)).unwrap();
+            }
+            k
+        }
+
+        /// Every kind, each from a sender allowed to send it.
+        fn every_kind() -> [(Message<f64>, u8); 9] {
+            let [e, je, rq, jrq, st, loc] = naming_vehicle_9();
+            [
+                (e, 9),
+                (je, 9),
+                (rq, 9),
+                (jrq, 9),
+                (st, 9),
+                (loc, 9),
+                (Message::Grant { id: 9, until: 4.0 }, MANAGER_ADDRESS),
+                (Message::Revoke { id: 9, at: 4.0 }, MANAGER_ADDRESS),
+                (
+                    Message::Sync {
+                        period: 4,
+                        last: false,
+                    },
+                    CLOCK_ADDRESS,
+                ),
+            ]
+        }
+
+        struct Rx {
+            r: Reassembler<8>,
+            keys: KeyStore<8>,
+            fresh: FreshnessRx<16>,
+        }
+
+        impl Rx {
+            fn new() -> Self {
+                Self {
+                    r: Reassembler::new(),
+                    keys: keys(),
+                    fresh: FreshnessRx::default(),
+                }
+            }
+            fn push(
+                &mut self,
+                f: &TestFrame,
+                now_ms: u64,
+            ) -> Result<Option<Message<f64>>, DecodeError> {
+                let v = Verifier {
+                    keys: &self.keys,
+                    freshness: &mut self.fresh,
+                    now_ms,
+                };
+                self.r.push_secured::<f64, _, 8, 16>(f, v)
+            }
+            fn push_all(
+                &mut self,
+                frames: &[TestFrame],
+                now_ms: u64,
+            ) -> Vec<Result<Option<Message<f64>>, DecodeError>, 8> {
+                frames.iter().map(|f| self.push(f, now_ms)).collect()
+            }
+        }
+
+        fn sign(
+            m: &Message<f64>,
+            sa: u8,
+            counter: u8,
+            key_of: u8,
+            fv: u64,
+        ) -> SecuredFrames<TestFrame> {
+            encode_secured(m, sa, counter, &derive_key(&MASTER, key_of), fv).unwrap()
+        }
+
+        #[test]
+        fn every_kind_round_trips_with_its_authenticator_and_not_before() {
+            for (m, sa) in every_kind() {
+                let mut rx = Rx::new();
+                let frames = sign(&m, sa, 3, sa, 1_000);
+                assert_eq!(frames.len(), m.kind().frames() + 1);
+                let out = rx.push_all(&frames, 1_000);
+                let (last, rest) = out.split_last().unwrap();
+                assert!(
+                    rest.iter().all(|r| *r == Ok(None)),
+                    "{m:?}: accepted before its MAC"
+                );
+                let got = (*last).unwrap().unwrap();
+                assert_eq!(
+                    encode::<f64, TestFrame>(&got, sa, 3).unwrap(),
+                    encode(&m, sa, 3).unwrap()
+                );
+                // The same frames again: the E2E counter already refuses them.
+                let again = rx.push_all(&frames, 1_010);
+                assert_eq!(*again.last().unwrap(), Err(DecodeError::Duplicate), "{m:?}");
+                // After a newer message, the old one replayed: its freshness is taken (states
+                // and ticks are refused by their stamps first).
+                let later = match m {
+                    Message::State(mut st) => {
+                        st.stamp += 0.1;
+                        Message::State(st)
+                    }
+                    Message::Located { segment, mut state } => {
+                        state.stamp += 0.1;
+                        Message::Located { segment, state }
+                    }
+                    Message::Sync { period, last } => Message::Sync {
+                        period: period + 1,
+                        last,
+                    },
+                    other => other,
+                };
+                let newer = sign(&later, sa, 4, sa, 1_005);
+                assert!(matches!(
+                    rx.push_all(&newer, 1_005).last(),
+                    Some(Ok(Some(_)))
+                ));
+                let replay = rx.push_all(&frames, 1_010);
+                let expect = match m.kind() {
+                    MessageKind::State | MessageKind::Located | MessageKind::Sync => {
+                        DecodeError::Stale
+                    }
+                    _ => DecodeError::Auth(AuthError::Replayed),
+                };
+                assert_eq!(*replay.last().unwrap(), Err(expect), "{m:?}");
+                // A plain receiver refuses the authenticator frame's index.
+                let mut plain = Reassembler::<8>::new();
+                let mut res = Ok(None);
+                for f in &frames {
+                    res = plain.push::<f64, _>(f);
+                }
+                assert_eq!(res, Err(DecodeError::BadFrameIndex));
+            }
+        }
+
+        #[test]
+        fn a_forged_grant_is_refused_and_changes_nothing() {
+            // A vehicle writes the manager's address: the CRC and the sender rule pass, the
+            // MAC (under the vehicle's own key, or any but the manager's) does not.
+            let grant = Message::Grant { id: 8, until: 9.0 };
+            let mut rx = Rx::new();
+            let forged = sign(&grant, MANAGER_ADDRESS, 1, 8, 2_000);
+            let before = rx.r.slots.clone();
+            let out = rx.push_all(&forged, 2_000);
+            assert_eq!(
+                *out.last().unwrap(),
+                Err(DecodeError::Auth(AuthError::BadMac))
+            );
+            assert_eq!(
+                rx.r.slots.len(),
+                before.len() + 1,
+                "only the partial frame is held"
+            );
+            assert!(rx.r.slots.iter().all(|s| s.last_counter.is_none()));
+            // The real grant with the same counter is still accepted afterwards.
+            let real = sign(&grant, MANAGER_ADDRESS, 1, MANAGER_ADDRESS, 2_000);
+            assert!(matches!(
+                rx.push_all(&real, 2_000).last(),
+                Some(Ok(Some(_)))
+            ));
+            // An unknown sender has no key.
+            let mut st = state();
+            st.id = 0x33;
+            let unknown = sign(&Message::State(st), 0x33, 0, 0x33, 2_000);
+            assert_eq!(
+                *rx.push_all(&unknown, 2_000).last().unwrap(),
+                Err(DecodeError::Auth(AuthError::UnknownKey))
+            );
+        }
+
+        #[test]
+        fn stale_spliced_and_padded_authenticators_are_refused() {
+            let m = Message::Exit { id: 9, at: 1.0 };
+            let mut rx = Rx::new();
+            // Recorded a second ago: outside the 500 ms window.
+            let old = sign(&m, 9, 2, 9, 10_000);
+            assert_eq!(
+                *rx.push_all(&old, 11_000).last().unwrap(),
+                Err(DecodeError::Auth(AuthError::Stale))
+            );
+            // The authenticator of another message (another time) spliced onto this one.
+            let a = sign(&m, 9, 2, 9, 20_000);
+            let b = sign(&Message::Exit { id: 9, at: 2.0 }, 9, 2, 9, 20_001);
+            let spliced = [a[0], b[1]];
+            assert_eq!(
+                *rx.push_all(&spliced, 20_001).last().unwrap(),
+                Err(DecodeError::Auth(AuthError::BadMac))
+            );
+            // Non-zero padding after the trailer.
+            let mut data = [0u8; 8];
+            data.copy_from_slice(a[1].data());
+            data[7] = 1;
+            let padded = TestFrame::new(a[1].id(), &data).unwrap();
+            rx.push(&a[0], 20_000).unwrap();
+            assert_eq!(rx.push(&padded, 20_000), Err(DecodeError::BadLength));
+            // The genuine one still goes through after all that.
+            assert!(matches!(rx.push_all(&a, 20_000).last(), Some(Ok(Some(_)))));
+        }
     }
 
     #[test]

@@ -9,7 +9,8 @@
 //! - [`crc`]: CRC-8 SAE J1850;
 //! - [`codec`]: encoding messages into frames and reassembling frames into messages;
 //! - [`frame`]: a plain frame value for in-process buses, logs and tests;
-//! - [`log`]: `candump -l` lines.
+//! - [`log`]: `candump -l` lines;
+//! - [`secoc`]: SecOC-style authentication (AES-128-CMAC, time-based freshness).
 //!
 //! `can-gateway.dbc` (in this crate) describes every frame for standard tools.
 #![no_std]
@@ -32,6 +33,7 @@ pub mod codec;
 pub mod crc;
 pub mod frame;
 pub mod log;
+pub mod secoc;
 pub mod wire;
 
 pub use codec::{encode, DecodeError, EncodeError, Frames, Reassembler};
