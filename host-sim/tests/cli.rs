@@ -388,3 +388,77 @@ fn intersection_run_and_throughput_experiment() {
         assert_eq!(out.status.code(), Some(2), "{args:?}");
     }
 }
+
+/// `--auth` and `--keys` (issue 17): a key file authenticates the fleet; a bad one, or
+/// authentication without a CAN bus, is refused before anything runs, naming the file
+/// and the key.
+#[test]
+fn key_files_are_checked_and_authenticate_the_fleet() {
+    let good = tmp("keys-good.toml");
+    std::fs::write(
+        &good,
+        "master = \"000102030405060708090a0b0c0d0e0f\"\n[nodes]\n\"0xF1\" = \"ffeeddccbbaa99887766554433221100\"\n",
+    )
+    .expect("write");
+    let out = bin()
+        .arg("run")
+        .arg(scenario("intersection.toml"))
+        .args(["--bus", "can-hub", "--json", "--keys"])
+        .arg(&good)
+        .output()
+        .expect("runs");
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(&out.stdout, &["authenticated", "can"]);
+    assert_eq!(v["authenticated"], true);
+    assert_eq!(v["can"]["rejected"], serde_json::json!({}));
+    for (name, text, says) in [
+        (
+            "keys-short.toml",
+            "master = \"0011\"\n",
+            "master: a key is 32 hex digits, not 4",
+        ),
+        (
+            "keys-hex.toml",
+            "[nodes]\n\"5\" = \"zz0102030405060708090a0b0c0d0e0f\"\n",
+            "nodes.5: \"zz\" is not hex",
+        ),
+        (
+            "keys-addr.toml",
+            "[nodes]\n\"0x100\" = \"000102030405060708090a0b0c0d0e0f\"\n",
+            "\"0x100\" is not an address",
+        ),
+        ("keys-none.toml", "", "no key"),
+        (
+            "keys-extra.toml",
+            "master = \"000102030405060708090a0b0c0d0e0f\"\nsalt = 1\n",
+            "unknown field",
+        ),
+    ] {
+        let f = tmp(name);
+        std::fs::write(&f, text).expect("write");
+        let out = bin()
+            .arg("run")
+            .arg(scenario("intersection.toml"))
+            .args(["--bus", "can-hub", "--keys"])
+            .arg(&f)
+            .output()
+            .expect("runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{name}: {err}");
+        assert!(err.contains(name) && err.contains(says), "{name}: {err}");
+        assert!(out.stdout.is_empty());
+    }
+    let out = bin()
+        .arg("run")
+        .arg(scenario("intersection.toml"))
+        .arg("--auth")
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--bus can-hub"));
+}

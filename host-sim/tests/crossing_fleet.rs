@@ -332,3 +332,173 @@ fn cli_runs_intersections_on_the_bus() {
     common::refused_on_the_bus(&faulty, "[faults]");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A vehicle that writes the intersection manager's source address (CAN authenticates no
+/// sender): after each of its crossing requests it sends itself a grant "from" 0xF1,
+/// signed, when the fleet authenticates, with the only key it has — its own — and the
+/// freshness of its own request (the right time, so the window does not refuse it).
+struct Impostor {
+    inner: HubPort,
+    sa: Option<u8>,
+    counter: u8,
+    key: Option<can_gateway::secoc::Key>,
+}
+
+impl CanPort for Impostor {
+    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+        self.inner.transmit(frame)?;
+        let Some(sa) = self.sa else {
+            return Ok(());
+        };
+        let embedded_can::Id::Extended(id) = embedded_can::Frame::id(frame) else {
+            return Ok(());
+        };
+        // After the last frame of one of its requests (its authenticator, if keyed).
+        let last = 1 + u8::from(self.key.is_some());
+        if wire::split_id(id.as_raw()) != Some((wire::MessageKind::Request as u8, last, sa)) {
+            return Ok(());
+        }
+        let grant = wire::Message::<f64>::Grant {
+            id: u16::from(sa),
+            until: 1e5,
+        };
+        let manager = wire::MANAGER_ADDRESS;
+        let frames: Vec<PlainFrame> = match &self.key {
+            None => encode::<f64, PlainFrame>(&grant, manager, self.counter)
+                .map_err(|e| io::Error::other(format!("{e:?}")))?
+                .into_iter()
+                .collect(),
+            Some(key) => {
+                // The scenarios here last under 65.5 s: the low 16 bits are the value.
+                let d = embedded_can::Frame::data(frame);
+                let fv = u64::from(u16::from_le_bytes([d[1], d[2]]));
+                can_gateway::codec::encode_secured::<f64, PlainFrame>(
+                    &grant,
+                    manager,
+                    self.counter,
+                    key,
+                    fv,
+                )
+                .map_err(|e| io::Error::other(format!("{e:?}")))?
+                .into_iter()
+                .collect()
+            }
+        };
+        self.counter = (self.counter + 1) & 0x0F;
+        for f in &frames {
+            self.inner.transmit(f)?;
+        }
+        Ok(())
+    }
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+        self.inner.receive(timeout)
+    }
+}
+
+fn with_impostors(
+    sc: &WorldSpec,
+    keys: Option<std::sync::Arc<host_sim::fleet::can::Keys>>,
+) -> FleetSummary {
+    let hub = Hub::new();
+    let own = |sa: u8| keys.as_ref().and_then(|k| k.get(sa).copied());
+    fleet::Fleet {
+        solver: SolverChoice::Ours,
+        seed: None,
+        medium: "impostors' hub",
+        keys: keys.clone(),
+    }
+    .run(
+        sc.clone(),
+        |n| {
+            let sa = match n {
+                Node::Vehicle(i) => Some(i as u8),
+                _ => None,
+            };
+            Ok(Impostor {
+                inner: hub.port(),
+                sa,
+                counter: 0,
+                key: sa.and_then(own),
+            })
+        },
+        &mut |_| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Issue 17: without authentication the grants a vehicle forges under the manager's
+/// address are accepted by every receiver (the CRC, the counter and the sender rule all
+/// pass); with it, every one fails its MAC at every receiver, nothing else is refused,
+/// and the run is the clean authenticated run to the bit.
+#[test]
+fn grants_forged_under_the_managers_address_pass_a_plain_fleet_not_an_authenticated_one() {
+    let sc = scenario("intersection.toml", Some("fifo"));
+    // Without authentication every receiver accepts the forged grants: the CRC, the
+    // alive counter and the sender rule all pass (only a counter equal to the manager's
+    // last one is refused, as a duplicate).
+    let plain_clean = on_hub(&sc);
+    let plain = with_impostors(&sc, None);
+    let forged = plain.can.messages_received - plain_clean.can.messages_received;
+    assert!(
+        forged > 1000,
+        "{:?} against {:?}",
+        plain.can,
+        plain_clean.can
+    );
+    assert!(
+        plain.can.rejected.keys().all(|k| k == "Duplicate"),
+        "{:?}",
+        plain.can.rejected
+    );
+    let keys = std::sync::Arc::new(host_sim::fleet::can::simulation_keys(
+        &can_gateway::secoc::Key(*b"test master key!"),
+    ));
+    let clean = fleet::run_keyed(
+        sc.clone(),
+        SolverChoice::Ours,
+        None,
+        &Medium::Hub,
+        Some(keys.clone()),
+        &mut |_| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(clean.authenticated);
+    assert!(clean.can.rejected.is_empty(), "{:?}", clean.can.rejected);
+    let attacked = with_impostors(&sc, Some(keys));
+    let bad_mac = attacked
+        .can
+        .rejected
+        .get("Auth(BadMac)")
+        .copied()
+        .unwrap_or(0);
+    assert!(bad_mac > 0, "{:?}", attacked.can.rejected);
+    // A forgery whose counter equals the manager's last is refused before its MAC.
+    assert!(
+        attacked
+            .can
+            .rejected
+            .keys()
+            .all(|k| k == "Auth(BadMac)" || k == "Duplicate"),
+        "{:?}",
+        attacked.can.rejected
+    );
+    assert_all_crossed_safely(&attacked.run, sc.vehicles.len() as u64);
+    let strip = |s: &host_sim::world::summary::Summary| host_sim::world::summary::Summary {
+        wall_seconds: 0.0,
+        ..s.clone()
+    };
+    assert_eq!(
+        format!("{:?}", strip(&attacked.run)),
+        format!("{:?}", strip(&clean.run)),
+        "the forged grants changed the authenticated run"
+    );
+    // Authentication changes the frames, not the run.
+    assert_eq!(
+        format!("{:?}", strip(&clean.run)),
+        format!("{:?}", strip(&plain_clean.run))
+    );
+    assert_eq!(
+        clean.can.messages_received,
+        plain_clean.can.messages_received
+    );
+}

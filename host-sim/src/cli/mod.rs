@@ -81,6 +81,15 @@ enum Command {
             value_name = "in-process|can-hub|IFACE"
         )]
         bus: String,
+        /// With `--bus`: every message carries a SecOC-style authenticator (AES-128-CMAC,
+        /// time-based freshness) and every node accepts only those that verify; keys are
+        /// derived from the public simulation master key (docs/security.md).
+        #[arg(long)]
+        auth: bool,
+        /// With `--bus`: authenticate with the keys of this TOML file (`master = "32 hex
+        /// digits"` and/or `[nodes]` "0xSA" = "32 hex digits"); implies --auth.
+        #[arg(long, value_name = "keys.toml")]
+        keys: Option<PathBuf>,
     },
     /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
     Platoons(sweep::PlatoonsArgs),
@@ -124,6 +133,8 @@ pub fn main() -> ExitCode {
             html,
             solver,
             bus,
+            auth,
+            keys,
         } => run::run(run::RunArgs {
             file,
             seed,
@@ -133,6 +144,8 @@ pub fn main() -> ExitCode {
             html,
             solver: solver.choice(),
             bus,
+            auth: auth || keys.is_some(),
+            keys,
         }),
         Command::Platoons(a) => sweep::platoons(a),
         Command::Traffic(a) => sweep::traffic(a),

@@ -29,6 +29,10 @@ pub struct RunArgs {
     pub solver: SolverChoice,
     /// `in-process`, `can-hub`, or an interface.
     pub bus: String,
+    /// Authenticate every message (issue 17).
+    pub auth: bool,
+    /// The key file (else keys derived from the simulation master key).
+    pub keys: Option<PathBuf>,
 }
 
 /// Where a run's rows go.
@@ -109,6 +113,13 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
 }
 
 fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
+    let keys = match super::fleet::keys(a.auth, a.keys.as_deref()) {
+        Ok(k) => k,
+        Err(e) => return bad_input(e),
+    };
+    if keys.is_some() && a.bus == "in-process" {
+        return bad_input("--auth and --keys authenticate CAN frames: use them with --bus can-hub or an interface");
+    }
     let name = spec.name.clone();
     let net = spec.network.clone();
     let outcome = if a.bus == "in-process" {
@@ -119,7 +130,7 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
         .map(|s| (s, None))
         .map_err(|e| bad_input(format!("bus: {e}")))
     } else {
-        super::fleet::run(&a.bus, spec, a.solver, a.seed, &mut |r| sinks.row(r))
+        super::fleet::run(&a.bus, spec, a.solver, a.seed, keys, &mut |r| sinks.row(r))
             .map(|f| (f.run.clone(), Some(f)))
             .map_err(|e| {
                 eprintln!("error: --bus {}: {e}", a.bus);

@@ -19,7 +19,8 @@
 use crate::bus::{Bus, BusError, Message, Received};
 use crate::world::network::Network;
 use crate::world::LENGTH_M;
-use can_gateway::codec::{DecodeError, EncodeError};
+use can_gateway::codec::{encode_secured, DecodeError, EncodeError, SecuredFrames, Verifier};
+use can_gateway::secoc::{derive_key, FreshnessRx, FreshnessTx, Key, KeyStore};
 use can_gateway::wire::{self, CLOCK_ADDRESS};
 use can_gateway::{encode, Frames, PlainFrame, Reassembler};
 use planner_core::crossing::CrossingReport;
@@ -243,6 +244,8 @@ pub enum CanError {
     BadAddress(u16),
     /// The message kind has no CAN mapping yet.
     Unmapped(&'static str),
+    /// An authenticated fleet has no key for this node's address.
+    NoKey(u8),
 }
 
 impl fmt::Display for CanError {
@@ -256,6 +259,7 @@ impl fmt::Display for CanError {
                 CLOCK_ADDRESS - 1
             ),
             Self::Unmapped(what) => write!(f, "{what} cannot go over CAN yet"),
+            Self::NoKey(sa) => write!(f, "no key for node {sa:#04x} in an authenticated fleet"),
         }
     }
 }
@@ -324,14 +328,43 @@ pub enum Polled {
     Message(wire::Message<f64>, SystemTime, u8),
 }
 
+/// Keys of every address a fleet may use (one per source address).
+pub const KEY_SLOTS: usize = 256;
+/// A fleet's keys, shared by its nodes.
+pub type Keys = KeyStore<KEY_SLOTS>;
+
+/// Every address's key derived from a simulation's `master` key
+/// ([`can_gateway::secoc::derive_key`]): for simulations only, where every node is ours.
+pub fn simulation_keys(master: &Key) -> Keys {
+    let mut keys = Keys::new();
+    for sa in 0..=u8::MAX {
+        // 256 slots hold every address: the insert cannot fail.
+        let _ = keys.insert(sa, derive_key(master, sa));
+    }
+    keys
+}
+
+/// A node's authentication state (issue 17): the fleet's keys, its own freshness values
+/// and what it accepted from each sender.
+struct Security {
+    keys: Arc<Keys>,
+    tx: FreshnessTx,
+    rx: FreshnessRx<REASSEMBLY_SLOTS>,
+}
+
 /// One node on a CAN medium: the sender address, a port, an alive counter per message
-/// kind, and a reassembler for what others send.
+/// kind, and a reassembler for what others send; with keys, every message it sends
+/// carries an authenticator and every message it accepts has one that verifies.
 pub struct CanNode<P> {
     sa: u8,
     port: P,
     counters: [u8; 16],
     reassembler: Box<Reassembler<REASSEMBLY_SLOTS>>,
     stats: CanStats,
+    security: Option<Box<Security>>,
+    /// The node's time on the fleet's clock (ms): freshness of what it sends, and the
+    /// centre of its acceptance window.
+    now_ms: u64,
 }
 
 impl<P> fmt::Debug for CanNode<P> {
@@ -352,7 +385,24 @@ impl<P: CanPort> CanNode<P> {
             counters: [0; 16],
             reassembler: Box::default(),
             stats: CanStats::default(),
+            security: None,
+            now_ms: 0,
         }
+    }
+
+    /// This node, authenticating with `keys` (its own among them).
+    pub fn with_keys(mut self, keys: Arc<Keys>) -> Self {
+        self.security = Some(Box::new(Security {
+            keys,
+            tx: FreshnessTx::new(),
+            rx: FreshnessRx::default(),
+        }));
+        self
+    }
+
+    /// Sets the node's clock to `t` s of the fleet's time.
+    pub fn set_time(&mut self, t: f64) {
+        self.now_ms = (t.max(0.0) * 1000.0).round() as u64;
     }
 
     /// The node of vehicle `id` (its CAN source address is its id).
@@ -369,13 +419,30 @@ impl<P: CanPort> CanNode<P> {
     pub fn send_wire(&mut self, msg: &wire::Message<f64>) -> Result<(), CanError> {
         let k = msg.kind() as usize;
         let counter = self.counters.get(k).copied().unwrap_or(0);
-        let frames: Frames<PlainFrame> = encode(msg, self.sa, counter).map_err(CanError::Encode)?;
-        for f in &frames {
-            self.port.transmit(f)?;
-            self.stats.frames_sent += 1;
+        match &mut self.security {
+            None => {
+                let frames: Frames<PlainFrame> =
+                    encode(msg, self.sa, counter).map_err(CanError::Encode)?;
+                self.transmit_all(&frames)?;
+            }
+            Some(s) => {
+                let key = *s.keys.get(self.sa).ok_or(CanError::NoKey(self.sa))?;
+                let fv = s.tx.next(msg.kind() as u8, self.now_ms);
+                let frames: SecuredFrames<PlainFrame> =
+                    encode_secured(msg, self.sa, counter, &key, fv).map_err(CanError::Encode)?;
+                self.transmit_all(&frames)?;
+            }
         }
         if let Some(c) = self.counters.get_mut(k) {
             *c = (counter + 1) & 0x0F;
+        }
+        Ok(())
+    }
+
+    fn transmit_all(&mut self, frames: &[PlainFrame]) -> Result<(), CanError> {
+        for f in frames {
+            self.port.transmit(f)?;
+            self.stats.frames_sent += 1;
         }
         Ok(())
     }
@@ -405,7 +472,18 @@ impl<P: CanPort> CanNode<P> {
             return Ok(Polled::Nothing);
         };
         self.stats.frames_received += 1;
-        match self.reassembler.push::<f64, _>(&frame) {
+        let pushed = match &mut self.security {
+            None => self.reassembler.push::<f64, _>(&frame),
+            Some(s) => {
+                let v = Verifier {
+                    keys: &s.keys,
+                    freshness: &mut s.rx,
+                    now_ms: self.now_ms,
+                };
+                self.reassembler.push_secured(&frame, v)
+            }
+        };
+        match pushed {
             Ok(Some(m)) => {
                 self.stats.messages_received += 1;
                 let sa = match frame.id() {
@@ -427,6 +505,7 @@ fn reason(e: DecodeError) -> String {
     match e {
         DecodeError::OutOfRange(f) => format!("OutOfRange({f:?})"),
         DecodeError::UnknownKind(_) => "UnknownKind".into(),
+        DecodeError::Auth(a) => format!("Auth({a:?})"),
         other => format!("{other:?}"),
     }
 }

@@ -36,12 +36,13 @@ use crate::world::step::{build_vehicle, step_place, Moved, WorldMonitor};
 use crate::world::summary::{summarize, Outcome, Summary};
 use crate::world::vehicle::{Counters, PlannerSetup, StepCtx, Vehicle, VehicleTruth};
 use crate::world::{SolverChoice, TraceRow, WorldSpec};
-use can::{CanError, CanNode, CanPort, CanStats, Hub, Polled, SocketCanPort, WireMap};
+use can::{CanError, CanNode, CanPort, CanStats, Hub, Keys, Polled, SocketCanPort, WireMap};
 use can_gateway::wire::{self, CLOCK_ADDRESS};
 use serde::Serialize;
 use std::fmt;
 use std::io;
 use std::sync::mpsc;
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
 /// How long a task waits for the next SYNC, and the master for a report, before the run
@@ -145,6 +146,9 @@ pub struct FleetSummary {
     pub messages: Messages,
     /// Every node's CAN traffic, summed.
     pub can: CanStats,
+    /// Every message carried a SecOC-style authenticator, and every node accepted only
+    /// those that verified (issue 17).
+    pub authenticated: bool,
     /// States: publication (before the first frame is written) to the receiving socket's
     /// time stamp of the last frame.
     pub state_latency: Latency,
@@ -324,7 +328,26 @@ pub fn run(
     medium: &Medium,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Result<FleetSummary, FleetError> {
+    run_keyed(spec, solver, seed, medium, None, trace)
+}
+
+/// [`run`], every node authenticating what it sends and verifying what it accepts with
+/// `keys` (issue 17); `None` runs without.
+pub fn run_keyed(
+    spec: WorldSpec,
+    solver: SolverChoice,
+    seed: Option<u64>,
+    medium: &Medium,
+    keys: Option<Arc<Keys>>,
+    trace: &mut dyn FnMut(&TraceRow),
+) -> Result<FleetSummary, FleetError> {
     let name = medium.to_string();
+    let fleet = Fleet {
+        solver,
+        seed,
+        medium: &name,
+        keys,
+    };
     match medium {
         Medium::SocketCan(iface) => {
             let iface = iface.clone();
@@ -332,11 +355,11 @@ pub fn run(
                 Node::Clock => SocketCanPort::open_transmit_only(&iface),
                 _ => SocketCanPort::open(&iface),
             };
-            run_with_ports(spec, solver, seed, &name, open, trace)
+            fleet.run(spec, open, trace)
         }
         Medium::Hub => {
             let hub = Hub::new();
-            run_with_ports(spec, solver, seed, &name, move |_| Ok(hub.port()), trace)
+            fleet.run(spec, move |_| Ok(hub.port()), trace)
         }
     }
 }
@@ -351,12 +374,43 @@ pub fn run_with_ports<P: CanPort + 'static>(
     open: impl FnMut(Node) -> io::Result<P>,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Result<FleetSummary, FleetError> {
-    if let Some(why) = unsupported(&spec) {
-        return Err(FleetError::Unsupported(why));
-    }
-    match spec.horizon {
-        50 => Harness::<50>::new(spec, solver, seed).run(medium, open, trace),
-        _ => Harness::<20>::new(spec, solver, seed).run(medium, open, trace),
+    let fleet = Fleet {
+        solver,
+        seed,
+        medium,
+        keys: None,
+    };
+    fleet.run(spec, open, trace)
+}
+
+/// How a fleet runs: its planners' solver, seed, medium and keys.
+pub struct Fleet<'a> {
+    /// The planners' solver.
+    pub solver: SolverChoice,
+    /// Overrides the scenario's seed.
+    pub seed: Option<u64>,
+    /// Names the medium in the summary.
+    pub medium: &'a str,
+    /// With keys, every message is authenticated (issue 17).
+    pub keys: Option<Arc<Keys>>,
+}
+
+impl Fleet<'_> {
+    /// Runs `spec` on ports from `open` (one per node, the master's included).
+    pub fn run<P: CanPort + 'static>(
+        self,
+        spec: WorldSpec,
+        open: impl FnMut(Node) -> io::Result<P>,
+        trace: &mut dyn FnMut(&TraceRow),
+    ) -> Result<FleetSummary, FleetError> {
+        if let Some(why) = unsupported(&spec) {
+            return Err(FleetError::Unsupported(why));
+        }
+        let (solver, seed, keys) = (self.solver, self.seed, self.keys);
+        match spec.horizon {
+            50 => Harness::<50>::new(spec, solver, seed, keys).run(self.medium, open, trace),
+            _ => Harness::<20>::new(spec, solver, seed, keys).run(self.medium, open, trace),
+        }
     }
 }
 
@@ -366,6 +420,7 @@ struct Harness<const N: usize> {
     solver: SolverChoice,
     seed: u64,
     lim: Limits,
+    keys: Option<Arc<Keys>>,
 }
 
 /// The latencies and counts the harness gathers.
@@ -413,12 +468,18 @@ impl Tally {
 }
 
 impl<const N: usize> Harness<N> {
-    fn new(spec: WorldSpec, solver: SolverChoice, seed: Option<u64>) -> Self {
+    fn new(
+        spec: WorldSpec,
+        solver: SolverChoice,
+        seed: Option<u64>,
+        keys: Option<Arc<Keys>>,
+    ) -> Self {
         Self {
             seed: seed.unwrap_or(spec.seed),
             spec,
             solver,
             lim: Limits::table_i(),
+            keys,
         }
     }
 
@@ -449,7 +510,10 @@ impl<const N: usize> Harness<N> {
             .map(|v| build_vehicle::<N>(v, self.setup(), self.seed, &net))
             .collect();
         let managers = self.managers(&net)?;
-        let nodes = Nodes::open(&mut open, &vehicles, &managers, &map)?;
+        let mut nodes = Nodes::open(&mut open, &vehicles, &managers, &map)?;
+        if let Some(keys) = &self.keys {
+            nodes = nodes.with_keys(keys);
+        }
         let order: Vec<u16> = vehicles.iter().map(|v| v.id).collect();
         let ctx = TaskCtx {
             net: &net,
@@ -568,6 +632,7 @@ impl<const N: usize> Harness<N> {
             sync_ticks: tally.ticks,
             messages: msgs,
             can,
+            authenticated: self.keys.is_some(),
             state_latency: Latency::of(tally.state),
             request_latency: Latency::of(tally.request),
             grant_latency: Latency::of(tally.grant),
@@ -606,6 +671,18 @@ impl<P: CanPort> Nodes<P> {
             vehicles: vnodes,
             managers: mnodes,
         })
+    }
+}
+
+impl<P: CanPort> Nodes<P> {
+    /// Every node authenticating with `keys`.
+    fn with_keys(self, keys: &Arc<Keys>) -> Self {
+        let keyed = |v: Vec<CanNode<P>>| v.into_iter().map(|n| n.with_keys(keys.clone())).collect();
+        Self {
+            clock: self.clock.with_keys(keys.clone()),
+            vehicles: keyed(self.vehicles),
+            managers: keyed(self.managers),
+        }
     }
 }
 
@@ -758,6 +835,7 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
     /// Period k: the vehicles' reports, the monitors, the managers' turn, the sensor
     /// returns and the planning tick. `Ok(true)` when the run is over.
     fn period(&mut self, k: u64, trace: &mut dyn FnMut(&TraceRow)) -> Result<bool, FleetError> {
+        self.clock.set_time(k as f64 * self.ctx.lim.h);
         let Truths { truths, rows } = self.vehicle_reports(k)?;
         let present: Vec<VehicleTruth> = truths.iter().flatten().copied().collect();
         if k > 0 {
@@ -977,6 +1055,7 @@ fn vehicle_task<const N: usize, P: CanPort>(
     let mut departing: Option<(Option<usize>, f64)> = None;
     for k in 0..=ctx.total {
         let t = k as f64 * h;
+        node.set_time(t);
         let published = SystemTime::now();
         let mut exit = false;
         if let Some((j, at)) =
@@ -1068,6 +1147,7 @@ fn manager_task<P: CanPort>(
     let mut heard = Vec::new();
     for k in 0..=ctx.total {
         let t = k as f64 * ctx.lim.h;
+        node.set_time(t);
         inbox.clear();
         let Some(sync_rx) =
             await_tick(&mut node, 2 * k, ctx.map, t, &mut inbox, &mut heard).map_err(fail)?
