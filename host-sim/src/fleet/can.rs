@@ -45,6 +45,10 @@ pub const RESOLUTION: (f64, f64) = (wire::POS_RES, wire::SPEED_RES);
 /// (128) × the kinds a vehicle sends, plus the clock and the manager.
 pub const REASSEMBLY_SLOTS: usize = 512;
 
+/// Receive buffer each SocketCAN port asks for (bytes; the kernel accounts about 1 KiB
+/// per CAN frame, so some 8,000 frames).
+const RECV_BUFFER_BYTES: i32 = 8 << 20;
+
 /// Bounded retries of a transmission the kernel refuses for lack of buffer (ENOBUFS on a
 /// busy interface): 100 × 1 ms, then the error is reported.
 const TX_RETRIES: u32 = 100;
@@ -80,6 +84,20 @@ impl SocketCanPort {
     pub fn open(iface: &str) -> io::Result<Self> {
         let sock = CanSocket::open(iface)?;
         sock.set_recv_timestamp(true)?;
+        // Every node hears every frame of the fleet; a task the scheduler starves for a
+        // moment (a busy host, a VM under TCG) must not have the kernel drop frames for a
+        // full queue (its default holds a few hundred). Root may force a larger buffer;
+        // otherwise ask for it within the system's limit.
+        const SOL_SOCKET: i32 = 1;
+        const SO_RCVBUF: i32 = 8;
+        const SO_RCVBUFFORCE: i32 = 33;
+        if sock
+            .set_socket_option_int(SOL_SOCKET, SO_RCVBUFFORCE, RECV_BUFFER_BYTES)
+            .is_err()
+        {
+            // Best effort: the default still works on an idle machine.
+            let _ = sock.set_socket_option_int(SOL_SOCKET, SO_RCVBUF, RECV_BUFFER_BYTES);
+        }
         Ok(Self {
             sock,
             timeout: None,
