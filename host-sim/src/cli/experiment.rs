@@ -4,8 +4,11 @@ use super::output::{bad_input, check_duration, check_plot, finish};
 use super::SolverArg;
 use host_sim::bus::Faults;
 use host_sim::experiments::faults::{compare, FaultSettings};
+use host_sim::experiments::multilane::MultilaneCase;
 use host_sim::experiments::shard::{MultilaneSettings, Runs, Shard, ThroughputSettings};
+use host_sim::experiments::throughput::ThroughputCase;
 use host_sim::output::plot::PlotData;
+use host_sim::world::SolverChoice;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -219,10 +222,7 @@ pub fn run(e: Experiment) -> ExitCode {
             solver,
             faults,
             shard,
-        } => match shard {
-            Some(sh) => multilane_shard(seeds, seed, solver, faults, sh),
-            None => multilane(seeds, seed, json, plot, solver, faults),
-        },
+        } => multilane(seeds, seed, json, plot, solver, faults, shard),
         Experiment::Faults {
             seeds,
             throughput_seeds,
@@ -258,10 +258,7 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
             faults,
             shard,
-        } => match shard {
-            Some(sh) => throughput_shard(duration, seeds, seed, faults, sh),
-            None => throughput(duration, seeds, seed, json, plot, faults),
-        },
+        } => throughput(duration, seeds, seed, json, plot, faults, shard),
         Experiment::Network {
             grid,
             rate,
@@ -397,6 +394,7 @@ fn multilane(
     plot: Option<PathBuf>,
     solver: SolverArg,
     faults: FaultArgs,
+    shard: Option<Shard>,
 ) -> ExitCode {
     let faults = match faults.faults() {
         Ok(f) => f,
@@ -408,6 +406,9 @@ fn multilane(
         }
     }
     let solver = solver.choice();
+    if let Some(sh) = shard {
+        return multilane_shard(seeds, seed, solver, faults, sh);
+    }
     let r = host_sim::experiments::multilane::experiment(seeds, seed, solver, faults, 0);
     if let Some(path) = plot {
         let sc = host_sim::experiments::multilane::paper_scenario(seed);
@@ -438,6 +439,7 @@ fn throughput(
     json: bool,
     plot: Option<PathBuf>,
     faults: FaultArgs,
+    shard: Option<Shard>,
 ) -> ExitCode {
     let faults = match faults.faults() {
         Ok(f) => f,
@@ -445,6 +447,9 @@ fn throughput(
     };
     if let Err(code) = check_duration(duration, 3600.0) {
         return code;
+    }
+    if let Some(sh) = shard {
+        return throughput_shard(duration, seeds, seed, faults, sh);
     }
     if let Some(p) = &plot {
         if let Err(code) = check_plot(p) {
@@ -502,15 +507,10 @@ fn shard_of<T: serde::Serialize>(
 fn multilane_shard(
     seeds: u64,
     seed: u64,
-    solver: SolverArg,
-    faults: FaultArgs,
+    solver: SolverChoice,
+    faults: Faults,
     sh: Shard,
 ) -> ExitCode {
-    let faults = match faults.faults() {
-        Ok(f) => f,
-        Err(e) => return bad_input(e),
-    };
-    let solver = solver.choice();
     let settings = MultilaneSettings {
         seeds,
         seed,
@@ -523,25 +523,12 @@ fn multilane_shard(
         seeds,
         sh,
         |r| host_sim::experiments::multilane::multilane_cases(r, seed, solver, faults, 0),
-        |c| c.collisions + c.invariant_violations + c.limit_violations,
+        MultilaneCase::unsafe_events,
     )
 }
 
-fn throughput_shard(
-    duration: f64,
-    seeds: u64,
-    seed: u64,
-    faults: FaultArgs,
-    sh: Shard,
-) -> ExitCode {
+fn throughput_shard(duration: f64, seeds: u64, seed: u64, faults: Faults, sh: Shard) -> ExitCode {
     use host_sim::experiments::throughput::throughput_cases;
-    let faults = match faults.faults() {
-        Ok(f) => f,
-        Err(e) => return bad_input(e),
-    };
-    if let Err(code) = check_duration(duration, 3600.0) {
-        return code;
-    }
     let settings = ThroughputSettings {
         seeds,
         seed,
@@ -555,7 +542,7 @@ fn throughput_shard(
         cases,
         sh,
         |r| throughput_cases(seeds, seed, r, duration, faults, 0),
-        |c| c.collisions + c.invariant_violations + c.limit_violations + c.unpermitted_entries,
+        ThroughputCase::unsafe_events,
     )
 }
 
@@ -567,19 +554,11 @@ fn faults_shard(s: &FaultSettings, sh: Shard) -> ExitCode {
         s.cases(),
         sh,
         |r| s.run(r, 0),
+        // Only the faulty bus's events count, as in the unsharded comparison.
         |c| match c {
-            // Only the faulty bus's events count, as in the unsharded comparison.
-            FaultCase::Multilane { faulty, run } => {
-                u64::from(*faulty)
-                    * (run.collisions + run.invariant_violations + run.limit_violations)
-            }
-            FaultCase::Throughput { faulty, run } => {
-                u64::from(*faulty)
-                    * (run.collisions
-                        + run.invariant_violations
-                        + run.limit_violations
-                        + run.unpermitted_entries)
-            }
+            FaultCase::Multilane { faulty: true, run } => run.unsafe_events(),
+            FaultCase::Throughput { faulty: true, run } => run.unsafe_events(),
+            _ => 0,
         },
     )
 }

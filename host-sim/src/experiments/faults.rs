@@ -118,34 +118,29 @@ impl FaultSettings {
 
     /// The comparison over `cases` (in [`Self::run`] order).
     pub fn report(&self, cases: &[FaultCase], wall_seconds: f64) -> FaultComparison {
-        let multilane = |bus: bool| -> Vec<MultilaneCase> {
-            cases
-                .iter()
-                .filter_map(|c| match c {
-                    FaultCase::Multilane { faulty, run } if *faulty == bus => Some(run.clone()),
-                    _ => None,
-                })
-                .collect()
-        };
-        let throughput = |bus: bool| -> Vec<ThroughputCase> {
-            cases
-                .iter()
-                .filter_map(|c| match c {
-                    FaultCase::Throughput { faulty, run } if *faulty == bus => Some(run.clone()),
-                    _ => None,
-                })
-                .collect()
-        };
+        // [perfect, faulty] bus, each in run order.
+        let mut multilane: [Vec<MultilaneCase>; 2] = Default::default();
+        let mut throughput: [Vec<ThroughputCase>; 2] = Default::default();
+        for c in cases {
+            match c {
+                FaultCase::Multilane { faulty, run } => {
+                    multilane[usize::from(*faulty)].push(run.clone())
+                }
+                FaultCase::Throughput { faulty, run } => {
+                    throughput[usize::from(*faulty)].push(run.clone())
+                }
+            }
+        }
         let solver = SolverChoice::Ours;
         let (n, d) = (self.throughput_seeds, self.duration);
         // The four parts ran interleaved on one pool: each reports the whole comparison's time.
         let w = wall_seconds;
         comparison(
             self.faults,
-            multilane_report(&multilane(false), solver, Faults::NONE, w),
-            multilane_report(&multilane(true), solver, self.faults, w),
-            throughput_report(&throughput(false), n, d, Faults::NONE, w),
-            throughput_report(&throughput(true), n, d, self.faults, w),
+            multilane_report(&multilane[0], solver, Faults::NONE, w),
+            multilane_report(&multilane[1], solver, self.faults, w),
+            throughput_report(&throughput[0], n, d, Faults::NONE, w),
+            throughput_report(&throughput[1], n, d, self.faults, w),
         )
     }
 }

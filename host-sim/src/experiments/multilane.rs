@@ -181,6 +181,13 @@ pub struct MultilaneCase {
     pub planner_steps: u64,
 }
 
+impl MultilaneCase {
+    /// Collisions, invariant and limit violations (and road departures) of the run.
+    pub fn unsafe_events(&self) -> u64 {
+        self.collisions + self.invariant_violations + self.limit_violations
+    }
+}
+
 /// Runs the paper's experiment for the runs `first..end` (seed `first_seed + i` for
 /// run i: a run depends on its index alone).
 pub fn multilane_cases(

@@ -162,6 +162,16 @@ pub struct ThroughputCase {
     pub fallback_steps: u64,
 }
 
+impl ThroughputCase {
+    /// Collisions, invariant and limit violations and unpermitted entries of the run.
+    pub fn unsafe_events(&self) -> u64 {
+        self.collisions
+            + self.invariant_violations
+            + self.limit_violations
+            + self.unpermitted_entries
+    }
+}
+
 /// The runs of the throughput experiment, algorithm by algorithm, seeds
 /// `first_seed..first_seed + seeds` each: run i is `(ALL[i / seeds], first_seed + i % seeds)`.
 pub fn throughput_jobs(seeds: u64, first_seed: u64) -> Vec<(Algorithm, u64)> {
