@@ -330,6 +330,30 @@ mod tests {
         );
     }
 
+    #[test]
+    fn the_mac_covers_the_documented_bytes_in_order() {
+        // The authenticated data, laid out by hand as the module documents it: Data ID
+        // (kind code, then sender address, big-endian), the alive counter's 4 bits, the
+        // payload, the full 64-bit freshness value (big-endian). Another implementation
+        // (a tester, a gateway in C) must compute the same MAC from this description.
+        let msg = [0xA5u8, 0x5A, 0x01, 0x80, 0xFF, 0x00, 0x42];
+        for counter in [0u8, 3, 9, 15] {
+            let fv = 0x0001_2345_6789_ABCDu64;
+            let mut bytes = [0u8; 3 + 7 + 8];
+            bytes[..3].copy_from_slice(&[0x01, 0x05, counter]);
+            bytes[3..10].copy_from_slice(&msg);
+            bytes[10..].copy_from_slice(&fv.to_be_bytes());
+            let mut m = <Cmac<Aes128> as KeyInit>::new(&K1.0.into());
+            m.update(&bytes);
+            let full = m.finalize().into_bytes();
+            assert_eq!(
+                mac(&K1, data_id(1, 0x05), counter, &msg, fv).as_slice(),
+                full.get(..MAC_LEN).expect("16 bytes"),
+                "counter {counter}"
+            );
+        }
+    }
+
     fn store() -> KeyStore<4> {
         let mut k = KeyStore::new();
         k.insert(0x05, derive_key(&K1, 0x05)).expect("room");
@@ -434,6 +458,13 @@ mod tests {
         assert_eq!(at(3, 0, 500), Ok(3));
         assert_eq!(FreshnessRx::<1>::full_value(0xFFFF, 0), 0xFFFF);
         assert_eq!(FreshnessRx::<1>::new(u64::MAX).window_ms, MAX_WINDOW_MS);
+        // The widest window is just under half the 16-bit range: a value 32.767 s old is
+        // still recovered (its nearest full value is the right one) and accepted, and a
+        // wider request is clamped to it, never to something narrower.
+        assert_eq!(at(100_000, 132_767, u64::MAX), Ok(100_000));
+        assert_eq!(at(100_000, 132_768, u64::MAX), Err(AuthError::Stale));
+        assert_eq!(FreshnessRx::<1>::new(32_767).window_ms, 32_767);
+        assert_eq!(FreshnessRx::<1>::new(32_768).window_ms, 32_767);
     }
 
     #[test]

@@ -757,3 +757,329 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         self.planner.step(&obs)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The vehicle side's bookkeeping, read from its private state: what it keeps of the
+    //! reports, grants and sensor returns it hears (issue 20's second mutation pass).
+    use super::*;
+    use crate::intersection::LayoutSpec;
+    use crate::mpc::CostWeights;
+    use crate::planner::Planner;
+    use crate::Params;
+
+    type Car = CrossingPlanner<f64, 20, 2>;
+    type Car8 = CrossingPlanner<f64, 20, 8>;
+
+    fn car(id: u16, route: u8) -> Car {
+        let p = Params::<f64>::table_i();
+        let planner = Planner::<f64, 20>::new(p, CostWeights::default()).expect("planner");
+        CrossingPlanner::new(planner, id, route, 4.5)
+    }
+
+    fn report(id: u16, s: f64) -> CrossingReport<f64> {
+        CrossingReport {
+            id,
+            route: 3,
+            s,
+            v: 5.0,
+            length: 4.5,
+        }
+    }
+
+    #[test]
+    fn the_notify_bound_is_at_least_one_period_and_a_bad_one_changes_nothing() {
+        let mut c = car(1, 0);
+        let h = c.planner.params().h();
+        assert_eq!(
+            c.set_notify_latency(f64::NAN),
+            Err(ConfigError::InvalidLatency)
+        );
+        assert_eq!(c.notify, h);
+        c.set_notify_latency(0.3).expect("finite");
+        assert_eq!(c.notify, 0.3);
+        c.set_notify_latency(h / 2.0).expect("finite");
+        assert_eq!(c.notify, h);
+    }
+
+    #[test]
+    fn sensors_are_validated_before_they_are_taken() {
+        let mut c = car(1, 0);
+        let mut bad = Sensing::radar();
+        bad.position_error_m = -0.1;
+        assert_eq!(c.set_sensing(Some(bad)), Err(ConfigError::InvalidSensing));
+        assert!(c.sensing.is_none());
+        c.set_sensing(Some(Sensing::radar())).expect("radar");
+        assert!(c.sensing.is_some());
+    }
+
+    #[test]
+    fn mapped_and_sensed_positions_replace_the_last_steps_and_refuse_bad_ones() {
+        let mut c = car(1, 0);
+        c.hear_mapped(&[1.0, 2.0]).expect("two fit");
+        assert_eq!(c.mapped.as_slice(), &[1.0, 2.0]);
+        c.hear_mapped(&[3.0]).expect("one");
+        assert_eq!(c.mapped.as_slice(), &[3.0]);
+        assert_eq!(c.hear_mapped(&[f64::NAN]), Err(ManagerError::BadValue));
+        assert_eq!(c.hear_mapped(&[1.0, 2.0, 3.0]), Err(ManagerError::Full));
+        c.hear_sensed(&[4.0, 5.0]).expect("two fit");
+        assert_eq!(c.sensed.as_slice(), &[4.0, 5.0]);
+        c.hear_sensed(&[6.0]).expect("one");
+        assert_eq!(c.sensed.as_slice(), &[6.0]);
+        assert_eq!(c.hear_sensed(&[f64::INFINITY]), Err(ManagerError::BadValue));
+        assert_eq!(c.hear_sensed(&[1.0, 2.0, 3.0]), Err(ManagerError::Full));
+    }
+
+    #[test]
+    fn reports_keep_the_newest_per_vehicle_and_never_the_own() {
+        let mut c = car(1, 5);
+        assert_eq!(c.route(), 5);
+        c.hear_report(&report(1, 10.0), 0.0).expect("own");
+        assert!(c.others.is_empty(), "its own report is not an obstacle");
+        c.hear_report(&report(2, 10.0), 1.0).expect("first");
+        c.hear_report(&report(2, 8.0), 0.5).expect("older");
+        assert_eq!(c.others.as_slice(), &[(2, 3, 10.0, 1.0)], "older ignored");
+        c.hear_report(&report(2, 11.0), 1.0).expect("duplicate");
+        assert_eq!(
+            c.others.as_slice(),
+            &[(2, 3, 10.0, 1.0)],
+            "same stamp ignored"
+        );
+        c.hear_report(&report(2, 12.0), 1.5).expect("newer");
+        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, 1.5)]);
+        assert_eq!(
+            c.hear_report(&report(3, f64::NAN), 2.0),
+            Err(ManagerError::BadValue)
+        );
+        c.hear_report(&report(3, 1.0), 2.0).expect("second");
+        assert!(!c.overflowed);
+        assert_eq!(c.hear_report(&report(4, 1.0), 2.0), Err(ManagerError::Full));
+        assert!(c.overflowed, "an unknown vehicle may be anywhere");
+        c.hear_left(3);
+        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, 1.5)], "only 3 left");
+        c.clear_reports();
+        assert!(c.others.is_empty() && !c.overflowed);
+    }
+
+    #[test]
+    fn only_its_own_finite_grants_extend_the_lease_and_none_shortens_it() {
+        let p = Params::<f64>::table_i();
+        let l = Layout::new(&p, LayoutSpec::spec8(&p)).expect("layout");
+        let entry = l.route(0).expect("route 0").path.entry();
+        let before = entry - 10.0;
+        let mut c = car(1, 0);
+        assert!(!c.permitted(&l, before, 0.0));
+        c.hear_grant(2, 5.0);
+        assert!(!c.permitted(&l, before, 0.0), "another vehicle's grant");
+        c.hear_grant(1, f64::NAN);
+        assert!(!c.permitted(&l, before, 0.0));
+        c.hear_grant(1, 5.0);
+        assert!(c.permitted(&l, before, 5.0), "up to the lease's end");
+        assert!(!c.permitted(&l, before, 5.01), "not after it");
+        c.hear_grant(1, 3.0);
+        assert!(
+            c.permitted(&l, before, 5.0),
+            "an older lease does not shorten it"
+        );
+        // Without a lease, a vehicle whose front is past the line is inside A_S (it
+        // entered when it held one) and keeps going.
+        assert!(c.permitted(&l, entry - 2.25 + 0.01, 9.0));
+        assert!(!c.permitted(&l, entry - 2.25 - 0.01, 9.0));
+    }
+
+    /// Another route's vehicle about to reach this one's outlet: it is an obstacle on
+    /// this path once its front is on the outlet, or may be because its report is older
+    /// than the notify bound and it may have driven on at v_max since.
+    #[test]
+    fn a_vehicle_heading_for_the_same_outlet_counts_once_it_is_or_may_be_there() {
+        let p = Params::<f64>::table_i();
+        let l = Layout::new(&p, LayoutSpec::spec8(&p)).expect("layout");
+        let mine = l.route(0).expect("route 0");
+        let (q, other) = (0..crate::intersection::ROUTES)
+            .filter_map(|q| l.route(q).map(|r| (q, r)))
+            .find(|(_, r)| r.outlet == mine.outlet && r.inlet != mine.inlet)
+            .expect("another route onto the same outlet");
+        let (exit, ox) = (mine.path.exit(), other.path.exit());
+        let vmax = p.v_max();
+        // Obstacles this step for a report of the other's centre at `x` stamped `stamp`.
+        let seen = |x: f64, stamp: f64, now: f64| {
+            let mut c = car(1, 0);
+            c.set_sensing(Some(Sensing::radar())).expect("radar");
+            c.set_notify_latency(0.25).expect("bound");
+            c.hear_report(
+                &CrossingReport {
+                    id: 2,
+                    route: q as u8,
+                    s: x,
+                    v: 5.0,
+                    length: 4.5,
+                },
+                stamp,
+            )
+            .expect("kept");
+            c.step(&l, mine.path.entry() - 60.0, 5.0, now)
+                .expect("step");
+            let at = exit + (x - ox);
+            c.obstacles.iter().any(|o| (o.x - at).abs() < 1e-9)
+        };
+        // Fresh reports: its front 1 m before the outlet, or 1 m onto it.
+        assert!(!seen(ox - 2.25 - 1.0, 1.0, 1.05));
+        assert!(seen(ox - 2.25 + 1.0, 1.0, 1.05));
+        // Exactly as old as the bound: still fresh.
+        assert!(!seen(ox - 2.25 - 1.0, 1.0, 1.25));
+        // Older: it may have covered v_max · age, here half a second.
+        let reach = vmax * 0.5;
+        assert!(seen(ox - 2.25 - reach + 0.5, 1.0, 1.5));
+        assert!(!seen(ox - 2.25 - reach - 0.5, 1.0, 1.5));
+    }
+
+    fn spec8() -> Layout<f64> {
+        let p = Params::<f64>::table_i();
+        Layout::new(&p, LayoutSpec::spec8(&p)).expect("layout")
+    }
+
+    /// The obstacles (position, length) of one step of vehicle 1 on route 0 at `s`,
+    /// after hearing vehicle 2 on `route` at `x` (stamped now).
+    fn obstacles_with(l: &Layout<f64>, route: u8, x: f64, sensing: bool) -> Vec<(f64, f64), 8> {
+        let mut c = CrossingPlanner::<f64, 20, 8>::new(
+            Planner::new(Params::table_i(), CostWeights::default()).expect("planner"),
+            1,
+            0,
+            4.5,
+        );
+        if sensing {
+            c.set_sensing(Some(Sensing::radar())).expect("radar");
+        }
+        let r = CrossingReport {
+            id: 2,
+            route,
+            s: x,
+            v: 5.0,
+            length: 4.5,
+        };
+        c.hear_report(&r, 0.0).expect("kept");
+        let s = l.route(0).expect("route 0").path.entry() - 60.0;
+        c.step(l, s, 5.0, 0.0).expect("step");
+        c.obstacles.iter().map(|o| (o.x, o.length)).collect()
+    }
+
+    /// Which heard vehicles are on this vehicle's path: its own route anywhere; its inlet
+    /// lane until the other's rear has left it; nothing else before the outlet.
+    #[test]
+    fn vehicles_on_the_same_route_or_still_on_the_same_inlet_are_obstacles() {
+        let l = spec8();
+        let mine = *l.route(0).expect("route 0");
+        let on = |route: usize, x: f64| {
+            obstacles_with(&l, route as u8, x, true)
+                .iter()
+                .any(|o| (o.0 - x).abs() < 1e-9)
+        };
+        // The same route: before, inside and past A_S.
+        for x in [
+            mine.path.entry() - 10.0,
+            mine.path.entry() + 5.0,
+            mine.path.exit() + 1.0,
+        ] {
+            assert!(on(0, x), "same route at {x}");
+        }
+        let sibling = (1..crate::intersection::ROUTES)
+            .find(|&q| {
+                l.route(q)
+                    .is_some_and(|r| r.inlet == mine.inlet && r.outlet != mine.outlet)
+            })
+            .expect("another movement from the same inlet lane");
+        let oe = l.route(sibling).expect("sibling").path.entry();
+        assert!(on(sibling, oe + 2.0), "rear still on the common inlet");
+        assert!(!on(sibling, oe + 2.5), "rear off it");
+        let stranger = (1..crate::intersection::ROUTES)
+            .find(|&q| {
+                l.route(q)
+                    .is_some_and(|r| r.inlet != mine.inlet && r.outlet != mine.outlet)
+            })
+            .expect("a route sharing no track");
+        let se = l.route(stranger).expect("stranger").path.entry();
+        assert!(!on(stranger, se - 5.0), "another inlet lane");
+    }
+
+    /// Sensor returns are taken their error closer; heard positions one bus step longer;
+    /// and what is not known is blocked: right ahead while blind, beyond the forward
+    /// range with sensors.
+    #[test]
+    fn sensed_mapped_and_unknown_space_become_obstacles_where_they_may_be() {
+        let l = spec8();
+        let entry = l.route(0).expect("route 0").path.entry();
+        let s = entry - 60.0;
+        let new = |sensing: bool| {
+            let mut c = CrossingPlanner::<f64, 20, 8>::new(
+                Planner::new(Params::table_i(), CostWeights::default()).expect("planner"),
+                1,
+                0,
+                4.5,
+            );
+            if sensing {
+                c.set_sensing(Some(Sensing::radar())).expect("radar");
+            }
+            c.set_bus_resolution(0.1).expect("step");
+            c
+        };
+        let has = |c: &Car8, x: f64, len: f64| {
+            c.obstacles
+                .iter()
+                .any(|o| (o.x - x).abs() < 1e-9 && (o.length - len).abs() < 1e-9)
+        };
+        let mut c = new(true);
+        c.hear_sensed(&[s + 30.0]).expect("one");
+        c.hear_mapped(&[s + 40.0]).expect("one");
+        c.step(&l, s, 5.0, 0.0).expect("step");
+        assert!(has(&c, s + 30.0 - 0.1, 4.5), "sensed: its error closer");
+        assert!(has(&c, s + 40.0, 4.6), "mapped: one bus step longer");
+        assert!(
+            has(&c, s + 2.25 + 150.0 + 2.25, 4.5),
+            "beyond the radar's range"
+        );
+        let mut c = new(false);
+        c.set_notify_latency(0.5).expect("bound");
+        c.step(&l, s, 5.0, 0.0).expect("step");
+        assert!(
+            has(&c, s + 1e-3, 4.5),
+            "blind until reports can have arrived"
+        );
+    }
+
+    /// The command follows the permission: without one the vehicle stops at the line;
+    /// with one, or once inside or past A_S, it drives on toward its outlet.
+    #[test]
+    fn the_stop_line_and_the_target_follow_the_permission() {
+        let l = spec8();
+        let r = *l.route(0).expect("route 0");
+        let (entry, exit) = (r.path.entry(), r.path.exit());
+        // Where the front is after 8 s of closed loop from front position `front`.
+        let drive = |front: f64, lease: bool| {
+            let mut c = car(1, 0);
+            c.set_sensing(Some(Sensing::radar())).expect("radar");
+            if lease {
+                c.hear_grant(1, 100.0);
+            }
+            let h = c.planner.params().h();
+            let (mut s, mut v) = (front - 2.25, 5.0);
+            for k in 0..(8.0 / h) as u32 {
+                let now = f64::from(k) * h;
+                let next = c.step(&l, s, v, now).expect("step").v;
+                s += 0.5 * (v + next) * h;
+                v = next;
+            }
+            s + 2.25
+        };
+        let stopped = drive(entry - 20.0, false);
+        assert!(
+            stopped <= entry && stopped > entry - 1.0,
+            "{stopped} vs {entry}"
+        );
+        assert!(drive(entry - 20.0, true) > exit, "permitted: through A_S");
+        assert!(drive(entry + 1.0, false) > exit, "inside A_S it drives out");
+        assert!(
+            drive(exit + 1.0, false) > exit + 30.0,
+            "on its outlet it drives on"
+        );
+    }
+}

@@ -1,0 +1,298 @@
+//! The intersection manager's rules one at a time, on hand-placed reports (issue 20's
+//! second mutation pass: each test here pins a rule that only the slow host-sim sweeps
+//! exercised before, so that a bug in it fails `cargo test -p planner-core`).
+//!
+//! Positions: a report's `s` is its centre along its route's path; with the class length
+//! 4.5 m its front is `to_line` metres before the stop line when
+//! `s = entry − 2.25 − to_line` (negative `to_line`: past the line, inside A_S).
+
+use planner_core::crossing::{
+    Algorithm, CrossingReport, Manager, ManagerError, REQUEST_DISTANCE_M,
+};
+use planner_core::intersection::{Layout, LayoutSpec, Movement, CONFLICT_SAMPLE_M, ROUTES};
+use planner_core::Params;
+
+const LENGTH: f64 = 4.5;
+const HALF: f64 = LENGTH / 2.0;
+
+fn layout() -> Layout<f64> {
+    let p = Params::<f64>::table_i();
+    Layout::new(&p, LayoutSpec::spec8(&p)).unwrap()
+}
+
+/// Vehicle `id` on `route`, its front `to_line` metres before the stop line, at speed `v`.
+fn at(l: &Layout<f64>, id: u16, route: usize, to_line: f64, v: f64) -> CrossingReport<f64> {
+    let entry = l.route(route).unwrap().path.entry();
+    CrossingReport {
+        id,
+        route: route as u8,
+        s: entry - HALF - to_line,
+        v,
+        length: LENGTH,
+    }
+}
+
+fn route(l: &Layout<f64>, heading: u8, movement: Movement) -> usize {
+    l.route_index(heading, 0, movement).unwrap()
+}
+
+fn inlet(l: &Layout<f64>, r: usize) -> usize {
+    l.inlet_index(l.route(r).unwrap().inlet)
+}
+
+fn entry(m: &Manager<f64, 8>, id: u16) -> planner_core::crossing::Entry<f64> {
+    *m.entries().iter().find(|e| e.id == id).expect("registered")
+}
+
+#[test]
+fn algorithm_names_are_the_ones_outputs_and_the_cli_use() {
+    let names: Vec<&str> = Algorithm::ALL.iter().map(|a| a.name()).collect();
+    assert_eq!(names, ["STOP", "FIFO", "CON", "CON-fair", "PIPE"]);
+}
+
+#[test]
+fn a_report_sets_the_distance_to_the_line_the_progress_and_the_stop() {
+    let l = layout();
+    let r = route(&l, 0, Movement::Straight);
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::AllWayStop);
+    // Stopped 10 m before the line: registered, not "stopped at the line".
+    m.observe(&at(&l, 1, r, 10.0, 0.0), 1.0).unwrap();
+    let e = entry(&m, 1);
+    assert!((e.to_line - 10.0).abs() < 1e-9, "{}", e.to_line);
+    assert!((e.progress - (-10.0 - HALF)).abs() < 1e-9, "{}", e.progress);
+    assert_eq!(e.stopped_at, None);
+    // Rolling 1 m before the line: not stopped either.
+    m.observe(&at(&l, 1, r, 1.0, 3.0), 2.0).unwrap();
+    let e = entry(&m, 1);
+    assert_eq!(e.stopped_at, None);
+    assert!((e.progress - (-1.0 - HALF)).abs() < 1e-9, "{}", e.progress);
+    // Standing within the stop-line zone: stopped, from now on.
+    m.observe(&at(&l, 1, r, 0.5, 0.0), 3.0).unwrap();
+    m.observe(&at(&l, 1, r, 0.4, 0.0), 4.0).unwrap();
+    let e = entry(&m, 1);
+    assert_eq!(e.stopped_at, Some(3.0));
+    assert!((e.to_line - 0.4).abs() < 1e-9);
+    assert_eq!(e.tau, 1.0, "τ is the first report inside A_C");
+}
+
+#[test]
+fn a_vehicle_of_no_length_is_refused_and_changes_nothing() {
+    let l = layout();
+    let r = route(&l, 0, Movement::Straight);
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    let mut bad = at(&l, 1, r, 5.0, 0.0);
+    bad.length = 0.0;
+    assert_eq!(m.observe(&bad, 0.0), Err(ManagerError::BadValue));
+    assert!(m.entries().is_empty());
+}
+
+#[test]
+fn forget_drops_that_vehicle_only() {
+    let l = layout();
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    m.observe(&at(&l, 1, route(&l, 0, Movement::Straight), 5.0, 0.0), 0.0)
+        .unwrap();
+    m.observe(&at(&l, 2, route(&l, 1, Movement::Straight), 5.0, 0.0), 0.0)
+        .unwrap();
+    m.forget(1);
+    let ids: Vec<u16> = m.entries().iter().map(|e| e.id).collect();
+    assert_eq!(ids, [2]);
+}
+
+/// Only the pipelined manager waits until a vehicle is within the request distance.
+#[test]
+fn only_the_pipelined_manager_holds_back_a_vehicle_far_from_its_line() {
+    let l = layout();
+    let r = route(&l, 0, Movement::Straight);
+    let far = REQUEST_DISTANCE_M + 5.0;
+    let pose = l.route(r).unwrap().path.pose_at(at(&l, 1, r, far, 8.0).s);
+    assert!(
+        l.in_comm_region(pose.x, pose.y),
+        "the test needs it inside A_C"
+    );
+    for (alg, expected) in [
+        (Algorithm::ConcurrentFair, true),
+        (Algorithm::Concurrent, true),
+        (Algorithm::Pipelined, false),
+    ] {
+        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+        m.observe(&at(&l, 1, r, far, 8.0), 0.0).unwrap();
+        m.update();
+        assert_eq!(m.permitted(1), expected, "{alg:?}");
+        m.observe(&at(&l, 1, r, REQUEST_DISTANCE_M - 5.0, 8.0), 0.5)
+            .unwrap();
+        m.update();
+        assert!(m.permitted(1), "{alg:?}: within the request distance");
+    }
+}
+
+/// Routes (a, x, y), a ≥ 1, with a ⊗ x, a ⊗ y and x, y compatible: every such triple.
+fn starving_triples(l: &Layout<f64>) -> Vec<(usize, usize, usize)> {
+    let mut out = Vec::new();
+    for a in 1..ROUTES {
+        for x in 0..ROUTES {
+            for y in 0..ROUTES {
+                let distinct = x != a && y != a && x != y;
+                if distinct && l.conflict(a, x) && l.conflict(a, y) && !l.conflict(x, y) {
+                    out.push((a, x, y));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The starvation-free rule: a later vehicle may not be granted a route that conflicts
+/// with an earlier vehicle still waiting, for every route of the waiting vehicle.
+#[test]
+fn no_later_vehicle_overtakes_a_waiting_conflicting_one_under_the_fair_variant() {
+    let l = layout();
+    let triples = starving_triples(&l);
+    assert!(!triples.is_empty());
+    for (a, x, y) in triples {
+        for (alg, y_permitted) in [
+            (Algorithm::ConcurrentFair, false),
+            (Algorithm::Pipelined, false),
+            (Algorithm::Concurrent, true),
+        ] {
+            let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+            m.observe(&at(&l, 10, x, 0.5, 0.0), 0.0).unwrap();
+            m.update();
+            assert!(m.permitted(10));
+            m.observe(&at(&l, 10, x, -3.0, 5.0), 1.0).unwrap();
+            m.observe(&at(&l, 11, a, 0.5, 0.0), 1.0).unwrap();
+            m.observe(&at(&l, 12, y, 0.5, 0.0), 2.0).unwrap();
+            m.update();
+            assert!(m.permitted(10) && !m.permitted(11), "{alg:?} {a} {x} {y}");
+            assert_eq!(m.permitted(12), y_permitted, "{alg:?} routes {a} {x} {y}");
+        }
+    }
+}
+
+/// Two routes on different inlet lanes, the first on the lane earlier in Ψ's order.
+fn two_inlets(l: &Layout<f64>) -> (usize, usize) {
+    let (p, q) = (
+        route(l, 0, Movement::Straight),
+        route(l, 1, Movement::Straight),
+    );
+    assert_ne!(inlet(l, p), inlet(l, q));
+    if inlet(l, p) < inlet(l, q) {
+        (p, q)
+    } else {
+        (q, p)
+    }
+}
+
+/// Vehicles arriving together on different lanes go in Ψ's lane order, whatever their
+/// distance to the line (the tie rule of the manager's priority).
+#[test]
+fn ties_across_lanes_go_by_lane_order_not_by_position() {
+    let l = layout();
+    let (first, second) = two_inlets(&l);
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    m.observe(&at(&l, 1, first, 20.0, 5.0), 0.0).unwrap();
+    m.observe(&at(&l, 2, second, 0.5, 0.0), 0.0).unwrap();
+    m.update();
+    assert!(m.permitted(1) && !m.permitted(2));
+}
+
+/// A vehicle on another lane, nearer its own line, never takes a permission away: the
+/// withdrawal rule is about a leader on the same lane only.
+#[test]
+fn a_vehicle_on_another_lane_does_not_withdraw_a_permission() {
+    let l = layout();
+    for (held, other) in [two_inlets(&l), {
+        let (p, q) = two_inlets(&l);
+        (q, p)
+    }] {
+        let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+        m.observe(&at(&l, 1, held, 20.0, 5.0), 0.0).unwrap();
+        m.update();
+        assert!(m.permitted(1));
+        m.observe(&at(&l, 1, held, 15.0, 5.0), 1.0).unwrap();
+        m.observe(&at(&l, 2, other, 0.5, 0.0), 1.0).unwrap();
+        m.update();
+        assert!(
+            m.permitted(1) && !m.permitted(2),
+            "held {held}, other {other}"
+        );
+    }
+}
+
+/// A permission inside A_S is never withdrawn for an earlier vehicle that was not yet
+/// asking (pipelined: it was beyond the request distance when the other was granted).
+#[test]
+fn a_vehicle_inside_keeps_its_permission_against_an_earlier_arrival() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let x = (0..ROUTES)
+        .find(|&x| l.conflict(a, x) && inlet(&l, x) != inlet(&l, a))
+        .unwrap();
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Pipelined);
+    m.observe(&at(&l, 1, a, REQUEST_DISTANCE_M + 5.0, 8.0), 0.0)
+        .unwrap();
+    m.observe(&at(&l, 2, x, 1.0, 2.0), 1.0).unwrap();
+    m.update();
+    assert!(m.permitted(2) && !m.permitted(1));
+    m.observe(&at(&l, 2, x, -3.0, 5.0), 2.0).unwrap();
+    m.observe(&at(&l, 1, a, 10.0, 8.0), 2.0).unwrap();
+    m.update();
+    assert!(m.permitted(2), "inside A_S: its permission stays");
+    assert!(!m.permitted(1), "conflicting with a holder");
+}
+
+/// Pipelined relaxation 1: a follower on the holder's route, behind it, is granted.
+#[test]
+fn pipelined_grants_a_follower_on_the_holders_route() {
+    let l = layout();
+    let r = route(&l, 0, Movement::Straight);
+    for (alg, follower) in [
+        (Algorithm::Pipelined, true),
+        (Algorithm::ConcurrentFair, false),
+    ] {
+        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+        m.observe(&at(&l, 1, r, 0.5, 0.0), 0.0).unwrap();
+        m.update();
+        m.observe(&at(&l, 1, r, -3.0, 5.0), 1.0).unwrap();
+        m.observe(&at(&l, 2, r, 0.5, 0.0), 1.0).unwrap();
+        m.update();
+        assert!(m.permitted(1));
+        assert_eq!(m.permitted(2), follower, "{alg:?}");
+    }
+}
+
+/// Pipelined relaxation 2: once the holder's centre is past its conflict zone with a
+/// route (plus the sampling step), that route is granted; not a step before.
+#[test]
+fn pipelined_grants_a_conflicting_route_only_past_the_conflict_zone() {
+    let l = layout();
+    let mut checked = 0;
+    for h in 0..ROUTES {
+        for c in 0..ROUTES {
+            let end = l.zone_end[h][c];
+            let path = l.route(h).unwrap().path;
+            let room = path.exit() - path.entry() - HALF;
+            if h == c || !l.conflict(h, c) || end + CONFLICT_SAMPLE_M + 0.2 > room {
+                continue;
+            }
+            if inlet(&l, h) == inlet(&l, c) {
+                continue;
+            }
+            for (past, granted) in [(0.1, true), (-0.1, false)] {
+                let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Pipelined);
+                m.observe(&at(&l, 1, h, 0.5, 0.0), 0.0).unwrap();
+                m.update();
+                assert!(m.permitted(1));
+                // progress = s − entry = −HALF − to_line.
+                let progress = end + CONFLICT_SAMPLE_M + past;
+                m.observe(&at(&l, 1, h, -HALF - progress, 8.0), 1.0)
+                    .unwrap();
+                m.observe(&at(&l, 2, c, 0.5, 0.0), 1.0).unwrap();
+                m.update();
+                assert_eq!(m.permitted(2), granted, "holder {h}, c {c}, {past:+}");
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > 0);
+}
