@@ -130,3 +130,70 @@ fn experiment_network_prints_its_figures() {
         .expect("runs");
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// A vehicle changing lanes on a segment into the lane a junction's outlet feeds is on
+/// the path of a vehicle still on that outlet (which plans with the crossing planner)
+/// from the change's start, as (17) assumes of every follower in the target lane. Found
+/// by `experiment network --rate 500` (3 invariant violations: a follower leaving the
+/// junction closed in on a vehicle changing into its lane ahead of it).
+#[test]
+fn a_vehicle_changing_into_an_outlets_lane_is_on_the_crossing_followers_path() {
+    use host_sim::bus::Message;
+    use host_sim::world::heard::View;
+    use planner_core::VehicleState;
+    let net = load("grid-3x3.toml").network;
+    let (seg, j) = net
+        .segments
+        .iter()
+        .enumerate()
+        .find_map(|(k, s)| s.from.filter(|_| s.lanes >= 2).map(|j| (k, j)))
+        .expect("a segment leaving a junction");
+    // The route whose outlet is lane 1 of that segment.
+    let route = (0..planner_core::intersection::ROUTES as u8)
+        .find(|&r| net.on_route(seg, 10.0, 1, j, r).is_some())
+        .expect("a route onto lane 1");
+    let exit = net.junctions[j]
+        .layout
+        .route(usize::from(route))
+        .unwrap()
+        .path
+        .exit();
+    let state = |id: u16, lane: u8, alpha: Option<u8>| VehicleState {
+        id,
+        x: 20.0,
+        y: 0.0,
+        theta: 0.0,
+        v: 10.0,
+        omega: 0.0,
+        lane,
+        alpha,
+        beta: None,
+        stamp: 1.0,
+        cooperative: true,
+    };
+    let mut view = View::new(99);
+    let heard = |view: &mut View, s: VehicleState<f64>| {
+        view.take(
+            &Message::State {
+                state: s,
+                segment: seg,
+            },
+            &net,
+            (0.0, 0.0),
+        )
+        .expect("taken")
+    };
+    heard(&mut view, state(7, 0, None));
+    assert!(
+        view.on_path(&net, j, route).is_empty(),
+        "lane 0, staying there"
+    );
+    heard(&mut view, state(8, 0, Some(1)));
+    assert_eq!(
+        view.on_path(&net, j, route),
+        [exit + 20.0],
+        "changing into lane 1"
+    );
+    heard(&mut view, state(9, 1, None));
+    assert_eq!(view.on_path(&net, j, route).len(), 2, "and one in lane 1");
+}

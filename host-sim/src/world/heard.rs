@@ -255,7 +255,8 @@ impl View {
     }
 
     /// The positions along junction `j`'s route `route` of the vehicles heard of on the
-    /// segments that carry its inlet or outlet in its lane (states), and of those crossing
+    /// segments that carry its inlet or outlet in its lane or changing into it (states),
+    /// and of those crossing
     /// the next junction whose inlet is that outlet's segment (reports); reports at `j`
     /// itself are the crossing planner's own business.
     pub fn on_path(&self, net: &Network, j: usize, route: u8) -> Vec<f64> {
@@ -263,8 +264,16 @@ impl View {
         for r in &self.records {
             match *r {
                 Record::Lane { state, segment } => {
-                    if let Some(s) = net.on_route(segment, state.x, state.lane, j, route) {
-                        out.push(s);
+                    // In its lane, and in the lane it is changing into: (17) let it start
+                    // the change assuming the followers there keep the invariant toward
+                    // it from then on, and a follower still on this junction's outlet
+                    // drives this crossing planner, not a multi-lane one that would see
+                    // the change itself (issue 15's grid at 500 veh/h: a follower
+                    // leaving a junction closed in on a vehicle changing into its lane).
+                    for lane in core::iter::once(state.lane).chain(state.alpha) {
+                        if let Some(s) = net.on_route(segment, state.x, lane, j, route) {
+                            out.push(s);
+                        }
                     }
                 }
                 Record::Crossing {
