@@ -885,6 +885,16 @@ mod tests {
         // entered when it held one) and keeps going.
         assert!(c.permitted(&l, entry - 2.25 + 0.01, 9.0));
         assert!(!c.permitted(&l, entry - 2.25 - 0.01, 9.0));
+        // Front exactly on the line: not yet inside (it needs a lease to go on).
+        let on_line = [
+            entry - 2.25,
+            (entry - 2.25).next_up(),
+            (entry - 2.25).next_down(),
+        ]
+        .into_iter()
+        .find(|s| s + 2.25 == entry)
+        .expect("a centre whose front is exactly on the line");
+        assert!(!c.permitted(&l, on_line, 9.0));
     }
 
     /// Another route's vehicle about to reach this one's outlet: it is an obstacle on
@@ -1081,5 +1091,94 @@ mod tests {
             drive(exit + 1.0, false) > exit + 30.0,
             "on its outlet it drives on"
         );
+    }
+
+    /// One step equals the single-lane planner's on the observation the IC Protocol
+    /// prescribes: the stop line and x^f = the line while not permitted; x^f = the end of
+    /// A_S once permitted; the end of the route once the front is past A_S (Sec. VII-B).
+    #[test]
+    fn the_step_is_the_planners_on_the_prescribed_observation() {
+        let l = spec8();
+        let r = *l.route(0).expect("route 0");
+        let (entry, exit, end) = (r.path.entry(), r.path.exit(), r.path.length());
+        let p = Params::<f64>::table_i();
+        // A target weight, so that x^f shows in the command.
+        let w = CostWeights {
+            target_position: 0.05,
+            ..CostWeights::default()
+        };
+        for (front, lease, stop, target) in [
+            (entry - 15.0, false, Some(entry), entry),
+            (entry - 15.0, true, None, exit),
+            (exit - 1.0, false, None, exit),
+            (exit + 1.0, false, None, end),
+        ] {
+            let s = front - 2.25;
+            let mut c =
+                CrossingPlanner::<f64, 20, 2>::new(Planner::new(p, w).expect("planner"), 1, 0, 4.5);
+            c.set_sensing(Some(Sensing::radar())).expect("radar");
+            if lease {
+                c.hear_grant(1, 100.0);
+            }
+            let got = c.step(&l, s, 6.0, 0.0).expect("step").v;
+            let unknown = [crate::planner::Vehicle {
+                x: s + 2.25 + 150.0 + 2.25,
+                length: 4.5,
+            }];
+            let obs = crate::planner::Observation {
+                x: s,
+                v_prev: 6.0,
+                vehicles: &unknown,
+                stop_line: stop,
+                target_x: target,
+                v_ref: p.v_max(),
+            };
+            let want = Planner::<f64, 20>::new(p, w)
+                .expect("planner")
+                .step(&obs)
+                .expect("step")
+                .v;
+            assert_eq!(
+                got.to_bits(),
+                want.to_bits(),
+                "front {front}: {got} vs {want}"
+            );
+        }
+    }
+
+    /// Ties at the track boundaries: a rear exactly on its stop line has left the inlet,
+    /// a front exactly at the outlet's start is not on it yet.
+    #[test]
+    fn a_vehicle_exactly_at_a_boundary_is_on_the_far_side_of_it() {
+        let l = spec8();
+        let mine = *l.route(0).expect("route 0");
+        // The position within one ulp of `target + shift` that is exactly `shift` from it.
+        let exactly = |target: f64, shift: f64| {
+            let x = target + shift;
+            [x, x.next_up(), x.next_down()]
+                .into_iter()
+                .find(|x| x - shift == target)
+                .expect("an exact position")
+        };
+        let sibling = (1..crate::intersection::ROUTES)
+            .find(|&q| {
+                l.route(q)
+                    .is_some_and(|r| r.inlet == mine.inlet && r.outlet != mine.outlet)
+            })
+            .expect("another movement from the same inlet lane");
+        let oe = l.route(sibling).expect("sibling").path.entry();
+        let rear_on_line = exactly(oe, 2.25);
+        let seen = obstacles_with(&l, sibling as u8, rear_on_line, true);
+        assert!(!seen.iter().any(|o| (o.0 - rear_on_line).abs() < 1e-9));
+        let (q, other) = (0..crate::intersection::ROUTES)
+            .filter_map(|q| l.route(q).map(|r| (q, r)))
+            .find(|(_, r)| r.outlet == mine.outlet && r.inlet != mine.inlet)
+            .expect("another route onto the same outlet");
+        let ox = other.path.exit();
+        let front_at_outlet = exactly(ox, -2.25);
+        assert_eq!(front_at_outlet + 2.25, ox);
+        let seen = obstacles_with(&l, q as u8, front_at_outlet, true);
+        let at = mine.path.exit() + (front_at_outlet - ox);
+        assert!(!seen.iter().any(|o| (o.0 - at).abs() < 1e-9));
     }
 }

@@ -88,6 +88,9 @@ fn a_straight_path_along_the_road_never_meets_the_band() {
     assert_eq!(crossing_distance(pose(0.0, 0.0), 10.0, 0.0, BAND), None);
     // Standing still, whatever ω: treated as straight.
     assert_eq!(crossing_distance(pose(0.0, 0.0), 0.0, 0.5, BAND), None);
+    let up = pose(0.5, 0.3);
+    let d = crossing_distance(up, 0.0, 0.7, BAND).expect("straight up meets ȳ");
+    assert!((d - 1.5 / 0.3f64.sin()).abs() < 1e-12, "{d}");
 }
 
 #[test]
@@ -124,4 +127,19 @@ fn lemma5_angles_is_interval_inclusion() {
     assert!(!fs(arc(-0.3, 0.3), arc(-0.4, 0.2)).lemma5_angles(), "below");
     assert!(!fs(arc(-0.3, 0.3), arc(-0.2, 0.4)).lemma5_angles(), "above");
     assert!(!fs(arc(-0.3, 0.3), arc(-0.4, 0.4)).lemma5_angles(), "both");
+}
+
+/// A circle that misses ȳ loops back to y̲: the crossing comes after more than half a
+/// turn (the root 2π − a of the line behind the vehicle), both ways round.
+#[test]
+fn a_looping_path_meets_the_far_side_of_its_own_line() {
+    for (y, theta, omega) in [(-0.92, 1.2, 0.5), (0.7, -1.0, -0.5), (-0.6, 0.9, 0.45)] {
+        let kappa = omega / 1.0;
+        let got = crossing_distance(pose(y, theta), 1.0, omega, BAND);
+        let want = oracle(pose(y, theta), kappa, BAND, 1e9);
+        match (got, want) {
+            (Some(g), Some(w)) => assert!((g - w).abs() < 3.0 * DS, "{y} {theta}: {g} vs {w}"),
+            _ => panic!("{y} {theta}: {got:?} vs {want:?}"),
+        }
+    }
 }
