@@ -133,14 +133,24 @@ fn a_step_far_along_the_road_equals_the_step_in_ego_coordinates() {
         v_prev: 12.0,
         vehicles: &ahead,
         stop_line: None,
-        target_x: x + 25.0,
-        v_ref: 14.0,
+        target_x: x + 1.0,
+        v_ref: 12.0,
     };
-    let mut road = Planner::<f64, 20>::new(p, CostWeights::default()).expect("planner");
-    let mut ego = Planner::<f64, 20>::new(p, CostWeights::default()).expect("planner");
+    // A target weight and a target within the horizon's reach (N h v ≈ 2.4 m), so that
+    // x^f − x shows in the command.
+    let w = CostWeights {
+        target_position: 1.0,
+        ..CostWeights::default()
+    };
+    let mut road = Planner::<f64, 20>::new(p, w).expect("planner");
+    let mut ego = Planner::<f64, 20>::new(p, w).expect("planner");
     let gap = 60.0 - 0.5 * (4.5 + p.length()) - p.d0();
     let a = road.step(&obs).expect("step");
-    let b = ego.step_gap(12.0, gap, 25.0, 14.0).expect("step");
+    let b = ego.step_gap(12.0, gap, 1.0, 12.0).expect("step");
     assert!((a.v - b.v).abs() < 1e-9, "{} vs {}", a.v, b.v);
     assert!((a.gap - b.gap).abs() < 1e-9);
+    // And the target matters here: 1 m ahead slows the vehicle, far ahead does not.
+    let mut far = Planner::<f64, 20>::new(p, w).expect("planner");
+    let c = far.step_gap(12.0, gap, 100.0, 12.0).expect("step");
+    assert!(c.v > a.v + 1e-6, "{} vs {}", c.v, a.v);
 }
