@@ -771,10 +771,28 @@ mod tests {
     type Car = CrossingPlanner<f64, 20, 2>;
     type Car8 = CrossingPlanner<f64, 20, 8>;
 
-    fn car(id: u16, route: u8) -> Car {
+    fn car<const CAP: usize>(id: u16, route: u8) -> CrossingPlanner<f64, 20, CAP> {
         let p = Params::<f64>::table_i();
         let planner = Planner::<f64, 20>::new(p, CostWeights::default()).expect("planner");
         CrossingPlanner::new(planner, id, route, 4.5)
+    }
+
+    fn spec8() -> Layout<f64> {
+        let p = Params::<f64>::table_i();
+        Layout::new(&p, LayoutSpec::spec8(&p)).expect("layout")
+    }
+
+    /// A route other than 0 whose inlet (and outlet) is, or is not, route 0's.
+    fn route_like_0(l: &Layout<f64>, same_inlet: bool, same_outlet: bool) -> usize {
+        let mine = *l.route(0).expect("route 0");
+        (1..crate::intersection::ROUTES)
+            .find(|&q| {
+                l.route(q).is_some_and(|r| {
+                    (r.inlet == mine.inlet) == same_inlet
+                        && (r.outlet == mine.outlet) == same_outlet
+                })
+            })
+            .expect("such a route in the SPEC §8 layout")
     }
 
     fn report(id: u16, s: f64) -> CrossingReport<f64> {
@@ -789,7 +807,7 @@ mod tests {
 
     #[test]
     fn the_notify_bound_is_at_least_one_period_and_a_bad_one_changes_nothing() {
-        let mut c = car(1, 0);
+        let mut c: Car = car(1, 0);
         let h = c.planner.params().h();
         assert_eq!(
             c.set_notify_latency(f64::NAN),
@@ -804,7 +822,7 @@ mod tests {
 
     #[test]
     fn sensors_are_validated_before_they_are_taken() {
-        let mut c = car(1, 0);
+        let mut c: Car = car(1, 0);
         let mut bad = Sensing::radar();
         bad.position_error_m = -0.1;
         assert_eq!(c.set_sensing(Some(bad)), Err(ConfigError::InvalidSensing));
@@ -815,7 +833,7 @@ mod tests {
 
     #[test]
     fn mapped_and_sensed_positions_replace_the_last_steps_and_refuse_bad_ones() {
-        let mut c = car(1, 0);
+        let mut c: Car = car(1, 0);
         c.hear_mapped(&[1.0, 2.0]).expect("two fit");
         assert_eq!(c.mapped.as_slice(), &[1.0, 2.0]);
         c.hear_mapped(&[3.0]).expect("one");
@@ -832,7 +850,7 @@ mod tests {
 
     #[test]
     fn reports_keep_the_newest_per_vehicle_and_never_the_own() {
-        let mut c = car(1, 5);
+        let mut c: Car = car(1, 5);
         assert_eq!(c.route(), 5);
         c.hear_report(&report(1, 10.0), 0.0).expect("own");
         assert!(c.others.is_empty(), "its own report is not an obstacle");
@@ -863,11 +881,10 @@ mod tests {
 
     #[test]
     fn only_its_own_finite_grants_extend_the_lease_and_none_shortens_it() {
-        let p = Params::<f64>::table_i();
-        let l = Layout::new(&p, LayoutSpec::spec8(&p)).expect("layout");
+        let l = spec8();
         let entry = l.route(0).expect("route 0").path.entry();
         let before = entry - 10.0;
-        let mut c = car(1, 0);
+        let mut c: Car = car(1, 0);
         assert!(!c.permitted(&l, before, 0.0));
         c.hear_grant(2, 5.0);
         assert!(!c.permitted(&l, before, 0.0), "another vehicle's grant");
@@ -903,17 +920,15 @@ mod tests {
     #[test]
     fn a_vehicle_heading_for_the_same_outlet_counts_once_it_is_or_may_be_there() {
         let p = Params::<f64>::table_i();
-        let l = Layout::new(&p, LayoutSpec::spec8(&p)).expect("layout");
+        let l = spec8();
         let mine = l.route(0).expect("route 0");
-        let (q, other) = (0..crate::intersection::ROUTES)
-            .filter_map(|q| l.route(q).map(|r| (q, r)))
-            .find(|(_, r)| r.outlet == mine.outlet && r.inlet != mine.inlet)
-            .expect("another route onto the same outlet");
+        let q = route_like_0(&l, false, true);
+        let other = l.route(q).expect("route onto the same outlet");
         let (exit, ox) = (mine.path.exit(), other.path.exit());
         let vmax = p.v_max();
         // Obstacles this step for a report of the other's centre at `x` stamped `stamp`.
         let seen = |x: f64, stamp: f64, now: f64| {
-            let mut c = car(1, 0);
+            let mut c: Car = car(1, 0);
             c.set_sensing(Some(Sensing::radar())).expect("radar");
             c.set_notify_latency(0.25).expect("bound");
             c.hear_report(
@@ -943,20 +958,10 @@ mod tests {
         assert!(!seen(ox - 2.25 - reach - 0.5, 1.0, 1.5));
     }
 
-    fn spec8() -> Layout<f64> {
-        let p = Params::<f64>::table_i();
-        Layout::new(&p, LayoutSpec::spec8(&p)).expect("layout")
-    }
-
     /// The obstacles (position, length) of one step of vehicle 1 on route 0 at `s`,
     /// after hearing vehicle 2 on `route` at `x` (stamped now).
     fn obstacles_with(l: &Layout<f64>, route: u8, x: f64, sensing: bool) -> Vec<(f64, f64), 8> {
-        let mut c = CrossingPlanner::<f64, 20, 8>::new(
-            Planner::new(Params::table_i(), CostWeights::default()).expect("planner"),
-            1,
-            0,
-            4.5,
-        );
+        let mut c: Car8 = car(1, 0);
         if sensing {
             c.set_sensing(Some(Sensing::radar())).expect("radar");
         }
@@ -992,21 +997,11 @@ mod tests {
         ] {
             assert!(on(0, x), "same route at {x}");
         }
-        let sibling = (1..crate::intersection::ROUTES)
-            .find(|&q| {
-                l.route(q)
-                    .is_some_and(|r| r.inlet == mine.inlet && r.outlet != mine.outlet)
-            })
-            .expect("another movement from the same inlet lane");
+        let sibling = route_like_0(&l, true, false);
         let oe = l.route(sibling).expect("sibling").path.entry();
         assert!(on(sibling, oe + 2.0), "rear still on the common inlet");
         assert!(!on(sibling, oe + 2.5), "rear off it");
-        let stranger = (1..crate::intersection::ROUTES)
-            .find(|&q| {
-                l.route(q)
-                    .is_some_and(|r| r.inlet != mine.inlet && r.outlet != mine.outlet)
-            })
-            .expect("a route sharing no track");
+        let stranger = route_like_0(&l, false, false);
         let se = l.route(stranger).expect("stranger").path.entry();
         assert!(!on(stranger, se - 5.0), "another inlet lane");
     }
@@ -1020,12 +1015,7 @@ mod tests {
         let entry = l.route(0).expect("route 0").path.entry();
         let s = entry - 60.0;
         let new = |sensing: bool| {
-            let mut c = CrossingPlanner::<f64, 20, 8>::new(
-                Planner::new(Params::table_i(), CostWeights::default()).expect("planner"),
-                1,
-                0,
-                4.5,
-            );
+            let mut c: Car8 = car(1, 0);
             if sensing {
                 c.set_sensing(Some(Sensing::radar())).expect("radar");
             }
@@ -1065,7 +1055,7 @@ mod tests {
         let (entry, exit) = (r.path.entry(), r.path.exit());
         // Where the front is after 8 s of closed loop from front position `front`.
         let drive = |front: f64, lease: bool| {
-            let mut c = car(1, 0);
+            let mut c: Car = car(1, 0);
             c.set_sensing(Some(Sensing::radar())).expect("radar");
             if lease {
                 c.hear_grant(1, 100.0);
@@ -1160,21 +1150,13 @@ mod tests {
                 .find(|x| x - shift == target)
                 .expect("an exact position")
         };
-        let sibling = (1..crate::intersection::ROUTES)
-            .find(|&q| {
-                l.route(q)
-                    .is_some_and(|r| r.inlet == mine.inlet && r.outlet != mine.outlet)
-            })
-            .expect("another movement from the same inlet lane");
+        let sibling = route_like_0(&l, true, false);
         let oe = l.route(sibling).expect("sibling").path.entry();
         let rear_on_line = exactly(oe, 2.25);
         let seen = obstacles_with(&l, sibling as u8, rear_on_line, true);
         assert!(!seen.iter().any(|o| (o.0 - rear_on_line).abs() < 1e-9));
-        let (q, other) = (0..crate::intersection::ROUTES)
-            .filter_map(|q| l.route(q).map(|r| (q, r)))
-            .find(|(_, r)| r.outlet == mine.outlet && r.inlet != mine.inlet)
-            .expect("another route onto the same outlet");
-        let ox = other.path.exit();
+        let q = route_like_0(&l, false, true);
+        let ox = l.route(q).expect("route onto the same outlet").path.exit();
         let front_at_outlet = exactly(ox, -2.25);
         assert_eq!(front_at_outlet + 2.25, ox);
         let seen = obstacles_with(&l, q as u8, front_at_outlet, true);
