@@ -16,7 +16,8 @@ use can_gateway::PlainFrame as F8;
 #[test]
 fn cantools_decodes_the_gateways_candump_log() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let tmp = std::env::temp_dir().join(format!("can-gateway-{}", std::process::id()));
+    let tmp = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("can-gateway-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).expect("temp dir");
     let mut log = String::new();
     let mut expected = String::new();

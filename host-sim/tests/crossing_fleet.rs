@@ -324,7 +324,8 @@ fn cli_runs_intersections_on_the_bus() {
     );
     assert_eq!(v["tasks"], 9);
     assert!(v["messages"]["grants"].as_u64().expect("count") > 0);
-    let dir = std::env::temp_dir().join(format!("crossing-fleet-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("crossing-fleet-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let faulty = dir.join("faulty-intersection.toml");
     let text = std::fs::read_to_string(builtin("intersection.toml")).expect("read");

@@ -76,7 +76,8 @@ x = -40.0
 lane = 0
 v = 15.0
 "#;
-    let dir = std::env::temp_dir().join(format!("host-sim-det-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("host-sim-det-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let f = dir.join("random.toml");
     std::fs::write(&f, text).expect("write");

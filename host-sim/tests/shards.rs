@@ -20,7 +20,8 @@ fn dir(name: &str) -> PathBuf {
     // Tests run in parallel: every call its own directory.
     static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let d = std::env::temp_dir().join(format!("shards-{}-{name}-{k}", std::process::id()));
+    let d = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("shards-{}-{name}-{k}", std::process::id()));
     std::fs::create_dir_all(&d).expect("temp dir");
     d
 }

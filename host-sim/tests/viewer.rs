@@ -36,7 +36,8 @@ fn browser_available() -> Result<(), String> {
 
 /// Runs `file` with `--html` and `--trace` (and `extra`), then the browser check.
 fn check(file: &str, extra: &[&str]) {
-    let dir = std::env::temp_dir().join(format!("viewer-{}-{file}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("viewer-{}-{file}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let (html, trace) = (dir.join("page.html"), dir.join("trace.csv"));
     let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))

@@ -113,6 +113,7 @@ for sc in "${scenarios[@]}"; do
   mkdir -p "$d"
   status="$(sed -n "s/^=== SCENARIO $name STATUS //p" "$out/console.txt" | tail -1)"
   echo "== $name: host-sim exit status in the VM: ${status:-none}"
+  grep "^=== softnet after $name:" "$out/console.txt" || true
   section "$name/summary.json" > "$d/summary.json"
   section "$name/candump.log" | base64 -d | gunzip > "$d/candump.log" || true
   trace="-"

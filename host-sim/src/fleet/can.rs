@@ -165,6 +165,31 @@ impl CanPort for SocketCanPort {
     }
 }
 
+/// Why frames on `iface` may arrive out of order, if they may: a virtual CAN interface
+/// hands each frame to the sending CPU's receive backlog, so on a multi-core host without
+/// receive packet steering a frame can overtake an earlier one of the same sender (see
+/// docs/can.md). `None` for one CPU, steering set, or an interface without the file (a
+/// real controller's driver keeps its own order).
+pub fn order_warning(iface: &str) -> Option<String> {
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let path = format!("/sys/class/net/{iface}/queues/rx-0/rps_cpus");
+    let mask = std::fs::read_to_string(&path).ok()?;
+    steering_warning(iface, cpus, &path, &mask)
+}
+
+/// [`order_warning`] on what it read: `mask` is the hexadecimal CPU mask of `path`.
+fn steering_warning(iface: &str, cpus: usize, path: &str, mask: &str) -> Option<String> {
+    let unsteered = mask.trim().chars().all(|c| matches!(c, '0' | ','));
+    (cpus > 1 && unsteered).then(|| {
+        format!(
+            "{iface}: {cpus} CPUs and no receive packet steering ({path} is {}); frames may \
+             be delivered out of order and refused (OutOfSequence). As root: \
+             echo 1 > {path}",
+            mask.trim()
+        )
+    })
+}
+
 /// Linux's ENOBUFS (no `ErrorKind` of std names it).
 const ENOBUFS: i32 = 105;
 
@@ -811,4 +836,24 @@ fn node_mut<P>(nodes: &mut [(u16, CanNode<P>)], id: u16) -> Result<&mut CanNode<
         .find(|(i, _)| *i == id)
         .map(|(_, n)| n)
         .ok_or(BusError::UnknownNode(id))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unsteered_multi_core_vcan_is_reported() {
+        let p = "/sys/class/net/vcan0/queues/rx-0/rps_cpus";
+        let w = steering_warning("vcan0", 2, p, "0\n").expect("two CPUs, no steering");
+        assert!(
+            w.contains("echo 1 > /sys/class/net/vcan0/queues/rx-0/rps_cpus"),
+            "{w}"
+        );
+        assert!(steering_warning("vcan0", 2, p, "00000000,00000000\n").is_some());
+        assert_eq!(steering_warning("vcan0", 2, p, "1\n"), None);
+        assert_eq!(steering_warning("vcan0", 2, p, "00000000,00000001\n"), None);
+        assert_eq!(steering_warning("vcan0", 1, p, "0\n"), None);
+        assert_eq!(order_warning("no-such-interface"), None);
+    }
 }

@@ -350,6 +350,9 @@ pub fn run_keyed(
     };
     match medium {
         Medium::SocketCan(iface) => {
+            if let Some(w) = can::order_warning(iface) {
+                eprintln!("warning: {w}");
+            }
             let iface = iface.clone();
             let open = move |n: Node| match n {
                 Node::Clock => SocketCanPort::open_transmit_only(&iface),

@@ -1,6 +1,6 @@
 //! `bench-planner`: our solver and Clarabel on identical instances of (10), side by side.
 
-use super::clarabel::{conic_data, ClarabelSolver};
+use super::clarabel::{conic_data, ClarabelSolver, PersistentClarabel};
 use super::instances::{random_instances, rng};
 use planner_core::planner::free_road_gap;
 use planner_core::{CostWeights, IpmSolver, MpcSolver, Params, Real, SingleLaneProblem};
@@ -25,6 +25,20 @@ pub struct BenchResult {
     pub clarabel_median_us: f64,
     /// clarabel_median_us / planner_median_us.
     pub speedup: f64,
+    /// Median wall time of a resident Clarabel that takes each problem's data in place
+    /// (`update_P/q/A/b`, presolve off) and solves: how a user would run it in a
+    /// receding horizon (µs).
+    pub clarabel_persistent_median_us: f64,
+    /// clarabel_persistent_median_us / planner_median_us.
+    pub speedup_persistent: f64,
+    /// Median wall time of Clarabel's `solve()` alone, its setup done beforehand and
+    /// not timed (µs): a lower bound on any way of running it.
+    pub clarabel_solve_only_median_us: f64,
+    /// clarabel_solve_only_median_us / planner_median_us.
+    pub speedup_solve_only: f64,
+    /// Largest |J_ours − J_resident| / (1 + |J_resident|): the resident solver answers
+    /// the same problems.
+    pub max_rel_objective_gap_persistent: f64,
     /// Largest |J_ours − J_clarabel| / (1 + |J_clarabel|).
     pub max_rel_objective_gap: f64,
     /// Largest constraint violation of our plans (m or m/s).
@@ -66,15 +80,69 @@ fn time_us<T>(reps: usize, mut setup: impl FnMut(), mut f: impl FnMut() -> T) ->
 struct Sample {
     ours_us: f64,
     clarabel_us: f64,
+    persistent_us: f64,
+    solve_only_us: f64,
     gap: f64,
+    gap_persistent: f64,
     viol: f64,
     iterations: u32,
+}
+
+/// Clarabel three ways on `pr`'s conic data: setup + solve from scratch (the
+/// reference answer), `solve()` alone on a solver built beforehand, and the resident
+/// solver taking the data in place. Times in µs, with the objectives of the reference
+/// and of the resident solver.
+fn clarabel_times<const N: usize>(
+    pr: &SingleLaneProblem<f64, N>,
+    resident: &mut PersistentClarabel,
+    reps: usize,
+) -> Option<[f64; 5]> {
+    let data = conic_data(pr);
+    let reference = ClarabelSolver {
+        tol_gap: 1e-8,
+        tol_feas: 1e-8,
+        accept_almost_solved: false,
+    };
+    let (full_us, r) = time_us(reps, || {}, || reference.solve_conic(pr, &data));
+    let r = r.ok()?;
+    // Solve only: a fresh resident solver per repetition, built outside the timing.
+    let fresh = std::cell::RefCell::new(PersistentClarabel::new(1e-8));
+    let (solve_only_us, _) = time_us(
+        reps,
+        || {
+            let mut f = PersistentClarabel::new(1e-8);
+            let _ = f.load(&data);
+            *fresh.borrow_mut() = f;
+        },
+        || fresh.borrow_mut().solve_loaded(pr, &data),
+    );
+    // Resident: the first problem of a shape builds it, untimed (a one-off setup).
+    if !resident.load(&data).ok()? {
+        let _ = resident.solve_loaded(pr, &data);
+    }
+    let (persistent_us, p) = time_us(
+        reps,
+        || {},
+        || {
+            resident.load(&data)?;
+            resident.solve_loaded(pr, &data)
+        },
+    );
+    let p = p.ok()?;
+    Some([
+        full_us,
+        solve_only_us,
+        persistent_us,
+        r.objective,
+        p.objective,
+    ])
 }
 
 fn compare<const N: usize>(
     pr: &SingleLaneProblem<f64, N>,
     warm: Option<&[f64; N]>,
     ours: &mut IpmSolver<f64, N>,
+    resident: &mut PersistentClarabel,
     reps: usize,
 ) -> Option<(Sample, [f64; N])> {
     // Each repetition starts from the same solver state (warm duals included).
@@ -86,19 +154,17 @@ fn compare<const N: usize>(
         || ours_cell.borrow_mut().solve(pr, warm),
     );
     let sol = sol.ok()?;
-    let data = conic_data(pr);
-    let reference = ClarabelSolver {
-        tol_gap: 1e-8,
-        tol_feas: 1e-8,
-        accept_almost_solved: false,
-    };
-    let (clarabel_us, r) = time_us(reps, || {}, || reference.solve_conic(pr, &data));
-    let r = r.ok()?;
+    let [clarabel_us, solve_only_us, persistent_us, j_ref, j_res] =
+        clarabel_times(pr, resident, reps)?;
+    let gap = |j: f64| (sol.objective - j).abs() / (1.0 + j.abs());
     Some((
         Sample {
             ours_us,
             clarabel_us,
-            gap: (sol.objective - r.objective).abs() / (1.0 + r.objective.abs()),
+            persistent_us,
+            solve_only_us,
+            gap: gap(j_ref),
+            gap_persistent: gap(j_res),
             viol: pr.max_violation(&sol.v).amount.max(0.0),
             iterations: sol.iterations,
         },
@@ -108,6 +174,11 @@ fn compare<const N: usize>(
 
 fn summarize(horizon: usize, mode: &'static str, samples: &[Sample]) -> BenchResult {
     let mut ours: Vec<f64> = samples.iter().map(|s| s.ours_us).collect();
+    let median_of = |f: fn(&Sample) -> f64| {
+        let mut v: Vec<f64> = samples.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        percentile(&v, 0.5)
+    };
     let mut cl: Vec<f64> = samples.iter().map(|s| s.clarabel_us).collect();
     let mut it: Vec<f64> = samples.iter().map(|s| f64::from(s.iterations)).collect();
     ours.sort_by(f64::total_cmp);
@@ -115,6 +186,8 @@ fn summarize(horizon: usize, mode: &'static str, samples: &[Sample]) -> BenchRes
     it.sort_by(f64::total_cmp);
     let pm = percentile(&ours, 0.5);
     let cm = percentile(&cl, 0.5);
+    let persistent = median_of(|s| s.persistent_us);
+    let solve_only = median_of(|s| s.solve_only_us);
     BenchResult {
         horizon,
         mode,
@@ -123,6 +196,14 @@ fn summarize(horizon: usize, mode: &'static str, samples: &[Sample]) -> BenchRes
         planner_p99_us: percentile(&ours, 0.99),
         clarabel_median_us: cm,
         speedup: cm / pm,
+        clarabel_persistent_median_us: persistent,
+        speedup_persistent: persistent / pm,
+        clarabel_solve_only_median_us: solve_only,
+        speedup_solve_only: solve_only / pm,
+        max_rel_objective_gap_persistent: samples
+            .iter()
+            .map(|s| s.gap_persistent)
+            .fold(0.0, f64::max),
         max_rel_objective_gap: samples.iter().map(|s| s.gap).fold(0.0, f64::max),
         max_constraint_violation: samples.iter().map(|s| s.viol).fold(0.0, f64::max),
         planner_median_iterations: percentile(&it, 0.5),
@@ -132,10 +213,11 @@ fn summarize(horizon: usize, mode: &'static str, samples: &[Sample]) -> BenchRes
 /// Cold: `problems` random instances, each solved from scratch by both.
 pub fn cold<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchResult {
     let mut ours = IpmSolver::<f64, N>::default();
+    let mut resident = PersistentClarabel::new(1e-8);
     let samples: Vec<Sample> = random_instances(seed, problems, N)
         .iter()
         .filter_map(|spec| spec.build::<f64, N>())
-        .filter_map(|pr| compare(&pr, None, &mut ours, reps).map(|(s, _)| s))
+        .filter_map(|pr| compare(&pr, None, &mut ours, &mut resident, reps).map(|(s, _)| s))
         .collect();
     summarize(N, "cold", &samples)
 }
@@ -154,6 +236,7 @@ pub fn warm<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchRes
         settings.warm_barrier = wb;
     }
     let mut ours = IpmSolver::<f64, N>::new(settings);
+    let mut resident = PersistentClarabel::new(1e-8);
     let (mut x, mut v) = (0.0f64, 15.0f64);
     let (mut xl, mut vl) = (60.0f64, 15.0f64);
     let mut accel = 0.0;
@@ -177,7 +260,8 @@ pub fn warm<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchRes
         );
         let Ok(pr) = pr else { break };
         let warm_start = plan.as_ref().map(planner_core::planner::shifted);
-        let Some((sample, sol)) = compare(&pr, warm_start.as_ref(), &mut ours, reps) else {
+        let Some((sample, sol)) = compare(&pr, warm_start.as_ref(), &mut ours, &mut resident, reps)
+        else {
             break;
         };
         samples.push(sample);

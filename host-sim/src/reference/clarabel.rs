@@ -274,6 +274,103 @@ impl ClarabelSolver {
     }
 }
 
+/// Clarabel kept resident across problems of one shape, as a user would run it in a
+/// receding horizon: built once (setup, equilibration, the KKT system's symbolic
+/// factorisation), then each new problem overwrites P, q, A and b in place (`update_P`,
+/// `update_q`, `update_A`, `update_b`, which Clarabel 0.11 allows only with presolve off
+/// and structural zeros kept) and is solved. Clarabel does not warm-start its iterates,
+/// so what persists is the setup and the factorisation's structure; the equilibration
+/// computed for the first problem scales the later ones.
+pub struct PersistentClarabel {
+    solver: Option<DefaultSolver<f64>>,
+    settings: DefaultSettings<f64>,
+    /// The nonzeros of P and A the resident solver holds: a receding horizon changes
+    /// only q and b (P and A depend on h and the weights alone), and an update of what
+    /// did not change would be time a user would not spend.
+    held: (Vec<f64>, Vec<f64>),
+}
+
+impl PersistentClarabel {
+    /// A resident solver with the duality-gap and feasibility tolerance `tol` (one try:
+    /// no retry ladder, so that what is timed is one solve).
+    pub fn new(tol: f64) -> Self {
+        Self {
+            solver: None,
+            settings: DefaultSettings {
+                verbose: false,
+                tol_gap_abs: tol,
+                tol_gap_rel: tol,
+                tol_feas: tol,
+                max_iter: 200,
+                presolve_enable: false,
+                input_sparse_dropzeros: false,
+                ..DefaultSettings::default()
+            },
+            held: (Vec::new(), Vec::new()),
+        }
+    }
+
+    /// Makes the resident solver hold `data`: in place when its shape matches the
+    /// resident one (returns `true`), else by building a new solver (`false`).
+    pub fn load(&mut self, data: &ConicData) -> Result<bool, SolveError> {
+        if let Some(s) = self.solver.as_mut() {
+            let same_p = self.held.0 == data.p.nzval;
+            let same_a = self.held.1 == data.a.nzval;
+            if (same_p || s.update_P(&data.p).is_ok())
+                && (same_a || s.update_A(&data.a).is_ok())
+                && s.update_q(&data.q).is_ok()
+                && s.update_b(&data.b).is_ok()
+            {
+                if !same_p {
+                    self.held.0.clone_from(&data.p.nzval);
+                }
+                if !same_a {
+                    self.held.1.clone_from(&data.a.nzval);
+                }
+                return Ok(true);
+            }
+        }
+        let s = DefaultSolver::new(
+            &data.p,
+            &data.q,
+            &data.a,
+            &data.b,
+            &data.cones,
+            self.settings.clone(),
+        )
+        .map_err(|_| SolveError::Numerical { iteration: 0 })?;
+        self.solver = Some(s);
+        self.held = (data.p.nzval.clone(), data.a.nzval.clone());
+        Ok(false)
+    }
+
+    /// Solves what [`load`](Self::load) put in place; only a certified ("Solved")
+    /// answer counts.
+    pub fn solve_loaded<const N: usize>(
+        &mut self,
+        pr: &SingleLaneProblem<f64, N>,
+        data: &ConicData,
+    ) -> Result<Solution<f64, N>, SolveError> {
+        let s = self
+            .solver
+            .as_mut()
+            .ok_or(SolveError::Numerical { iteration: 0 })?;
+        s.solve();
+        let sol = &s.solution;
+        match sol.status {
+            SolverStatus::Solved => {
+                Ok(ClarabelSolver::default().unshift(pr, data, &sol.x, sol.iterations))
+            }
+            SolverStatus::MaxIterations => Err(SolveError::IterationLimit {
+                iterations: sol.iterations,
+            }),
+            _ => Err(SolveError::Numerical {
+                iteration: sol.iterations,
+            }),
+        }
+    }
+}
+
 impl<const N: usize> MpcSolver<f64, N> for ClarabelSolver {
     fn solve(
         &mut self,
