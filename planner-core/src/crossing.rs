@@ -27,7 +27,7 @@ pub enum Algorithm {
     /// Concurrent Crossing that never admits a vehicle ahead of an earlier waiting
     /// vehicle whose route it conflicts with (closes SPEC §7's liveness gap).
     ConcurrentFair,
-    /// Beyond the paper: starvation-free Concurrent Crossing with three relaxations that
+    /// Beyond the paper: starvation-free Concurrent Crossing with four relaxations that
     /// keep every safety guarantee.
     ///
     /// 1. *Following on the same route.* A vehicle may be permitted while a vehicle ahead
@@ -42,6 +42,10 @@ pub enum Algorithm {
     ///    stop line compete for permissions, so a permission is not held for the whole
     ///    approach through A_C. Permissions are only ever an addition to the stop line
     ///    (IC Protocol (ii)); a vehicle without one still stops before A_S.
+    /// 4. *Only a lane's head waits.* A vehicle queued behind an unpermitted vehicle on
+    ///    its inlet lane is neither granted nor counted as waiting, so its route holds
+    ///    back no other route until it is the lane's head (it cannot reach the stop line
+    ///    before then). Granting less is always safe; fairness holds per lane head.
     ///
     /// No two permitted vehicles ever have footprints that can meet inside A_S except
     /// followers on one route, which Theorem 1 covers; every other guarantee (the stop
@@ -315,7 +319,8 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                         continue;
                     }
                     if self.algorithm == Algorithm::Pipelined
-                        && !(c.to_line <= F::from_f64(REQUEST_DISTANCE_M))
+                        && (!(c.to_line <= F::from_f64(REQUEST_DISTANCE_M))
+                            || self.queued_behind(c, &grant))
                     {
                         continue;
                     }
@@ -356,6 +361,21 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             && a.id != b.id
             && a.progress > b.progress
             && a.to_line >= F::ZERO
+    }
+
+    /// `true` if a vehicle ahead of `c` on its inlet lane is neither permitted nor
+    /// granted in this scan (`granted_now`): `c` cannot reach the stop line before that
+    /// one has crossed it. The pipelined manager then neither grants `c` (the grant
+    /// would be withdrawn, [`Manager::revoke_blocked`]) nor counts it as waiting: a
+    /// queued follower's route holds back no other route, since its turn begins only
+    /// when the vehicle ahead of it goes. The first waiting vehicle of each lane still
+    /// holds back every route that conflicts with its own, which keeps the scan
+    /// starvation-free: each lane's head gets its turn, then the next becomes the head.
+    fn queued_behind(&self, c: &Entry<F>, granted_now: &[usize]) -> bool {
+        self.entries
+            .iter()
+            .enumerate()
+            .any(|(i, l)| !l.permitted && !granted_now.contains(&i) && self.ahead_on_inlet(l, c))
     }
 
     /// Liveness fix 2 (root cause of the queue deadlocks of issue 14): a permitted vehicle

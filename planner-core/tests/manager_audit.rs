@@ -296,3 +296,67 @@ fn pipelined_grants_a_conflicting_route_only_past_the_conflict_zone() {
     }
     assert!(checked > 0);
 }
+
+/// Pipelined relaxation 4: a vehicle queued behind a waiting lane head is neither granted
+/// nor counted as waiting, so a later vehicle on another lane whose route conflicts only
+/// with the follower's goes; the fair variant holds it back (there the follower is
+/// granted and then withdrawn, or counts as waiting).
+#[test]
+fn pipelined_lets_only_a_lanes_head_hold_back_other_routes() {
+    let l = layout();
+    let mut checked = 0;
+    for x in 0..ROUTES {
+        for a in 0..ROUTES {
+            for f in 0..ROUTES {
+                for y in 0..ROUTES {
+                    let lanes = inlet(&l, f) == inlet(&l, a)
+                        && f != a
+                        && inlet(&l, x) != inlet(&l, a)
+                        && inlet(&l, y) != inlet(&l, a)
+                        && inlet(&l, y) != inlet(&l, x);
+                    let conflicts = l.conflict(a, x)
+                        && !l.conflict(y, x)
+                        && !l.conflict(y, a)
+                        && l.conflict(y, f);
+                    if !(lanes && conflicts) {
+                        continue;
+                    }
+                    checked += 1;
+                    for (alg, y_permitted) in [
+                        (Algorithm::Pipelined, true),
+                        (Algorithm::ConcurrentFair, false),
+                    ] {
+                        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+                        m.observe(&at(&l, 10, x, 0.5, 0.0), 0.0).unwrap();
+                        m.update();
+                        m.observe(&at(&l, 10, x, -3.0, 5.0), 1.0).unwrap();
+                        m.observe(&at(&l, 11, a, 0.5, 0.0), 1.0).unwrap();
+                        m.observe(&at(&l, 12, f, 8.0, 0.0), 1.0).unwrap();
+                        m.observe(&at(&l, 13, y, 0.5, 0.0), 2.0).unwrap();
+                        m.update();
+                        let what = format!("{alg:?} routes x {x} a {a} f {f} y {y}");
+                        assert!(m.permitted(10) && !m.permitted(11), "{what}");
+                        assert_eq!(m.permitted(13), y_permitted, "{what}");
+                        if alg == Algorithm::Pipelined {
+                            assert!(!m.permitted(12), "{what}: queued behind a waiting head");
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 0, "the layout has no such routes");
+}
+
+/// A follower behind a lane head granted in the same scan is not queued behind it: on
+/// the head's route it is granted in that scan too (relaxation 1).
+#[test]
+fn pipelined_grants_a_head_and_its_follower_in_one_scan() {
+    let l = layout();
+    let r = route(&l, 0, Movement::Straight);
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Pipelined);
+    m.observe(&at(&l, 1, r, 0.5, 0.0), 0.0).unwrap();
+    m.observe(&at(&l, 2, r, 8.0, 0.0), 0.0).unwrap();
+    m.update();
+    assert!(m.permitted(1) && m.permitted(2));
+}

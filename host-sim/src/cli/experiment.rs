@@ -9,6 +9,7 @@ use host_sim::experiments::shard::{MultilaneSettings, Runs, Shard, ThroughputSet
 use host_sim::experiments::throughput::ThroughputCase;
 use host_sim::output::plot::PlotData;
 use host_sim::world::SolverChoice;
+use planner_core::crossing::Algorithm;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -121,6 +122,9 @@ pub enum Experiment {
         /// Draw mean delay against demand, one curve per algorithm, to a .png or .svg.
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
+        /// Algorithms to run (comma-separated, of STOP, FIFO, CON, CON-fair, PIPE).
+        #[arg(long, value_delimiter = ',', default_value = "STOP,FIFO,CON-fair,PIPE")]
+        algorithms: Vec<String>,
     },
     /// Open-system traffic on a grid of intersections: Poisson arrivals at every boundary
     /// inlet with random boundary destinations; trips, delays, safety and the realtime
@@ -285,7 +289,8 @@ pub fn run(e: Experiment) -> ExitCode {
             seeds,
             json,
             plot,
-        } => demand(&rates, duration, seeds, json, plot),
+            algorithms,
+        } => demand(&rates, duration, seeds, json, plot, &algorithms),
     }
 }
 
@@ -361,9 +366,34 @@ fn fault_grid(
     finish(&r, json, r.unsafe_cells == 0, true)
 }
 
-fn demand(rates: &[f64], duration: f64, seeds: u64, json: bool, plot: Option<PathBuf>) -> ExitCode {
+fn demand(
+    rates: &[f64],
+    duration: f64,
+    seeds: u64,
+    json: bool,
+    plot: Option<PathBuf>,
+    algorithms: &[String],
+) -> ExitCode {
     if rates.is_empty() || !rates.iter().all(|r| *r > 0.0 && *r <= 3600.0) {
         return bad_input("--rates: vehicles per hour per lane, each in (0, 3600]");
+    }
+    let mut chosen = Vec::new();
+    for name in algorithms {
+        match Algorithm::ALL
+            .iter()
+            .find(|a| a.name().eq_ignore_ascii_case(name))
+        {
+            Some(a) if !chosen.contains(a) => chosen.push(*a),
+            Some(_) => return bad_input(format!("--algorithms: {name} given twice")),
+            None => {
+                return bad_input(format!(
+                    "--algorithms: unknown {name:?} (STOP, FIFO, CON, CON-fair, PIPE)"
+                ))
+            }
+        }
+    }
+    if chosen.is_empty() {
+        return bad_input("--algorithms: at least one");
     }
     if let Err(code) = check_duration(duration, 7200.0) {
         return code;
@@ -373,7 +403,7 @@ fn demand(rates: &[f64], duration: f64, seeds: u64, json: bool, plot: Option<Pat
             return code;
         }
     }
-    let r = host_sim::experiments::demand::run(rates, duration, seeds, 0);
+    let r = host_sim::experiments::demand::run(&chosen, rates, duration, seeds, 0);
     if let Some(path) = plot {
         if let Err(e) = host_sim::output::plot::demand(&r, &path) {
             return bad_input(e);
