@@ -44,6 +44,16 @@ fn entry(m: &Manager<f64, 8>, id: u16) -> planner_core::crossing::Entry<f64> {
     *m.entries().iter().find(|e| e.id == id).expect("registered")
 }
 
+/// A manager under `alg` whose vehicle `id` on `route` was granted at its line at t = 0
+/// and reports itself 3 m inside A_S at t = 1 (a holder); nothing is decided yet at t = 1.
+fn with_holder(l: &Layout<f64>, alg: Algorithm, id: u16, route: usize) -> Manager<f64, 8> {
+    let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+    m.observe(&at(l, id, route, 0.5, 0.0), 0.0).unwrap();
+    m.update();
+    m.observe(&at(l, id, route, -3.0, 5.0), 1.0).unwrap();
+    m
+}
+
 #[test]
 fn algorithm_names_are_the_ones_outputs_and_the_cli_use() {
     let names: Vec<&str> = Algorithm::ALL.iter().map(|a| a.name()).collect();
@@ -155,11 +165,8 @@ fn no_later_vehicle_overtakes_a_waiting_conflicting_one_under_the_fair_variant()
             (Algorithm::Pipelined, false),
             (Algorithm::Concurrent, true),
         ] {
-            let mut m = Manager::<f64, 8>::new(l.clone(), alg);
-            m.observe(&at(&l, 10, x, 0.5, 0.0), 0.0).unwrap();
-            m.update();
+            let mut m = with_holder(&l, alg, 10, x);
             assert!(m.permitted(10));
-            m.observe(&at(&l, 10, x, -3.0, 5.0), 1.0).unwrap();
             m.observe(&at(&l, 11, a, 0.5, 0.0), 1.0).unwrap();
             m.observe(&at(&l, 12, y, 0.5, 0.0), 2.0).unwrap();
             m.update();
@@ -250,10 +257,7 @@ fn pipelined_grants_a_follower_on_the_holders_route() {
         (Algorithm::Pipelined, true),
         (Algorithm::ConcurrentFair, false),
     ] {
-        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
-        m.observe(&at(&l, 1, r, 0.5, 0.0), 0.0).unwrap();
-        m.update();
-        m.observe(&at(&l, 1, r, -3.0, 5.0), 1.0).unwrap();
+        let mut m = with_holder(&l, alg, 1, r);
         m.observe(&at(&l, 2, r, 0.5, 0.0), 1.0).unwrap();
         m.update();
         assert!(m.permitted(1));
@@ -297,6 +301,27 @@ fn pipelined_grants_a_conflicting_route_only_past_the_conflict_zone() {
     assert!(checked > 0);
 }
 
+/// Routes (x, a, f, y) where a relaxation-4 case exists: a conflicts with the holder's x;
+/// f leaves a's inlet lane by another movement; y, on a third lane, conflicts with f only.
+fn lane_head_quadruples(l: &Layout<f64>) -> Vec<[usize; 4]> {
+    let mut out = Vec::new();
+    for x in 0..ROUTES {
+        for a in (0..ROUTES).filter(|&a| l.conflict(a, x) && inlet(l, x) != inlet(l, a)) {
+            for f in (0..ROUTES).filter(|&f| f != a && inlet(l, f) == inlet(l, a)) {
+                let other_lane =
+                    |y: usize| inlet(l, y) != inlet(l, a) && inlet(l, y) != inlet(l, x);
+                let only_f = |y: usize| !l.conflict(y, x) && !l.conflict(y, a) && l.conflict(y, f);
+                out.extend(
+                    (0..ROUTES)
+                        .filter(|&y| other_lane(y) && only_f(y))
+                        .map(|y| [x, a, f, y]),
+                );
+            }
+        }
+    }
+    out
+}
+
 /// Pipelined relaxation 4: a vehicle queued behind a waiting lane head is neither granted
 /// nor counted as waiting, so a later vehicle on another lane whose route conflicts only
 /// with the follower's goes; the fair variant holds it back (there the follower is
@@ -304,48 +329,26 @@ fn pipelined_grants_a_conflicting_route_only_past_the_conflict_zone() {
 #[test]
 fn pipelined_lets_only_a_lanes_head_hold_back_other_routes() {
     let l = layout();
-    let mut checked = 0;
-    for x in 0..ROUTES {
-        for a in 0..ROUTES {
-            for f in 0..ROUTES {
-                for y in 0..ROUTES {
-                    let lanes = inlet(&l, f) == inlet(&l, a)
-                        && f != a
-                        && inlet(&l, x) != inlet(&l, a)
-                        && inlet(&l, y) != inlet(&l, a)
-                        && inlet(&l, y) != inlet(&l, x);
-                    let conflicts = l.conflict(a, x)
-                        && !l.conflict(y, x)
-                        && !l.conflict(y, a)
-                        && l.conflict(y, f);
-                    if !(lanes && conflicts) {
-                        continue;
-                    }
-                    checked += 1;
-                    for (alg, y_permitted) in [
-                        (Algorithm::Pipelined, true),
-                        (Algorithm::ConcurrentFair, false),
-                    ] {
-                        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
-                        m.observe(&at(&l, 10, x, 0.5, 0.0), 0.0).unwrap();
-                        m.update();
-                        m.observe(&at(&l, 10, x, -3.0, 5.0), 1.0).unwrap();
-                        m.observe(&at(&l, 11, a, 0.5, 0.0), 1.0).unwrap();
-                        m.observe(&at(&l, 12, f, 8.0, 0.0), 1.0).unwrap();
-                        m.observe(&at(&l, 13, y, 0.5, 0.0), 2.0).unwrap();
-                        m.update();
-                        let what = format!("{alg:?} routes x {x} a {a} f {f} y {y}");
-                        assert!(m.permitted(10) && !m.permitted(11), "{what}");
-                        assert_eq!(m.permitted(13), y_permitted, "{what}");
-                        if alg == Algorithm::Pipelined {
-                            assert!(!m.permitted(12), "{what}: queued behind a waiting head");
-                        }
-                    }
-                }
+    let cases = lane_head_quadruples(&l);
+    assert!(!cases.is_empty(), "the layout has no such routes");
+    for [x, a, f, y] in cases {
+        for (alg, y_permitted) in [
+            (Algorithm::Pipelined, true),
+            (Algorithm::ConcurrentFair, false),
+        ] {
+            let mut m = with_holder(&l, alg, 10, x);
+            m.observe(&at(&l, 11, a, 0.5, 0.0), 1.0).unwrap();
+            m.observe(&at(&l, 12, f, 8.0, 0.0), 1.0).unwrap();
+            m.observe(&at(&l, 13, y, 0.5, 0.0), 2.0).unwrap();
+            m.update();
+            let what = format!("{alg:?} routes x {x} a {a} f {f} y {y}");
+            assert!(m.permitted(10) && !m.permitted(11), "{what}");
+            assert_eq!(m.permitted(13), y_permitted, "{what}");
+            if alg == Algorithm::Pipelined {
+                assert!(!m.permitted(12), "{what}: queued behind a waiting head");
             }
         }
     }
-    assert!(checked > 0, "the layout has no such routes");
 }
 
 /// A follower behind a lane head granted in the same scan is not queued behind it: on
