@@ -371,6 +371,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     /// when the vehicle ahead of it goes. The first waiting vehicle of each lane still
     /// holds back every route that conflicts with its own, which keeps the scan
     /// starvation-free: each lane's head gets its turn, then the next becomes the head.
+    /// With nothing granted yet (`&[]`) it is also the test of [`Manager::revoke_blocked`].
     fn queued_behind(&self, c: &Entry<F>, granted_now: &[usize]) -> bool {
         self.entries
             .iter()
@@ -394,11 +395,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     fn revoke_blocked(&mut self) {
         let mut revoke: Vec<usize, CAP> = Vec::new();
         for (i, f) in self.entries.iter().enumerate() {
-            let usable = !f.permitted
-                || !self
-                    .entries
-                    .iter()
-                    .any(|l| !l.permitted && self.ahead_on_inlet(l, f));
+            let usable = !f.permitted || !self.queued_behind(f, &[]);
             if !usable {
                 let _ = revoke.push(i);
             }
