@@ -145,6 +145,30 @@ fn four_experiment_shards_merge_into_the_unsharded_experiments() {
 }
 
 #[test]
+fn four_fault_grid_and_demand_shards_merge_into_the_unsharded_experiments() {
+    // One loss, one delay: five cells (the grid's one and the four variants) × every
+    // workload, one run each.
+    check_command(
+        &["experiment", "faults"],
+        &["--grid", "--losses", "0.5", "--delays", "0.1", "--runs", "1"],
+    );
+    // Rates given in another order are the same experiment (it runs them ascending).
+    check_command(
+        &["experiment", "demand"],
+        &[
+            "--rates",
+            "200,100",
+            "--duration",
+            "60",
+            "--seeds",
+            "2",
+            "--algorithms",
+            "PIPE,STOP",
+        ],
+    );
+}
+
+#[test]
 fn four_liveness_shards_merge_into_the_unsharded_sweeps() {
     check("deadends", &["--cases", "6", "--seed", "2"]);
     check("crossings", &["--cases", "4", "--seed", "2"]);

@@ -5,7 +5,9 @@ use super::SolverArg;
 use host_sim::bus::Faults;
 use host_sim::experiments::faults::{compare, FaultSettings};
 use host_sim::experiments::multilane::MultilaneCase;
-use host_sim::experiments::shard::{MultilaneSettings, Runs, Shard, ThroughputSettings};
+use host_sim::experiments::shard::{
+    DemandSettings, GridSettings, MultilaneSettings, Runs, Shard, ThroughputSettings,
+};
 use host_sim::experiments::throughput::ThroughputCase;
 use host_sim::output::plot::PlotData;
 use host_sim::world::SolverChoice;
@@ -92,8 +94,8 @@ pub enum Experiment {
         #[arg(long, value_name = "out.png|out.svg", requires = "grid")]
         plot: Option<PathBuf>,
         /// Run only shard I of N (0-based) of the runs (both buses, both experiments) and
-        /// print them as JSON for `host-sim merge`; not with --grid.
-        #[arg(long, value_name = "I/N", conflicts_with = "grid")]
+        /// print them as JSON for `host-sim merge`; with --grid, of the grid's runs.
+        #[arg(long, value_name = "I/N", conflicts_with = "plot")]
         shard: Option<Shard>,
         /// Print one JSON object.
         #[arg(long)]
@@ -125,6 +127,10 @@ pub enum Experiment {
         /// Algorithms to run (comma-separated, of STOP, FIFO, CON, CON-fair, PIPE).
         #[arg(long, value_delimiter = ',', default_value = "STOP,FIFO,CON-fair,PIPE")]
         algorithms: Vec<String>,
+        /// Run only shard I of N (0-based) of the runs and print them as JSON for
+        /// `host-sim merge`.
+        #[arg(long, value_name = "I/N", conflicts_with = "plot")]
+        shard: Option<Shard>,
     },
     /// Open-system traffic on a grid of intersections: Poisson arrivals at every boundary
     /// inlet with random boundary destinations; trips, delays, safety and the realtime
@@ -243,7 +249,7 @@ pub fn run(e: Experiment) -> ExitCode {
             shard,
         } => {
             if grid {
-                return fault_grid(&losses, &delays, runs, json, plot);
+                return fault_grid(&losses, &delays, runs, json, plot, shard);
             }
             let args = FaultArgs {
                 loss,
@@ -290,7 +296,8 @@ pub fn run(e: Experiment) -> ExitCode {
             json,
             plot,
             algorithms,
-        } => demand(&rates, duration, seeds, json, plot, &algorithms),
+            shard,
+        } => demand(&rates, duration, seeds, (json, plot), &algorithms, shard),
     }
 }
 
@@ -340,6 +347,7 @@ fn fault_grid(
     runs: u64,
     json: bool,
     plot: Option<PathBuf>,
+    shard: Option<Shard>,
 ) -> ExitCode {
     use host_sim::experiments::fault_grid::{grid, Cell};
     let cells = Cell::grid(losses, delays);
@@ -356,6 +364,9 @@ fn fault_grid(
             return code;
         }
     }
+    if let Some(sh) = shard {
+        return fault_grid_shard(cells, losses, delays, runs, sh);
+    }
     let r = grid(&cells, runs, 1, 0);
     if let Some(path) = &plot {
         match host_sim::output::plot::fault_grid(&r, path) {
@@ -366,13 +377,66 @@ fn fault_grid(
     finish(&r, json, r.unsafe_cells == 0, true)
 }
 
+/// A shard of the fault grid: its runs, for `host-sim merge`.
+fn fault_grid_shard(
+    cells: Vec<host_sim::experiments::fault_grid::Cell>,
+    losses: &[f64],
+    delays: &[f64],
+    runs: u64,
+    sh: Shard,
+) -> ExitCode {
+    use host_sim::experiments::fault_grid::{grid_runs, run_count, GridRun};
+    let settings = GridSettings {
+        losses: losses.to_vec(),
+        delays: delays.to_vec(),
+        runs,
+        seed: 1,
+    };
+    shard_of(
+        "faults-grid",
+        settings,
+        run_count(&cells, runs),
+        sh,
+        |r| grid_runs(&cells, runs, 1, r, 0),
+        |g: &GridRun| {
+            let t = &g.totals;
+            t.collisions + t.invariant_violations + t.limit_violations + t.unpermitted_entries
+        },
+    )
+}
+
+/// A shard of the demand experiment: its runs, for `host-sim merge`.
+fn demand_shard(
+    algorithms: &[Algorithm],
+    rates: &[f64],
+    duration: f64,
+    seeds: u64,
+    sh: Shard,
+) -> ExitCode {
+    use host_sim::experiments::demand::{demand_runs, rates_in_order, run_count, RunOutcome};
+    let settings = DemandSettings {
+        algorithms: algorithms.iter().map(|a| a.name().to_string()).collect(),
+        rates: rates_in_order(rates),
+        duration,
+        seeds,
+    };
+    shard_of(
+        "demand",
+        settings,
+        run_count(algorithms, rates, seeds),
+        sh,
+        |r| demand_runs(algorithms, rates, duration, seeds, r, 0),
+        RunOutcome::unsafe_events,
+    )
+}
+
 fn demand(
     rates: &[f64],
     duration: f64,
     seeds: u64,
-    json: bool,
-    plot: Option<PathBuf>,
+    (json, plot): (bool, Option<PathBuf>),
     algorithms: &[String],
+    shard: Option<Shard>,
 ) -> ExitCode {
     if rates.is_empty() || !rates.iter().all(|r| *r > 0.0 && *r <= 3600.0) {
         return bad_input("--rates: vehicles per hour per lane, each in (0, 3600]");
@@ -402,6 +466,9 @@ fn demand(
         if let Err(code) = check_plot(p) {
             return code;
         }
+    }
+    if let Some(sh) = shard {
+        return demand_shard(&chosen, rates, duration, seeds, sh);
     }
     let r = host_sim::experiments::demand::run(&chosen, rates, duration, seeds, 0);
     if let Some(path) = plot {

@@ -183,7 +183,7 @@ pub fn merge(files: &[PathBuf], json: bool) -> ExitCode {
         Ok(m) => m,
         Err(e) => return bad(&format!("cannot merge: {e}")),
     };
-    let exit = merged_exit(&merged);
+    let exit = merged_exit(&sweep, &merged);
     let printed = if json {
         print_json(&merged)
     } else {
@@ -201,8 +201,9 @@ pub fn merge(files: &[PathBuf], json: bool) -> ExitCode {
 
 /// The exit code the unsharded run would give: unsafe events anywhere in the result (for
 /// `experiment faults`, on the faulty bus only), unfinished vehicles or deadlocks, runs
-/// that did not complete their lane changes.
-fn merged_exit(v: &Value) -> ExitCode {
+/// that did not complete their lane changes. The fault grid reports liveness per cell and
+/// judges safety alone; demand judges deadlocks per row.
+fn merged_exit(sweep: &str, v: &Value) -> ExitCode {
     fn unsafe_events(v: &Value) -> u64 {
         const UNSAFE: [&str; 4] = [
             "collisions",
@@ -228,8 +229,14 @@ fn merged_exit(v: &Value) -> ExitCode {
         None => unsafe_events(v),
     };
     let runs = v.get("multilane_faulty").unwrap_or(v);
-    let live =
-        n(v, "unfinished") + n(v, "deadlocks") == 0 && n(runs, "completed") == n(runs, "runs");
+    let live = match sweep {
+        "faults-grid" => true,
+        "demand" => v
+            .get("results")
+            .and_then(Value::as_array)
+            .is_some_and(|rows| rows.iter().all(|r| n(r, "deadlocks") == 0)),
+        _ => n(v, "unfinished") + n(v, "deadlocks") == 0 && n(runs, "completed") == n(runs, "runs"),
+    };
     code(events == 0, live)
 }
 

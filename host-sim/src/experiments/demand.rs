@@ -21,7 +21,7 @@ use crate::world::network::{Junction, Network};
 use crate::world::spawn::Entry;
 use crate::world::{Arrivals, Finish, SolverChoice, World, WorldSpec, LENGTH_M};
 use planner_core::crossing::Algorithm;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Vehicles waiting outside one lane at the end beyond which its queue is unbounded.
 pub const BOUNDED_QUEUE: usize = 5;
@@ -135,8 +135,9 @@ pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> World
     }
 }
 
-/// What one run gave.
-struct RunOutcome {
+/// What one run gave (a shard prints these for `host-sim merge`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunOutcome {
     delays: Vec<f64>,
     crossed: u64,
     offered: u64,
@@ -148,6 +149,13 @@ struct RunOutcome {
     invariant_violations: u64,
     unpermitted: u64,
     deadlock: bool,
+}
+
+impl RunOutcome {
+    /// Collisions, invariant violations and unpermitted entries.
+    pub fn unsafe_events(&self) -> u64 {
+        self.collisions + self.invariant_violations + self.unpermitted
+    }
 }
 
 /// One arrival: when (s), its delay or, if it has not crossed, the least it will be (s).
@@ -251,40 +259,70 @@ fn one(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> RunOutcome 
     }
 }
 
-/// The experiment: each of `algorithms` at every rate in `rates` (vehicles per hour per
-/// lane), `seeds` runs of `duration` s each, on `threads` threads. A run's seed depends on
-/// its rate and index alone, so an algorithm's rows do not depend on which others run.
-pub fn run(
-    algorithms: &[Algorithm],
-    rates: &[f64],
-    duration: f64,
-    seeds: u64,
-    threads: usize,
-) -> DemandReport {
-    let t0 = std::time::Instant::now();
-    // Ascending: a capacity is the last rate before the first saturated one.
+/// The rates as the experiment runs them: ascending, each once (a capacity is the last
+/// rate before the first saturated one).
+pub fn rates_in_order(rates: &[f64]) -> Vec<f64> {
     let mut rates = rates.to_vec();
     rates.sort_by(f64::total_cmp);
     rates.dedup();
-    let rates = rates.as_slice();
-    let jobs: Vec<(Algorithm, f64, u64)> = algorithms
+    rates
+}
+
+/// The experiment's runs in report order: (algorithm, rate, run).
+fn jobs(algorithms: &[Algorithm], rates: &[f64], seeds: u64) -> Vec<(Algorithm, f64, u64)> {
+    algorithms
         .iter()
         .flat_map(|&a| {
             rates
                 .iter()
                 .flat_map(move |&r| (0..seeds).map(move |k| (a, r, k)))
         })
-        .collect();
-    let outs = super::par::map_indexed(jobs.len(), threads, |i| {
-        let (a, r, k) = jobs[i];
+        .collect()
+}
+
+/// How many runs: algorithms × rates × seeds.
+pub fn run_count(algorithms: &[Algorithm], rates: &[f64], seeds: u64) -> u64 {
+    algorithms.len() as u64 * rates_in_order(rates).len() as u64 * seeds
+}
+
+/// The runs [first, end) (of [`run_count`], in (algorithm, rate, run) order), on
+/// `threads` threads. A run's seed depends on its rate and index alone, so an
+/// algorithm's rows do not depend on which others run, nor a run on its shard.
+pub fn demand_runs(
+    algorithms: &[Algorithm],
+    rates: &[f64],
+    duration: f64,
+    seeds: u64,
+    (first, end): (u64, u64),
+    threads: usize,
+) -> Vec<RunOutcome> {
+    let rates = rates_in_order(rates);
+    let jobs = jobs(algorithms, &rates, seeds);
+    let base = (first.min(end) as usize).min(jobs.len());
+    let mine = &jobs[base..(end as usize).min(jobs.len())];
+    super::par::map_indexed(mine.len(), threads, |i| {
+        let (a, r, k) = mine[i];
         one(a, r, duration, case_seed(r.to_bits(), k))
-    });
+    })
+}
+
+/// The report over every run of the experiment, `outs` in run order.
+pub fn demand_report(
+    algorithms: &[Algorithm],
+    rates: &[f64],
+    duration: f64,
+    seeds: u64,
+    outs: &[RunOutcome],
+    wall_seconds: f64,
+) -> DemandReport {
+    let rates = rates_in_order(rates);
+    let jobs = jobs(algorithms, &rates, seeds);
     let mut results = Vec::new();
     for &a in algorithms {
-        for &r in rates {
+        for &r in &rates {
             let mine: Vec<&RunOutcome> = jobs
                 .iter()
-                .zip(&outs)
+                .zip(outs)
                 .filter(|((b, q, _), _)| *b == a && *q == r)
                 .map(|(_, o)| o)
                 .collect();
@@ -312,8 +350,30 @@ pub fn run(
         lane_limit_vph: 3600.0 * v / (LENGTH_M + lim.d0 + lim.safe_distance(v)),
         duration_s: duration,
         seeds,
-        wall_seconds: t0.elapsed().as_secs_f64(),
+        wall_seconds,
     }
+}
+
+/// The experiment: each of `algorithms` at every rate in `rates` (vehicles per hour per
+/// lane), `seeds` runs of `duration` s each, on `threads` threads.
+pub fn run(
+    algorithms: &[Algorithm],
+    rates: &[f64],
+    duration: f64,
+    seeds: u64,
+    threads: usize,
+) -> DemandReport {
+    let t0 = std::time::Instant::now();
+    let all = (0, run_count(algorithms, rates, seeds));
+    let outs = demand_runs(algorithms, rates, duration, seeds, all, threads);
+    demand_report(
+        algorithms,
+        rates,
+        duration,
+        seeds,
+        &outs,
+        t0.elapsed().as_secs_f64(),
+    )
 }
 
 fn row(a: Algorithm, rate: f64, duration: f64, runs: &[&RunOutcome]) -> DemandRow {

@@ -26,7 +26,7 @@ use crate::world::{Finish, WorldSpec};
 use planner_core::crossing::Algorithm;
 use planner_core::sensing::Sensing;
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Loss probabilities of the grid.
 pub const LOSSES: [f64; 5] = [0.0, 0.2, 0.5, 0.9, 0.99];
@@ -194,39 +194,84 @@ pub struct GridReport {
     pub wall_seconds: f64,
 }
 
-/// Runs every workload `runs` times in every cell of `cells`, on `threads` threads.
-pub fn grid(cells: &[Cell], runs: u64, seed: u64, threads: usize) -> GridReport {
-    let t0 = std::time::Instant::now();
+/// The grid's runs in report order: (cell, workload, run). A run's seed depends on its
+/// run index alone, so a shard of these ([`grid_runs`]) runs exactly what the whole grid
+/// would for them.
+fn jobs(cells: usize, workloads: usize, runs: u64) -> Vec<(usize, usize, u64)> {
+    (0..cells)
+        .flat_map(|c| (0..workloads).flat_map(move |w| (0..runs).map(move |k| (c, w, k))))
+        .collect()
+}
+
+/// How many runs the grid has: cells × workloads × runs.
+pub fn run_count(cells: &[Cell], runs: u64) -> u64 {
+    cells.len() as u64 * Workload::all().len() as u64 * runs
+}
+
+/// One run of the grid: its index in [`run_count`] order and its totals.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GridRun {
+    /// Its index among the grid's runs.
+    pub job: u64,
+    /// Its safety and liveness totals (one case).
+    pub totals: Totals,
+}
+
+/// The grid's runs [first, end) (of [`run_count`]), on `threads` threads.
+pub fn grid_runs(
+    cells: &[Cell],
+    runs: u64,
+    seed: u64,
+    (first, end): (u64, u64),
+    threads: usize,
+) -> Vec<GridRun> {
     let workloads = Workload::all();
-    let jobs: Vec<(usize, usize, u64)> = (0..cells.len())
-        .flat_map(|c| (0..workloads.len()).flat_map(move |w| (0..runs).map(move |k| (c, w, k))))
-        .collect();
-    let outs = super::par::map_indexed(jobs.len(), threads, |i| {
-        let (c, w, k) = jobs[i];
+    let jobs = jobs(cells.len(), workloads.len(), runs);
+    let mine = first.min(end) as usize..end.min(jobs.len() as u64) as usize;
+    let base = mine.start;
+    super::par::map_indexed(mine.len(), threads, |i| {
+        let (c, w, k) = jobs[base + i];
         let (cell, workload) = (cells[c], workloads[w]);
         let mut world = workload.world(seed, k);
         world.faults = cell.faults(1);
         world.sensing = Some(Sensing::radar());
         world.finish = Finish::GoalsMetAndStill;
         world.name = format!("{}-{}", world.name, cell_name(&cell));
-        Case {
+        let case = Case {
             index: k,
             seed: case_seed(seed, k),
             label: "",
             summary: sweep::run(world),
             scenario: String::new(),
+        };
+        GridRun {
+            job: (base + i) as u64,
+            totals: Totals::of(std::iter::once(&case)),
         }
-    });
+    })
+}
+
+/// The report over the grid's runs `outs` (every run once, in any order of shards).
+pub fn grid_report(
+    cells: &[Cell],
+    runs: u64,
+    seed: u64,
+    outs: &[GridRun],
+    wall_seconds: f64,
+) -> GridReport {
+    let workloads = Workload::all();
+    let jobs = jobs(cells.len(), workloads.len(), runs);
     let mut results = Vec::new();
     for (c, cell) in cells.iter().enumerate() {
         for (w, workload) in workloads.iter().enumerate() {
-            let mine: Vec<&Case> = jobs
+            let mine = outs
                 .iter()
-                .zip(&outs)
-                .filter(|((jc, jw, _), _)| *jc == c && *jw == w)
-                .map(|(_, o)| o)
-                .collect();
-            let totals = Totals::of(mine.iter().copied());
+                .filter(|o| {
+                    jobs.get(o.job as usize)
+                        .is_some_and(|j| j.0 == c && j.1 == w)
+                })
+                .map(|o| &o.totals);
+            let totals = Totals::sum(mine);
             let completion = if totals.vehicles == 0 {
                 1.0
             } else {
@@ -256,8 +301,15 @@ pub fn grid(cells: &[Cell], runs: u64, seed: u64, threads: usize) -> GridReport 
         cells: results,
         runs,
         seed,
-        wall_seconds: t0.elapsed().as_secs_f64(),
+        wall_seconds,
     }
+}
+
+/// Runs every workload `runs` times in every cell of `cells`, on `threads` threads.
+pub fn grid(cells: &[Cell], runs: u64, seed: u64, threads: usize) -> GridReport {
+    let t0 = std::time::Instant::now();
+    let outs = grid_runs(cells, runs, seed, (0, run_count(cells, runs)), threads);
+    grid_report(cells, runs, seed, &outs, t0.elapsed().as_secs_f64())
 }
 
 /// A short name of a cell (for scenario names).

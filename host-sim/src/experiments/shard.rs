@@ -167,7 +167,9 @@ pub fn merge(mut parts: Vec<Output>) -> Result<Value, MergeError> {
         acc = combine("", &acc, &next)?;
     }
     match first.sweep.as_str() {
-        "multilane" | "throughput" | "faults" => report_of_runs(&first, &acc),
+        "multilane" | "throughput" | "faults" | "faults-grid" | "demand" => {
+            report_of_runs(&first, &acc)
+        }
         _ => Ok(acc),
     }
 }
@@ -209,6 +211,49 @@ pub struct ThroughputSettings {
     pub faults: crate::bus::Faults,
 }
 
+/// `experiment faults --grid`'s settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GridSettings {
+    /// Losses (rows).
+    pub losses: Vec<f64>,
+    /// Delays (columns, s).
+    pub delays: Vec<f64>,
+    /// Runs per workload and cell.
+    pub runs: u64,
+    /// Seed.
+    pub seed: u64,
+}
+
+/// `experiment demand`'s settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DemandSettings {
+    /// Algorithms by name, in report order.
+    pub algorithms: Vec<String>,
+    /// Rates (vehicles per hour per lane), ascending.
+    pub rates: Vec<f64>,
+    /// Simulated seconds per run.
+    pub duration: f64,
+    /// Runs per algorithm and rate.
+    pub seeds: u64,
+}
+
+impl DemandSettings {
+    /// The algorithms named, or the first name that is none.
+    pub fn algorithms(&self) -> Result<Vec<planner_core::crossing::Algorithm>, String> {
+        use planner_core::crossing::Algorithm;
+        self.algorithms
+            .iter()
+            .map(|n| {
+                Algorithm::ALL
+                    .iter()
+                    .copied()
+                    .find(|a| a.name() == n)
+                    .ok_or_else(|| n.clone())
+            })
+            .collect()
+    }
+}
+
 /// An experiment's merged runs → its report, as the unsharded experiment prints it.
 fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
     use super::{faults, multilane, throughput};
@@ -234,6 +279,28 @@ fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
                 s.seeds,
                 s.duration,
                 s.faults,
+                r.wall_seconds,
+            ))
+        }
+        "faults-grid" => {
+            use super::fault_grid::{grid_report, Cell, GridRun};
+            let s: GridSettings = parse("settings", &h.settings)?;
+            let r: Runs<GridRun> = parse("runs", merged)?;
+            let cells = Cell::grid(&s.losses, &s.delays);
+            serde_json::to_value(grid_report(&cells, s.runs, s.seed, &r.runs, r.wall_seconds))
+        }
+        "demand" => {
+            let s: DemandSettings = parse("settings", &h.settings)?;
+            let r: Runs<super::demand::RunOutcome> = parse("runs", merged)?;
+            let algorithms = s
+                .algorithms()
+                .map_err(|n| MergeError::Shape(format!("no algorithm {n}")))?;
+            serde_json::to_value(super::demand::demand_report(
+                &algorithms,
+                &s.rates,
+                s.duration,
+                s.seeds,
+                &r.runs,
                 r.wall_seconds,
             ))
         }

@@ -5,7 +5,7 @@
 
 use crate::world::summary::Summary;
 use crate::world::{SolverChoice, World, WorldSpec};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The seed of case `index` of a sweep seeded `seed`.
 pub fn case_seed(seed: u64, index: u64) -> u64 {
@@ -85,7 +85,7 @@ pub struct Failing {
 }
 
 /// Totals over cases.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Totals {
     /// Cases run.
     pub cases: u64,
@@ -130,6 +130,31 @@ impl Totals {
             let f = c.finish_time_s();
             t.max_finish_time_s = t.max_finish_time_s.max(f);
             sum += f;
+        }
+        t.mean_finish_time_s = sum / t.cases.max(1) as f64;
+        t
+    }
+
+    /// The totals of several totals, as [`Totals::of`] over all their cases: counts add,
+    /// the latest finish is the largest, the mean is weighted by cases. Over totals of
+    /// one case each, in case order, it is bit for bit `Totals::of` over those cases (a
+    /// one-case mean is its finish time exactly), so a shard's runs merge into exactly
+    /// the unsharded result.
+    pub fn sum<'a>(parts: impl Iterator<Item = &'a Totals>) -> Self {
+        let mut t = Totals::default();
+        let mut sum = 0.0;
+        for p in parts {
+            t.cases += p.cases;
+            t.vehicles += p.vehicles;
+            t.collisions += p.collisions;
+            t.invariant_violations += p.invariant_violations;
+            t.limit_violations += p.limit_violations;
+            t.unpermitted_entries += p.unpermitted_entries;
+            t.unfinished += p.unfinished;
+            t.deadlocks += p.deadlocks;
+            t.fallback_steps += p.fallback_steps;
+            t.max_finish_time_s = t.max_finish_time_s.max(p.max_finish_time_s);
+            sum += p.mean_finish_time_s * p.cases as f64;
         }
         t.mean_finish_time_s = sum / t.cases.max(1) as f64;
         t
