@@ -7,9 +7,9 @@
 use crate::crc;
 use crate::secoc::{self, AuthError, FreshnessRx, Key, KeyStore, TRAILER_LEN};
 use crate::wire::{
-    frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, CLOCK_ADDRESS,
-    HEADING_RES, MANAGER_ADDRESS, MANAGER_LAST, MAX_FRAMES, NO_LANE, POS_RES, SPEED_LIMIT,
-    SPEED_RES, TIME_RES, YAW_RATE_RES,
+    fd_len, frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, CLOCK_ADDRESS,
+    FD_INDEX, FD_SECURED_INDEX, HEADING_RES, MANAGER_ADDRESS, MANAGER_LAST, MAX_FRAMES, NO_LANE,
+    POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES, YAW_RATE_RES,
 };
 use embedded_can::{ExtendedId, Frame, Id};
 use heapless::Vec;
@@ -67,7 +67,8 @@ pub enum DecodeError {
     UnknownKind(u8),
     /// The frame index is not below the kind's frame count.
     BadFrameIndex,
-    /// Not 8 data bytes.
+    /// Not 8 data bytes (a classic frame), not the length of its kind's CAN FD frame, or
+    /// padding that is not zero.
     BadLength,
     /// The header's frame index differs from the identifier's.
     HeaderMismatch,
@@ -329,6 +330,85 @@ fn message_crc(kind: MessageKind, sa: u8, counter: u8, payload: &[u8]) -> u8 {
     crc::finish(crc::update(c, payload))
 }
 
+/// The message's payload chunks as the frames carry them: payload, zero padding, and the
+/// CRC in the last byte of the last chunk.
+fn protected<F: Real>(
+    msg: &Message<F>,
+    sa: u8,
+    counter: u8,
+) -> Result<[u8; MAX_FRAMES * CHUNK], EncodeError> {
+    let kind = msg.kind();
+    let (mut bytes, _) = payload(msg)?;
+    let total = kind.frames() * CHUNK;
+    let crc = message_crc(kind, sa, counter, bytes.get(..total - 1).unwrap_or(&[]));
+    if let Some(last) = bytes.get_mut(total - 1) {
+        *last = crc;
+    }
+    Ok(bytes)
+}
+
+/// The most data bytes of a CAN FD message frame: header, the longest payload, trailer.
+const FD_MAX: usize = 1 + MAX_FRAMES * CHUNK + TRAILER_LEN;
+const _: () = assert!(FD_MAX <= 64, "a secured message must fit one CAN FD frame");
+
+/// Encodes `msg` into one CAN FD frame ([`crate::wire`]: index [`FD_INDEX`], the header,
+/// the payload chunks back to back, zero padding to a CAN FD length). `Fr` must take
+/// data beyond 8 bytes (e.g. [`crate::FdFrame`]), else [`EncodeError::Frame`].
+pub fn encode_fd<F: Real, Fr: Frame>(
+    msg: &Message<F>,
+    sa: u8,
+    counter: u8,
+) -> Result<Fr, EncodeError> {
+    fd_frame(msg, sa, counter, None)
+}
+
+/// Encodes `msg` into one CAN FD frame with its authenticator: index
+/// [`FD_SECURED_INDEX`], the header, the payload chunks, then the trailer of
+/// [`crate::secoc`] over the same bytes as [`encode_secured`]'s, zero padding.
+pub fn encode_fd_secured<F: Real, Fr: Frame>(
+    msg: &Message<F>,
+    sa: u8,
+    counter: u8,
+    key: &Key,
+    fv: u64,
+) -> Result<Fr, EncodeError> {
+    fd_frame(msg, sa, counter, Some((key, fv)))
+}
+
+fn fd_frame<F: Real, Fr: Frame>(
+    msg: &Message<F>,
+    sa: u8,
+    counter: u8,
+    secured: Option<(&Key, u64)>,
+) -> Result<Fr, EncodeError> {
+    let kind = msg.kind();
+    let bytes = protected(msg, sa, counter)?;
+    let body = bytes.get(..kind.frames() * CHUNK).unwrap_or(&[]);
+    let index = if secured.is_some() {
+        FD_SECURED_INDEX
+    } else {
+        FD_INDEX
+    };
+    let mut data = [0u8; 64];
+    let mut w = 0;
+    for b in core::iter::once(index << 4 | (counter & 0x0F)).chain(body.iter().copied()) {
+        if let Some(slot) = data.get_mut(w) {
+            *slot = b;
+        }
+        w += 1;
+    }
+    if let Some((key, fv)) = secured {
+        let t = secoc::trailer(key, secoc::data_id(kind as u8, sa), counter, body, fv);
+        if let Some(dst) = data.get_mut(w..w + TRAILER_LEN) {
+            dst.copy_from_slice(&t);
+        }
+        w += TRAILER_LEN;
+    }
+    let len = fd_len(w).ok_or(EncodeError::Frame)?;
+    let id = ExtendedId::new(frame_id(kind, index, sa)).ok_or(EncodeError::Frame)?;
+    Fr::new(Id::Extended(id), data.get(..len).unwrap_or(&[])).ok_or(EncodeError::Frame)
+}
+
 /// Encodes `msg`, sent by node `sa` with alive counter `counter` (taken mod 16), into
 /// its frames.
 pub fn encode<F: Real, Fr: Frame>(
@@ -337,14 +417,7 @@ pub fn encode<F: Real, Fr: Frame>(
     counter: u8,
 ) -> Result<Frames<Fr>, EncodeError> {
     let kind = msg.kind();
-    let (mut bytes, n) = payload(msg)?;
-    let total = kind.frames() * CHUNK;
-    // Payload, zero padding, CRC in the last byte.
-    let crc = message_crc(kind, sa, counter, bytes.get(..total - 1).unwrap_or(&[]));
-    let _ = n;
-    if let Some(last) = bytes.get_mut(total - 1) {
-        *last = crc;
-    }
+    let bytes = protected(msg, sa, counter)?;
     let mut out = Frames::new();
     for i in 0..kind.frames() {
         let mut data = [0u8; 8];
@@ -484,19 +557,6 @@ impl<const CAP: usize> Reassembler<CAP> {
         };
         let (code, index, sa) = split_id(raw).ok_or(DecodeError::ForeignId)?;
         let kind = MessageKind::from_code(code).ok_or(DecodeError::UnknownKind(code))?;
-        let n = kind.frames() + usize::from(auth.is_some());
-        if usize::from(index) >= n {
-            return Err(DecodeError::BadFrameIndex);
-        }
-        let data = frame.data();
-        if data.len() != 8 {
-            return Err(DecodeError::BadLength);
-        }
-        let header = data.first().copied().unwrap_or(0);
-        if header >> 4 != index {
-            return Err(DecodeError::HeaderMismatch);
-        }
-        let counter = header & 0x0F;
         // Work on a copy: an error must leave the reassembler unchanged.
         let pos = self.slots.iter().position(|s| s.sa == sa && s.kind == kind);
         let mut slot = match pos.and_then(|i| self.slots.get(i)) {
@@ -510,88 +570,19 @@ impl<const CAP: usize> Reassembler<CAP> {
                 last_stamp: None,
             },
         };
-        let seen = match (index, slot.partial) {
-            (0, _) => 0u8,
-            (i, Some((c, seen))) if c == counter && seen == (1u8 << i) - 1 => seen,
-            _ => return Err(DecodeError::OutOfSequence),
-        };
-        let at = usize::from(index) * CHUNK;
         let mut trailer = [0u8; TRAILER_LEN];
-        if usize::from(index) < kind.frames() {
-            if let (Some(dst), Some(src)) = (slot.bytes.get_mut(at..at + CHUNK), data.get(1..)) {
-                dst.copy_from_slice(src);
-            }
-        } else if let Some(src) = data.get(1..1 + TRAILER_LEN) {
-            // The authenticator frame: its trailer, and zero padding.
-            trailer.copy_from_slice(src);
-            if data
-                .get(1 + TRAILER_LEN..)
-                .is_some_and(|p| p.iter().any(|b| *b != 0))
-            {
-                return Err(DecodeError::BadLength);
-            }
-        }
-        let seen = seen | 1 << index;
-        let mut result = None;
-        if usize::from(index) + 1 < n {
-            slot.partial = Some((counter, seen));
+        let secured = auth.is_some();
+        let (counter, whole) = if index == FD_INDEX || index == FD_SECURED_INDEX {
+            (
+                fd_chunks(&mut slot, index, frame.data(), &mut trailer, secured)?,
+                true,
+            )
         } else {
-            slot.partial = None;
-            let total = kind.frames() * CHUNK;
-            let body = slot.bytes.get(..total - 1).unwrap_or(&[]);
-            let crc = slot.bytes.get(total - 1).copied().unwrap_or(0);
-            if message_crc(kind, sa, counter, body) != crc {
-                return Err(DecodeError::Crc);
-            }
-            if slot.last_counter == Some(counter) {
-                return Err(DecodeError::Duplicate);
-            }
-            let msg = decode_body::<F>(kind, body)?;
-            let sender_ok = match &msg {
-                Message::State(s) | Message::Located { state: s, .. } => {
-                    s.id & 0xFF == u16::from(sa)
-                }
-                Message::Request(r) | Message::JunctionRequest { request: r, .. } => {
-                    r.id & 0xFF == u16::from(sa)
-                }
-                Message::Exit { id, .. } | Message::JunctionExit { id, .. } => {
-                    id & 0xFF == u16::from(sa)
-                }
-                // Permissions come only from an intersection manager: a vehicle cannot
-                // grant itself (or another) entry to A_S.
-                Message::Grant { .. } | Message::Revoke { .. } => {
-                    (MANAGER_ADDRESS..=MANAGER_LAST).contains(&sa)
-                }
-                Message::Sync { .. } => sa == CLOCK_ADDRESS,
-            };
-            if !sender_ok {
-                return Err(DecodeError::SenderMismatch);
-            }
-            // States must be newer than the last (by stamp), ticks later (by period).
-            let ordinal = match kind {
-                MessageKind::State => Some(rd_u32(body, 16)),
-                MessageKind::Located => Some(rd_u32(body, 21)),
-                MessageKind::Sync => Some(rd_u32(body, 0)),
-                _ => None,
-            };
-            if let Some(stamp) = ordinal {
-                if slot.last_stamp.is_some_and(|l| stamp <= l) {
-                    return Err(DecodeError::Stale);
-                }
-                slot.last_stamp = Some(stamp);
-            }
-            if pos.is_none() && self.slots.is_full() {
-                return Err(DecodeError::Full);
-            }
-            // Last, as the only check that records something outside this slot.
-            if let Some(v) = auth {
-                let all = slot.bytes.get(..total).unwrap_or(&[]);
-                v.freshness
-                    .verify(v.keys, kind as u8, sa, counter, all, &trailer, v.now_ms)
-                    .map_err(DecodeError::Auth)?;
-            }
-            slot.last_counter = Some(counter);
-            result = Some(msg);
+            classic_chunk(&mut slot, index, frame.data(), &mut trailer, secured)?
+        };
+        let mut result = None;
+        if whole {
+            result = Some(self.complete(&mut slot, pos, counter, &trailer, auth)?);
         }
         match pos.and_then(|i| self.slots.get_mut(i)) {
             Some(s) => *s = slot,
@@ -599,6 +590,162 @@ impl<const CAP: usize> Reassembler<CAP> {
         }
         Ok(result)
     }
+
+    /// Checks a whole message in `slot` (its payload chunks, and `trailer` when secured)
+    /// and records it there: CRC, duplicate, plausibility, sender, freshness of states
+    /// and ticks, room, and last the authenticator.
+    fn complete<F: Real, const K: usize, const R: usize>(
+        &self,
+        slot: &mut Slot,
+        pos: Option<usize>,
+        counter: u8,
+        trailer: &[u8; TRAILER_LEN],
+        auth: Option<Verifier<'_, K, R>>,
+    ) -> Result<Message<F>, DecodeError> {
+        let (kind, sa) = (slot.kind, slot.sa);
+        let total = kind.frames() * CHUNK;
+        let body = slot.bytes.get(..total - 1).unwrap_or(&[]);
+        let crc = slot.bytes.get(total - 1).copied().unwrap_or(0);
+        if message_crc(kind, sa, counter, body) != crc {
+            return Err(DecodeError::Crc);
+        }
+        if slot.last_counter == Some(counter) {
+            return Err(DecodeError::Duplicate);
+        }
+        let msg = decode_body::<F>(kind, body)?;
+        if !sender_ok(&msg, sa) {
+            return Err(DecodeError::SenderMismatch);
+        }
+        // States must be newer than the last (by stamp), ticks later (by period).
+        let ordinal = match kind {
+            MessageKind::State => Some(rd_u32(body, 16)),
+            MessageKind::Located => Some(rd_u32(body, 21)),
+            MessageKind::Sync => Some(rd_u32(body, 0)),
+            _ => None,
+        };
+        if let Some(stamp) = ordinal {
+            if slot.last_stamp.is_some_and(|l| stamp <= l) {
+                return Err(DecodeError::Stale);
+            }
+            slot.last_stamp = Some(stamp);
+        }
+        if pos.is_none() && self.slots.is_full() {
+            return Err(DecodeError::Full);
+        }
+        // Last, as the only check that records something outside this slot.
+        if let Some(v) = auth {
+            let all = slot.bytes.get(..total).unwrap_or(&[]);
+            v.freshness
+                .verify(v.keys, kind as u8, sa, counter, all, trailer, v.now_ms)
+                .map_err(DecodeError::Auth)?;
+        }
+        slot.last_counter = Some(counter);
+        Ok(msg)
+    }
+}
+
+/// Whether `sa` may send `msg`: a vehicle speaks only for itself; permissions come only
+/// from an intersection manager (a vehicle cannot grant itself, or another, entry to
+/// A_S); ticks only from the time master.
+fn sender_ok<F>(msg: &Message<F>, sa: u8) -> bool {
+    match msg {
+        Message::State(s) | Message::Located { state: s, .. } => s.id & 0xFF == u16::from(sa),
+        Message::Request(r) | Message::JunctionRequest { request: r, .. } => {
+            r.id & 0xFF == u16::from(sa)
+        }
+        Message::Exit { id, .. } | Message::JunctionExit { id, .. } => id & 0xFF == u16::from(sa),
+        Message::Grant { .. } | Message::Revoke { .. } => {
+            (MANAGER_ADDRESS..=MANAGER_LAST).contains(&sa)
+        }
+        Message::Sync { .. } => sa == CLOCK_ADDRESS,
+    }
+}
+
+/// Takes classic frame `index` of `slot`'s kind into `slot` (the authenticator frame's
+/// trailer into `trailer` when `secured`): its alive counter, and whether the message is
+/// now whole.
+fn classic_chunk(
+    slot: &mut Slot,
+    index: u8,
+    data: &[u8],
+    trailer: &mut [u8; TRAILER_LEN],
+    secured: bool,
+) -> Result<(u8, bool), DecodeError> {
+    let kind = slot.kind;
+    let n = kind.frames() + usize::from(secured);
+    if usize::from(index) >= n {
+        return Err(DecodeError::BadFrameIndex);
+    }
+    if data.len() != 8 {
+        return Err(DecodeError::BadLength);
+    }
+    let header = data.first().copied().unwrap_or(0);
+    if header >> 4 != index {
+        return Err(DecodeError::HeaderMismatch);
+    }
+    let counter = header & 0x0F;
+    let seen = match (index, slot.partial) {
+        (0, _) => 0u8,
+        (i, Some((c, seen))) if c == counter && seen == (1u8 << i) - 1 => seen,
+        _ => return Err(DecodeError::OutOfSequence),
+    };
+    let at = usize::from(index) * CHUNK;
+    if usize::from(index) < kind.frames() {
+        if let (Some(dst), Some(src)) = (slot.bytes.get_mut(at..at + CHUNK), data.get(1..)) {
+            dst.copy_from_slice(src);
+        }
+    } else if let Some(src) = data.get(1..1 + TRAILER_LEN) {
+        // The authenticator frame: its trailer, and zero padding.
+        trailer.copy_from_slice(src);
+        if data
+            .get(1 + TRAILER_LEN..)
+            .is_some_and(|p| p.iter().any(|b| *b != 0))
+        {
+            return Err(DecodeError::BadLength);
+        }
+    }
+    let seen = seen | 1 << index;
+    let whole = usize::from(index) + 1 == n;
+    slot.partial = if whole { None } else { Some((counter, seen)) };
+    Ok((counter, whole))
+}
+
+/// Takes a CAN FD frame (index [`FD_INDEX`] or [`FD_SECURED_INDEX`]) carrying a whole
+/// message of `slot`'s kind into `slot`, and its trailer into `trailer`: its alive
+/// counter. A secured receiver takes only frames with an authenticator; a plain one takes
+/// both (as it takes a classic secured stream's message frames).
+fn fd_chunks(
+    slot: &mut Slot,
+    index: u8,
+    data: &[u8],
+    trailer: &mut [u8; TRAILER_LEN],
+    secured: bool,
+) -> Result<u8, DecodeError> {
+    let with_trailer = index == FD_SECURED_INDEX;
+    if secured && !with_trailer {
+        return Err(DecodeError::BadFrameIndex);
+    }
+    let body = slot.kind.frames() * CHUNK;
+    let used = 1 + body + if with_trailer { TRAILER_LEN } else { 0 };
+    let padded = data.get(used..).is_some_and(|p| p.iter().any(|b| *b != 0));
+    if fd_len(used) != Some(data.len()) || padded {
+        return Err(DecodeError::BadLength);
+    }
+    let header = data.first().copied().unwrap_or(0);
+    if header >> 4 != index {
+        return Err(DecodeError::HeaderMismatch);
+    }
+    if let (Some(dst), Some(src)) = (slot.bytes.get_mut(..body), data.get(1..1 + body)) {
+        dst.copy_from_slice(src);
+    }
+    if let Some(src) = data.get(1 + body..used) {
+        if with_trailer {
+            trailer.copy_from_slice(src);
+        }
+    }
+    // A whole message: any classic reassembly of this sender and kind is superseded.
+    slot.partial = None;
+    Ok(header & 0x0F)
 }
 
 fn lane(n: u8) -> Option<u8> {
@@ -923,9 +1070,9 @@ mod tests {
         use super::*;
         use crate::secoc::{derive_key, FreshnessRx, Key, KeyStore};
 
-        const MASTER: Key = Key([7; 16]);
+        pub(super) const MASTER: Key = Key([7; 16]);
 
-        fn keys() -> KeyStore<8> {
+        pub(super) fn keys() -> KeyStore<8> {
             let mut k = KeyStore::new();
             for sa in [9u8, 8, MANAGER_ADDRESS, CLOCK_ADDRESS] {
                 k.insert(sa, derive_key(&MASTER, sa)).unwrap();
@@ -934,7 +1081,7 @@ mod tests {
         }
 
         /// Every kind, each from a sender allowed to send it.
-        fn every_kind() -> [(Message<f64>, u8); 9] {
+        pub(super) fn every_kind() -> [(Message<f64>, u8); 9] {
             let [e, je, rq, jrq, st, loc] = naming_vehicle_9();
             [
                 (e, 9),
@@ -955,23 +1102,23 @@ mod tests {
             ]
         }
 
-        struct Rx {
-            r: Reassembler<8>,
+        pub(super) struct Rx {
+            pub(super) r: Reassembler<8>,
             keys: KeyStore<8>,
             fresh: FreshnessRx<16>,
         }
 
         impl Rx {
-            fn new() -> Self {
+            pub(super) fn new() -> Self {
                 Self {
                     r: Reassembler::new(),
                     keys: keys(),
                     fresh: FreshnessRx::default(),
                 }
             }
-            fn push(
+            pub(super) fn push<Fr: Frame>(
                 &mut self,
-                f: &TestFrame,
+                f: &Fr,
                 now_ms: u64,
             ) -> Result<Option<Message<f64>>, DecodeError> {
                 let v = Verifier {
@@ -1122,6 +1269,153 @@ mod tests {
             assert_eq!(rx.push(&padded, 20_000), Err(DecodeError::BadLength));
             // The genuine one still goes through after all that.
             assert!(matches!(rx.push_all(&a, 20_000).last(), Some(Ok(Some(_)))));
+        }
+    }
+
+    mod fd {
+        use super::secured::{every_kind, Rx, MASTER};
+        use super::*;
+        use crate::frame::FdFrame;
+        use crate::secoc::derive_key;
+
+        fn fd(m: &Message<f64>, sa: u8, counter: u8) -> FdFrame {
+            encode_fd(m, sa, counter).unwrap()
+        }
+
+        fn with_data(f: &FdFrame, data: &[u8]) -> FdFrame {
+            FdFrame::new_fd(f.id(), data).unwrap()
+        }
+
+        #[test]
+        fn every_kind_fits_one_frame_that_carries_its_classic_chunks() {
+            for (m, sa) in every_kind() {
+                let n = m.kind().frames();
+                let f = fd(&m, sa, 5);
+                let used = 1 + n * CHUNK;
+                assert_eq!(f.data().len(), fd_len(used).unwrap(), "{m:?}");
+                assert_eq!(f.is_fd(), used > 8);
+                assert_eq!(f.data()[0], FD_INDEX << 4 | 5);
+                let Id::Extended(id) = f.id() else {
+                    panic!("extended")
+                };
+                assert_eq!(id.as_raw(), frame_id(m.kind(), FD_INDEX, sa));
+                let classic: Frames<TestFrame> = encode(&m, sa, 5).unwrap();
+                for (i, c) in classic.iter().enumerate() {
+                    assert_eq!(
+                        &f.data()[1 + i * CHUNK..1 + (i + 1) * CHUNK],
+                        &c.data()[1..]
+                    );
+                }
+                assert!(f.data()[used..].iter().all(|b| *b == 0));
+                let mut r = Reassembler::<8>::new();
+                let got = r.push::<f64, _>(&f).unwrap().unwrap();
+                assert_eq!(encode::<f64, TestFrame>(&got, sa, 5).unwrap(), classic);
+                let before = r.slots.clone();
+                assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::Duplicate));
+                assert_eq!(r.slots, before);
+            }
+            // A classic frame type cannot carry a message beyond 8 bytes.
+            let st = Message::State(state());
+            assert_eq!(
+                encode_fd::<f64, TestFrame>(&st, 7, 0),
+                Err(EncodeError::Frame)
+            );
+        }
+
+        #[test]
+        fn malformed_frames_are_refused_and_change_nothing() {
+            let st = Message::State(state());
+            let f = fd(&st, 0x07, 2);
+            let d = f.data();
+            assert_eq!(d.len(), 24);
+            let mut r = Reassembler::<8>::new();
+            // A classic first frame of another message is pending.
+            let classic: Frames<TestFrame> = encode(&st, 0x07, 9).unwrap();
+            assert_eq!(r.push::<f64, _>(&classic[0]), Ok(None));
+            let before = r.slots.clone();
+            let mut longer = [0u8; 32];
+            longer[..24].copy_from_slice(d);
+            let mut padded = [0u8; 24];
+            padded.copy_from_slice(d);
+            padded[23] = 1;
+            let mut header = [0u8; 24];
+            header.copy_from_slice(d);
+            header[0] = 2;
+            let mut flipped = [0u8; 24];
+            flipped.copy_from_slice(d);
+            flipped[5] ^= 0x10;
+            let mut other = state();
+            other.id = 0x0108;
+            let cases = [
+                (with_data(&f, &d[..20]), DecodeError::BadLength),
+                (with_data(&f, &longer), DecodeError::BadLength),
+                (with_data(&f, &padded), DecodeError::BadLength),
+                (with_data(&f, &header), DecodeError::HeaderMismatch),
+                (with_data(&f, &flipped), DecodeError::Crc),
+                // Sent by 0x07, naming vehicle 0x0108.
+                (
+                    fd(&Message::State(other), 0x07, 2),
+                    DecodeError::SenderMismatch,
+                ),
+            ];
+            for (bad, why) in cases {
+                assert_eq!(r.push::<f64, _>(&bad), Err(why));
+                assert_eq!(r.slots, before, "{why:?} changed the reassembler");
+            }
+            // The genuine frame supersedes the pending classic reassembly.
+            assert!(matches!(r.push::<f64, _>(&f), Ok(Some(Message::State(_)))));
+            assert_eq!(
+                r.push::<f64, _>(&classic[1]),
+                Err(DecodeError::OutOfSequence)
+            );
+        }
+
+        #[test]
+        fn a_secured_frame_carries_the_classic_authenticator_and_a_plain_one_is_refused() {
+            for (m, sa) in every_kind() {
+                let n = m.kind().frames();
+                let key = derive_key(&MASTER, sa);
+                let f: FdFrame = encode_fd_secured(&m, sa, 3, &key, 1_000).unwrap();
+                let used = 1 + n * CHUNK + TRAILER_LEN;
+                assert_eq!(f.data().len(), fd_len(used).unwrap(), "{m:?}");
+                assert_eq!(f.data()[0] >> 4, FD_SECURED_INDEX);
+                // The same MAC and freshness as the classic authenticator frame.
+                let classic: SecuredFrames<TestFrame> =
+                    encode_secured(&m, sa, 3, &key, 1_000).unwrap();
+                assert_eq!(
+                    &f.data()[1 + n * CHUNK..used],
+                    &classic[n].data()[1..1 + TRAILER_LEN]
+                );
+                let mut rx = Rx::new();
+                let got = rx.push(&f, 1_000).unwrap().unwrap();
+                assert_eq!(
+                    encode::<f64, TestFrame>(&got, sa, 3).unwrap(),
+                    encode(&m, sa, 3).unwrap()
+                );
+                // A plain receiver reads the message (it verifies nothing).
+                assert!(Reassembler::<8>::new()
+                    .push::<f64, _>(&f)
+                    .unwrap()
+                    .is_some());
+                // A secured receiver never takes a frame without an authenticator.
+                let mut rx = Rx::new();
+                assert_eq!(
+                    rx.push(&fd(&m, sa, 3), 1_000),
+                    Err(DecodeError::BadFrameIndex)
+                );
+                assert!(rx.r.slots.is_empty());
+            }
+            // A vehicle forging the manager's grant: refused, nothing recorded.
+            let grant = Message::Grant { id: 8, until: 9.0 };
+            let forged: FdFrame =
+                encode_fd_secured(&grant, MANAGER_ADDRESS, 1, &derive_key(&MASTER, 8), 2_000)
+                    .unwrap();
+            let mut rx = Rx::new();
+            assert_eq!(
+                rx.push(&forged, 2_000),
+                Err(DecodeError::Auth(AuthError::BadMac))
+            );
+            assert!(rx.r.slots.is_empty());
         }
     }
 

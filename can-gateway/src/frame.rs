@@ -1,5 +1,6 @@
-//! A plain classic CAN frame value implementing [`embedded_can::Frame`]: for in-process
-//! buses, logs and tests, where no driver's frame type is at hand.
+//! CAN frame values implementing [`embedded_can::Frame`] — [`PlainFrame`] (classic) and
+//! [`FdFrame`] (classic or CAN FD) — for in-process buses, logs and tests, where no
+//! driver's frame type is at hand.
 
 use embedded_can::{Frame, Id};
 
@@ -55,5 +56,139 @@ impl Frame for PlainFrame {
         } else {
             self.data.get(..usize::from(self.len)).unwrap_or(&[])
         }
+    }
+}
+
+/// A CAN frame held by value, classic (up to 8 data bytes) or CAN FD (a data length of
+/// [`crate::wire::fd_len`]: up to 64 bytes): what a host's CAN FD socket carries. Through
+/// [`Frame::new`] data of up to 8 bytes makes a classic frame and longer data an FD frame;
+/// [`FdFrame::new_fd`] makes an FD frame of any valid length.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FdFrame {
+    id: Id,
+    len: u8,
+    data: [u8; 64],
+    remote: bool,
+    fd: bool,
+}
+
+impl FdFrame {
+    /// A CAN FD frame: `None` unless `data`'s length is a CAN FD data length.
+    pub fn new_fd(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
+        if crate::wire::fd_len(data.len()) != Some(data.len()) {
+            return None;
+        }
+        let mut buf = [0u8; 64];
+        buf.get_mut(..data.len())?.copy_from_slice(data);
+        Some(Self {
+            id: id.into(),
+            len: data.len() as u8,
+            data: buf,
+            remote: false,
+            fd: true,
+        })
+    }
+
+    /// Whether it is a CAN FD frame.
+    pub fn is_fd(&self) -> bool {
+        self.fd
+    }
+}
+
+impl Frame for FdFrame {
+    fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
+        if data.len() > 8 {
+            return Self::new_fd(id, data);
+        }
+        let mut buf = [0u8; 64];
+        buf.get_mut(..data.len())?.copy_from_slice(data);
+        Some(Self {
+            id: id.into(),
+            len: data.len() as u8,
+            data: buf,
+            remote: false,
+            fd: false,
+        })
+    }
+
+    fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
+        (dlc <= 8).then(|| Self {
+            id: id.into(),
+            len: dlc as u8,
+            data: [0; 64],
+            remote: true,
+            fd: false,
+        })
+    }
+
+    fn is_extended(&self) -> bool {
+        matches!(self.id, Id::Extended(_))
+    }
+
+    fn is_remote_frame(&self) -> bool {
+        self.remote
+    }
+
+    fn id(&self) -> Id {
+        self.id
+    }
+
+    fn dlc(&self) -> usize {
+        usize::from(self.len)
+    }
+
+    fn data(&self) -> &[u8] {
+        if self.remote {
+            &[]
+        } else {
+            self.data.get(..usize::from(self.len)).unwrap_or(&[])
+        }
+    }
+}
+
+impl From<PlainFrame> for FdFrame {
+    fn from(p: PlainFrame) -> Self {
+        let mut data = [0u8; 64];
+        if let Some(dst) = data.get_mut(..p.data().len()) {
+            dst.copy_from_slice(p.data());
+        }
+        Self {
+            id: p.id(),
+            len: p.dlc() as u8,
+            data,
+            remote: p.is_remote_frame(),
+            fd: false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use embedded_can::{ExtendedId, StandardId};
+
+    #[test]
+    fn fd_frames_take_only_can_fd_lengths() {
+        let id = ExtendedId::new(0x18FF_1001).unwrap();
+        let data = [0xA5u8; 64];
+        for len in 0..=64 {
+            let valid = len <= 8 || crate::wire::FD_LENGTHS.contains(&len);
+            let f = FdFrame::new_fd(id, &data[..len]);
+            assert_eq!(f.is_some(), valid, "{len}");
+            let g = FdFrame::new(id, &data[..len]);
+            assert_eq!(g.is_some(), valid, "{len}");
+            if let Some(g) = g {
+                assert_eq!(g.is_fd(), len > 8);
+                assert_eq!(g.data(), &data[..len]);
+                assert_eq!(g.dlc(), len);
+            }
+        }
+        assert!(FdFrame::new(id, &[0; 65]).is_none());
+        let p = PlainFrame::new(StandardId::new(0x123).unwrap(), &[1, 2, 3]).unwrap();
+        let f = FdFrame::from(p);
+        assert!(!f.is_fd() && !f.is_extended());
+        assert_eq!((f.id(), f.data()), (p.id(), p.data()));
+        let r = FdFrame::from(PlainFrame::new_remote(id, 4).unwrap());
+        assert!(r.is_remote_frame() && r.data().is_empty() && r.dlc() == 4);
     }
 }

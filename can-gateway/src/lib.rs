@@ -1,6 +1,6 @@
 //! # can-gateway
 //!
-//! The planners' V2V and V2I messages on classic CAN frames: a `no_std`, allocation-free
+//! The planners' V2V and V2I messages on classic CAN and CAN FD frames: a `no_std`, allocation-free
 //! codec generic over [`embedded_can::Frame`], with AUTOSAR-E2E-style protection (an
 //! alive counter and a CRC-8 per message) and a reassembler that turns any byte
 //! sequence into either a message or a typed error, never a panic.
@@ -8,7 +8,7 @@
 //! - [`wire`]: the frame layout (29-bit J1939-style identifiers), units and resolutions;
 //! - [`crc`]: CRC-8 SAE J1850;
 //! - [`codec`]: encoding messages into frames and reassembling frames into messages;
-//! - [`frame`]: a plain frame value for in-process buses, logs and tests;
+//! - [`frame`]: classic and CAN FD frame values for in-process buses, logs and tests;
 //! - [`log`]: `candump -l` lines;
 //! - [`secoc`]: SecOC-style authentication (AES-128-CMAC, time-based freshness).
 //!
@@ -36,6 +36,6 @@ pub mod log;
 pub mod secoc;
 pub mod wire;
 
-pub use codec::{encode, DecodeError, EncodeError, Frames, Reassembler};
-pub use frame::PlainFrame;
+pub use codec::{encode, encode_fd, DecodeError, EncodeError, Frames, Reassembler};
+pub use frame::{FdFrame, PlainFrame};
 pub use wire::{Message, MessageKind};

@@ -5,9 +5,11 @@ use core::fmt::Write;
 use embedded_can::{Frame, Id};
 use heapless::String;
 
-/// One `candump -l` line (without newline) for `frame` seen at `micros` µs on `iface`.
-/// `None` if the interface name does not fit (the line holds 80 bytes).
-pub fn candump_line<Fr: Frame>(micros: u64, iface: &str, frame: &Fr) -> Option<String<80>> {
+/// One `candump -l` line (without newline) for `frame` seen at `micros` µs on `iface`;
+/// a frame with more than 8 data bytes is a CAN FD frame, written `ID##0DATA` (flags 0:
+/// no bit-rate switch) as candump writes it. `None` if the interface name does not fit
+/// (the line holds 192 bytes).
+pub fn candump_line<Fr: Frame>(micros: u64, iface: &str, frame: &Fr) -> Option<String<192>> {
     let mut s = String::new();
     write!(
         s,
@@ -20,6 +22,9 @@ pub fn candump_line<Fr: Frame>(micros: u64, iface: &str, frame: &Fr) -> Option<S
     match frame.id() {
         Id::Extended(e) => write!(s, "{:08X}#", e.as_raw()).ok()?,
         Id::Standard(st) => write!(s, "{:03X}#", st.as_raw()).ok()?,
+    }
+    if frame.data().len() > 8 {
+        s.push_str("#0").ok()?;
     }
     for b in frame.data() {
         write!(s, "{b:02X}").ok()?;

@@ -23,6 +23,14 @@
 //! with its junction (kind 9, 2 frames); grants come from each junction manager's own
 //! address. No field straddles two frames, so a DBC describes every one.
 //!
+//! **CAN FD**: a whole message in one frame, MAC included when secured. Its identifier's
+//! frame index is [`FD_INDEX`] (15; [`FD_SECURED_INDEX`], 14, when the frame carries an
+//! authenticator), so that a DBC names plain, secured and classic frames apart. Byte 0:
+//! that index (high nibble) and the alive counter; then the message's payload exactly as
+//! the classic frames carry it, chunk after chunk (7 bytes per classic frame, CRC last);
+//! then, when secured, the trailer of [`crate::secoc`]; then zeros up to the next CAN FD
+//! data length ([`fd_len`]: 8, 12, 16, 20, 24, 32, 48 or 64 bytes).
+//!
 //! **Time master**: a simulated fleet runs in lock-step on one tick per period,
 //! [`Message::Sync`] from [`CLOCK_ADDRESS`] (period number u32, end flag u8), protected
 //! like every other message.
@@ -37,6 +45,21 @@ pub const PDU_FORMAT: u32 = 0xFF;
 pub const CHUNK: usize = 7;
 /// The most frames a message spans.
 pub const MAX_FRAMES: usize = 4;
+/// Frame index of a CAN FD frame carrying a whole message (see the module docs).
+pub const FD_INDEX: u8 = 15;
+/// Frame index of a CAN FD frame carrying a whole message and its authenticator.
+pub const FD_SECURED_INDEX: u8 = 14;
+/// The data lengths a CAN FD frame can have beyond 8 bytes (ISO 11898-1 DLC 9–15).
+pub const FD_LENGTHS: [usize; 7] = [12, 16, 20, 24, 32, 48, 64];
+
+/// The shortest CAN FD data length that holds `n` bytes, if one does (n ≤ 64).
+pub fn fd_len(n: usize) -> Option<usize> {
+    if n <= 8 {
+        return Some(n);
+    }
+    FD_LENGTHS.iter().copied().find(|&l| l >= n)
+}
+
 /// Source address of a fleet's time master (sends [`Message::Sync`]); vehicles use
 /// addresses below it.
 pub const CLOCK_ADDRESS: u8 = 0xF0;

@@ -11,7 +11,24 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
-use can_gateway::PlainFrame as F8;
+use can_gateway::codec::encode_fd_secured;
+use can_gateway::secoc::{derive_key, Key};
+use can_gateway::{encode_fd, FdFrame, PlainFrame as F8, Reassembler};
+use embedded_can::{Frame, Id};
+
+/// The message the classic `frames` carry, its sender and its alive counter.
+fn message_of(frames: &Frames<F8>) -> (Message<f64>, u8, u8) {
+    let mut r = Reassembler::<2>::new();
+    let mut msg = None;
+    for f in frames {
+        msg = r.push::<f64, _>(f).expect("valid frames");
+    }
+    let Some(Id::Extended(id)) = frames.first().map(|f| f.id()) else {
+        panic!("extended frames")
+    };
+    let counter = frames[0].data()[0] & 0x0F;
+    (msg.expect("a whole message"), id.as_raw() as u8, counter)
+}
 
 #[test]
 fn cantools_decodes_the_gateways_candump_log() {
@@ -22,23 +39,47 @@ fn cantools_decodes_the_gateways_candump_log() {
     let mut log = String::new();
     let mut expected = String::new();
     let mut n = 0usize;
+    let mut line = |f: &dyn Fn(u64) -> Option<heapless::String<192>>,
+                    sig: &[(&str, f64)],
+                    log: &mut String,
+                    exp: &mut String| {
+        let line = f(1_700_000_000_000_000 + n as u64 * 10_000).expect("fits");
+        writeln!(log, "{line}").expect("string");
+        let fields: Vec<String> = sig.iter().map(|(k, v)| format!("\"{k}\": {v}")).collect();
+        writeln!(
+            exp,
+            "{{\"frame\": {n}, \"signals\": {{{}}}}}",
+            fields.join(", ")
+        )
+        .expect("string");
+        n += 1;
+    };
+    // Each message goes out three ways: its classic frames, one CAN FD frame, and one
+    // secured CAN FD frame (the same signals, and the freshness value after them).
     let mut push = |frames: &Frames<F8>,
                     signals: Vec<Vec<(&str, f64)>>,
                     log: &mut String,
                     exp: &mut String| {
-        for (f, sig) in frames.iter().zip(signals) {
-            let line =
-                candump_line(1_700_000_000_000_000 + n as u64 * 10_000, "vcan0", f).expect("fits");
-            writeln!(log, "{line}").expect("string");
-            let fields: Vec<String> = sig.iter().map(|(k, v)| format!("\"{k}\": {v}")).collect();
-            writeln!(
-                exp,
-                "{{\"frame\": {n}, \"signals\": {{{}}}}}",
-                fields.join(", ")
-            )
-            .expect("string");
-            n += 1;
+        for (f, sig) in frames.iter().zip(&signals) {
+            line(&|t| candump_line(t, "vcan0", f), sig, log, exp);
         }
+        let (msg, sa, counter) = message_of(frames);
+        let mut all: Vec<(&str, f64)> = signals
+            .concat()
+            .into_iter()
+            .filter(|(k, _)| *k != "FrameIndex")
+            .collect();
+        all.push(("AliveCounter", f64::from(counter)));
+        let fd: FdFrame = encode_fd(&msg, sa, counter).expect("fits one CAN FD frame");
+        all.push(("FrameIndex", 15.0));
+        line(&|t| candump_line(t, "vcan0", &fd), &all, log, exp);
+        let fv = 0x1_2345 + u64::from(sa);
+        let key = derive_key(&Key([3; 16]), sa);
+        let sec: FdFrame = encode_fd_secured(&msg, sa, counter, &key, fv).expect("fits");
+        all.pop();
+        all.push(("FrameIndex", 14.0));
+        all.push(("FreshnessValue", (fv & 0xFFFF) as f64));
+        line(&|t| candump_line(t, "vcan0", &sec), &all, log, exp);
     };
     for (i, (x, v, theta)) in [
         (1234.56, 15.02, -0.1234),
@@ -278,4 +319,16 @@ fn cantools_decodes_the_gateways_candump_log() {
         String::from_utf8_lossy(&out.stderr)
     );
     println!("{}", String::from_utf8_lossy(&out.stdout));
+    // The DBC's CAN FD messages are its classic frames laid end to end (tools/dbc_fd.py).
+    let fd = Command::new("python3")
+        .arg(dir.join("tools/dbc_fd.py"))
+        .arg(dir.join("can-gateway.dbc"))
+        .arg("--check")
+        .output()
+        .expect("python3 runs");
+    assert!(
+        fd.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fd.stdout)
+    );
 }

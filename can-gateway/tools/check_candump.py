@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Decodes a candump -l log written by can-gateway with cantools and the DBC, checks
-every frame's CRC-8 SAE J1850 independently, and compares the decoded physical values
+"""Decodes a candump -l log written by can-gateway (classic and CAN FD frames) with
+cantools and the DBC, checks every message's CRC-8 SAE J1850 independently, and compares the decoded physical values
 with the expected ones (JSON lines: {"frame": i, "signals": {name: value}}), within
 half a resolution step. Exit 0 on success, 1 with a message on the first mismatch."""
 import json
@@ -18,6 +18,28 @@ def crc8_j1850(data: bytes, crc: int = 0xFF) -> int:
 
 
 FRAMES_PER_KIND = {1: 3, 2: 2, 7: 4, 8: 3, 9: 2}  # kind code -> frames per message (others: 1)
+FD_INDEX, FD_SECURED_INDEX = 15, 14  # a whole message in one CAN FD frame (+ SecOC trailer)
+FD_LENGTHS = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64]
+TRAILER_LEN = 6
+
+
+def check_crc(sa, kind, counter, body):
+    want = crc8_j1850(bytes([kind, sa, counter]) + body[:-1]) ^ 0xFF
+    if want != body[-1]:
+        raise ValueError(
+            f"CRC mismatch in message kind {kind} from {sa}: {body[-1]:#04x} != {want:#04x}")
+
+
+def whole_fd(kind, index, sa, data):
+    """The message body of a CAN FD frame (index 15, or 14 with a trailer), checked."""
+    n = FRAMES_PER_KIND.get(kind, 1)
+    used = 1 + 7 * n + (TRAILER_LEN if index == FD_SECURED_INDEX else 0)
+    want = next(l for l in FD_LENGTHS if l >= used)
+    if len(data) != want or any(data[used:]) or data[0] >> 4 != index:
+        raise ValueError(f"malformed CAN FD frame of kind {kind} from {sa}: {data.hex()}")
+    body = data[1:1 + 7 * n]
+    check_crc(sa, kind, data[0] & 0x0F, body)
+    return body
 
 
 def reassemble(frames):
@@ -30,6 +52,10 @@ def reassemble(frames):
     for i, (can_id, data) in enumerate(frames):
         kind, index, sa = (can_id >> 12) & 0x0F, (can_id >> 8) & 0x0F, can_id & 0xFF
         key = (sa, kind)
+        if index in (FD_INDEX, FD_SECURED_INDEX):
+            body = whole_fd(kind, index, sa, data)
+            messages.append((sa, kind, data[0] & 0x0F, body, [i]))
+            continue
         if index == 0:
             pending[key] = (b"", [])
         if key not in pending:
@@ -39,10 +65,7 @@ def reassemble(frames):
         if index == FRAMES_PER_KIND.get(kind, 1) - 1:
             body, parts = pending.pop(key)
             counter = data[0] & 0x0F
-            want = crc8_j1850(bytes([kind, sa, counter]) + body[:-1]) ^ 0xFF
-            if want != body[-1]:
-                raise ValueError(
-                    f"CRC mismatch in message kind {kind} from {sa}: {body[-1]:#04x} != {want:#04x}")
+            check_crc(sa, kind, counter, body)
             messages.append((sa, kind, counter, body, parts))
     return messages, sorted(pending)
 
@@ -55,7 +78,9 @@ def main(dbc_path: str, log_path: str, expected_path: str) -> int:
         if not line:
             continue
         _ts, _iface, frame = line.split()
-        can_id, data = frame.split("#")
+        can_id, data = frame.split("#", 1)
+        if data.startswith("#"):  # CAN FD: ID##<flags nibble><data>
+            data = data[2:]
         frames.append((int(can_id, 16), bytes.fromhex(data)))
     expected = [json.loads(l) for l in open(expected_path) if l.strip()]
     # Reassemble messages per sender, kind and counter to check their CRC.

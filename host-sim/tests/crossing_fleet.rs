@@ -5,7 +5,7 @@
 mod common;
 
 use can_gateway::wire;
-use can_gateway::{encode, Frames, PlainFrame, Reassembler};
+use can_gateway::{encode, FdFrame, Frames, PlainFrame, Reassembler};
 use common::{assert_all_crossed_safely, builtin, Failing};
 use host_sim::bus::Message;
 use host_sim::fleet::can::{CanPort, Hub, HubPort, WireMap};
@@ -196,7 +196,7 @@ fn exit_of_another(sa: u8) -> wire::Message<f64> {
 }
 
 impl CanPort for Forger {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+    fn transmit(&mut self, frame: &FdFrame) -> io::Result<()> {
         self.inner.transmit(frame)?;
         let Some(sa) = self.sa else {
             return Ok(());
@@ -211,12 +211,12 @@ impl CanPort for Forger {
                 .map_err(|e| io::Error::other(format!("{e:?}")))?;
             self.forged = (self.forged + 1) & 0x0F;
             for f in &frames {
-                self.inner.transmit(f)?;
+                self.inner.transmit(&FdFrame::from(*f))?;
             }
         }
         Ok(())
     }
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         self.inner.receive(timeout)
     }
 }
@@ -346,7 +346,7 @@ struct Impostor {
 }
 
 impl CanPort for Impostor {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+    fn transmit(&mut self, frame: &FdFrame) -> io::Result<()> {
         self.inner.transmit(frame)?;
         let Some(sa) = self.sa else {
             return Ok(());
@@ -387,11 +387,11 @@ impl CanPort for Impostor {
         };
         self.counter = (self.counter + 1) & 0x0F;
         for f in &frames {
-            self.inner.transmit(f)?;
+            self.inner.transmit(&FdFrame::from(*f))?;
         }
         Ok(())
     }
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         self.inner.receive(timeout)
     }
 }
@@ -407,6 +407,7 @@ fn with_impostors(
         seed: None,
         medium: "impostors' hub",
         keys: keys.clone(),
+        fd: false,
     }
     .run(
         sc.clone(),
@@ -460,6 +461,7 @@ fn grants_forged_under_the_managers_address_pass_a_plain_fleet_not_an_authentica
         None,
         &Medium::Hub,
         Some(keys.clone()),
+        false,
         &mut |_| {},
     )
     .unwrap_or_else(|e| panic!("{e}"));

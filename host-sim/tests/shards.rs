@@ -150,7 +150,9 @@ fn four_fault_grid_and_demand_shards_merge_into_the_unsharded_experiments() {
     // workload, one run each.
     check_command(
         &["experiment", "faults"],
-        &["--grid", "--losses", "0.5", "--delays", "0.1", "--runs", "1"],
+        &[
+            "--grid", "--losses", "0.5", "--delays", "0.1", "--runs", "1",
+        ],
     );
     // Rates given in another order are the same experiment (it runs them ascending).
     check_command(

@@ -86,12 +86,23 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
             continue
         try:
             ts, iface, frame = line.split()
-            can_id, data = frame.split("#")
+            can_id, data = frame.split("#", 1)
+            if data.startswith("#"):  # CAN FD: ID##<flags nibble><data>
+                data = data[2:]
             frames.append((float(ts.strip("()")), int(can_id, 16), bytes.fromhex(data)))
         except ValueError:
             fail(f"{log_path}:{n}: not a candump -l line: {line!r}")
         if iface != "vcan0":
             fail(f"{log_path}:{n}: interface {iface}")
+    # A CAN FD run sends every message as one frame (index 15, or 14 with a MAC); a
+    # classic run never does.
+    whole = sum(((can_id >> 8) & 0x0F) in (14, 15) for _ts, can_id, _d in frames)
+    if s.get("can_fd") and whole != len(frames):
+        fail(f"CAN FD run: {len(frames) - whole} frames are not whole messages")
+    if not s.get("can_fd") and whole:
+        fail(f"classic run: {whole} CAN FD frames")
+    print(f"frames: {len(frames)}, {'CAN FD, one per message' if s.get('can_fd') else 'classic CAN'}; "
+          f"{sum(len(d) > 8 for _ts, _id, d in frames)} with more than 8 data bytes")
     names = Counter()
     decoded = []
     for _ts, can_id, data in frames:

@@ -8,7 +8,9 @@
 # cantools and the DBC (check_vcan_run.py): against the vehicles' trace for a road
 # scenario, against the summary's message counts for an intersection.
 #
-# Usage: host-sim/vcan/run-in-qemu.sh [SCENARIO.toml ...]   (default: multilane.toml)
+# Usage: host-sim/vcan/run-in-qemu.sh [SCENARIO.toml ...] [--can-fd SCENARIO.toml ...]
+#   (default: multilane.toml). Scenarios after --can-fd run with `--can-fd`: every
+#   message in one CAN FD frame (vcan0 has MTU 72, so both kinds travel on it).
 # Results go to $VCAN_OUT (default: vcan-qemu in cargo's target directory).
 # Needs: qemu-system-x86_64, apt-get (Debian's archive), cargo with the
 # x86_64-unknown-linux-musl target, python3 with cantools (.ci/run installs all of them).
@@ -18,10 +20,18 @@ set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
 scenarios=()
+fd=() # per scenario: "--can-fd" or ""
+on_fd=""
 for sc in "${@:-$root/scenarios/multilane.toml}"; do
+  if [ "$sc" = "--can-fd" ]; then
+    on_fd="--can-fd"
+    continue
+  fi
   [ -f "$sc" ] || { echo "run-in-qemu: no scenario $sc" >&2; exit 2; }
   scenarios+=("$(realpath "$sc")")
+  fd+=("$on_fd")
 done
+[ "${#scenarios[@]}" -gt 0 ] || { echo "run-in-qemu: no scenario after --can-fd" >&2; exit 2; }
 for tool in qemu-system-x86_64 apt-get dpkg-deb python3 cargo; do
   command -v "$tool" >/dev/null || { echo "run-in-qemu: $tool is missing" >&2; exit 2; }
 done
@@ -82,6 +92,7 @@ i=0
 for sc in "${scenarios[@]}"; do # numbered: run in the order given
   i=$((i + 1))
   cp "$sc" "$r/work/scenarios/$i-$(basename "$sc")"
+  echo "${fd[$((i - 1))]}" > "$r/work/scenarios/$i-$(basename "$sc" .toml).args"
 done
 echo "${HOST_SIM_ARGS:-}" > "$r/work/args"
 (cd "$r" && find . | "$r/bin/busybox" cpio -o -H newc 2>/dev/null | gzip -1) > "$out/initramfs.gz"

@@ -3,13 +3,14 @@
 //! receiver's clock on, pushed into one reassembler with a key
 //! store and a freshness record. Any input must give messages, `None`s or typed errors —
 //! never a panic — and a rejected frame must leave both the reassembler and the freshness
-//! record unchanged. Half the inputs start with a genuinely signed message, so the fuzzer
-//! also mutates frames that reach the MAC check.
+//! record unchanged. Half the inputs start with genuinely signed messages (classic frames,
+//! or CAN FD frames with their MAC inside), so the fuzzer also mutates frames that reach
+//! the MAC check.
 #![no_main]
 
-use can_gateway::codec::{encode_secured, SecuredFrames, Verifier};
+use can_gateway::codec::{encode_fd_secured, encode_secured, SecuredFrames, Verifier};
 use can_gateway::secoc::{derive_key, FreshnessRx, Key, KeyStore};
-use can_gateway::{Message, PlainFrame, Reassembler};
+use can_gateway::{FdFrame, Message, PlainFrame, Reassembler};
 use libfuzzer_sys::fuzz_target;
 
 #[path = "frames.rs"]
@@ -25,12 +26,21 @@ fuzz_target!(|bytes: &[u8]| {
     let mut fresh = FreshnessRx::<8>::default();
     let mut r = Reassembler::<8>::new();
     let mut now: u64 = 1_000;
-    let mut received: Vec<PlainFrame> = Vec::new();
-    if bytes.first().is_some_and(|b| b & 1 == 1) {
-        let m = Message::<f64>::Grant { id: 2, until: 3.0 };
-        let signed: SecuredFrames<PlainFrame> =
-            encode_secured(&m, 0xF1, 1, &derive_key(&MASTER, 0xF1), now).unwrap();
-        received.extend(signed);
+    let mut received: Vec<FdFrame> = Vec::new();
+    let m = Message::<f64>::Grant { id: 2, until: 3.0 };
+    let key = derive_key(&MASTER, 0xF1);
+    match bytes.first().map(|b| b & 3) {
+        Some(1) => {
+            let signed: SecuredFrames<PlainFrame> = encode_secured(&m, 0xF1, 1, &key, now).unwrap();
+            received.extend(signed.into_iter().map(FdFrame::from));
+        }
+        Some(3) => {
+            let at = bytes.get(1).map_or(1.0, |b| f64::from(*b));
+            let exit = Message::Exit { id: 1, at };
+            received.push(encode_fd_secured(&exit, 1, 2, &derive_key(&MASTER, 1), now).unwrap());
+            received.push(encode_fd_secured(&m, 0xF1, 1, &key, now).unwrap());
+        }
+        _ => {}
     }
     let mut rest = bytes;
     // Each frame ([`frames::next`]) is followed by one byte that moves the clock on.

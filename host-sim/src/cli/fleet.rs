@@ -41,17 +41,25 @@ pub fn fits_the_bus(file: &Path, spec: &WorldSpec) -> Result<(), ExitCode> {
     }
 }
 
-/// Runs the fleet (authenticated with `keys`, if given).
+/// How the fleet's nodes talk: authenticated with `keys`, if given; one CAN FD frame
+/// per message when `fd`.
+pub struct Link {
+    /// The fleet's keys.
+    pub keys: Option<Arc<Keys>>,
+    /// CAN FD.
+    pub fd: bool,
+}
+
+/// Runs the fleet on `bus` over `link`.
 pub fn run(
     bus: &str,
     spec: WorldSpec,
-    solver: SolverChoice,
-    seed: Option<u64>,
-    keys: Option<Arc<Keys>>,
+    (solver, seed): (SolverChoice, Option<u64>),
+    link: Link,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Result<FleetSummary, FleetError> {
     let m = medium(bus).map_err(FleetError::Unsupported)?;
-    fleet::run_keyed(spec, solver, seed, &m, keys, trace)
+    fleet::run_keyed(spec, solver, seed, &m, link.keys, link.fd, trace)
 }
 
 /// The public master key of simulations: `--auth` derives every node's key from it. It

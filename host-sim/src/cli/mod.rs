@@ -90,6 +90,11 @@ enum Command {
         /// digits"` and/or `[nodes]` "0xSA" = "32 hex digits"); implies --auth.
         #[arg(long, value_name = "keys.toml")]
         keys: Option<PathBuf>,
+        /// With `--bus`: every message (its authenticator included) goes as one CAN FD
+        /// frame instead of up to five classic ones; an interface must carry CAN FD
+        /// (vcan: `ip link set vcan0 mtu 72`).
+        #[arg(long)]
+        can_fd: bool,
     },
     /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
     Platoons(sweep::PlatoonsArgs),
@@ -135,6 +140,7 @@ pub fn main() -> ExitCode {
             bus,
             auth,
             keys,
+            can_fd,
         } => run::run(run::RunArgs {
             file,
             seed,
@@ -146,6 +152,7 @@ pub fn main() -> ExitCode {
             bus,
             auth: auth || keys.is_some(),
             keys,
+            can_fd,
         }),
         Command::Platoons(a) => sweep::platoons(a),
         Command::Traffic(a) => sweep::traffic(a),

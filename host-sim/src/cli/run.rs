@@ -33,6 +33,8 @@ pub struct RunArgs {
     pub auth: bool,
     /// The key file (else keys derived from the simulation master key).
     pub keys: Option<PathBuf>,
+    /// One CAN FD frame per message.
+    pub can_fd: bool,
 }
 
 /// Where a run's rows go.
@@ -120,6 +122,11 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
     if keys.is_some() && a.bus == "in-process" {
         return bad_input("--auth and --keys authenticate CAN frames: use them with --bus can-hub or an interface");
     }
+    if a.can_fd && a.bus == "in-process" {
+        return bad_input(
+            "--can-fd puts messages on CAN FD frames: use it with --bus can-hub or an interface",
+        );
+    }
     let name = spec.name.clone();
     let net = spec.network.clone();
     let outcome = if a.bus == "in-process" {
@@ -130,12 +137,15 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
         .map(|s| (s, None))
         .map_err(|e| bad_input(format!("bus: {e}")))
     } else {
-        super::fleet::run(&a.bus, spec, a.solver, a.seed, keys, &mut |r| sinks.row(r))
-            .map(|f| (f.run.clone(), Some(f)))
-            .map_err(|e| {
-                eprintln!("error: --bus {}: {e}", a.bus);
-                ExitCode::from(EXIT_BUS)
-            })
+        let link = super::fleet::Link { keys, fd: a.can_fd };
+        super::fleet::run(&a.bus, spec, (a.solver, a.seed), link, &mut |r| {
+            sinks.row(r)
+        })
+        .map(|f| (f.run.clone(), Some(f)))
+        .map_err(|e| {
+            eprintln!("error: --bus {}: {e}", a.bus);
+            ExitCode::from(EXIT_BUS)
+        })
     };
     let (summary, fleet) = match outcome {
         Ok(x) => x,

@@ -1,6 +1,7 @@
 //! The planners' messages as real CAN frames: can-gateway's codec over a [`CanPort`] —
 //! SocketCAN on Linux (`socketcan` 4, e.g. `vcan0`) or an in-process frame [`Hub`] —
-//! with kernel (or hub) receive time stamps.
+//! with kernel (or hub) receive time stamps; classic CAN (a message in up to five
+//! frames) or CAN FD (a whole message, authenticator included, in one frame).
 //!
 //! - [`CanNode`]: one node's attachment (its port, alive counters, reassembler, counts);
 //! - [`CanBus`]: the message-level [`Bus`] over one node per vehicle, so that the
@@ -19,14 +20,18 @@
 use crate::bus::{Bus, BusError, Message, Received};
 use crate::world::network::Network;
 use crate::world::LENGTH_M;
-use can_gateway::codec::{encode_secured, DecodeError, EncodeError, SecuredFrames, Verifier};
+use can_gateway::codec::{
+    encode_fd_secured, encode_secured, DecodeError, EncodeError, SecuredFrames, Verifier,
+};
 use can_gateway::secoc::{derive_key, FreshnessRx, FreshnessTx, Key, KeyStore};
 use can_gateway::wire::{self, CLOCK_ADDRESS};
-use can_gateway::{encode, Frames, PlainFrame, Reassembler};
+use can_gateway::{encode, encode_fd, FdFrame, Frames, PlainFrame, Reassembler};
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::Track;
 use serde::Serialize;
-use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions};
+use socketcan::{
+    CanAnyFrame, CanFdFrame, CanFdSocket, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions,
+};
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::io;
@@ -55,26 +60,32 @@ const TX_RETRIES: u32 = 100;
 
 /// One node's attachment to a CAN medium.
 pub trait CanPort: Send {
-    /// Transmits one frame.
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()>;
+    /// Transmits one frame (classic, or CAN FD when it carries more than 8 bytes).
+    fn transmit(&mut self, frame: &FdFrame) -> io::Result<()>;
     /// The next received frame and its receive time stamp, waiting up to `timeout`
     /// (zero: only a frame already there); `None` when none came in time.
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>>;
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>>;
 }
 
 impl<P: CanPort + ?Sized> CanPort for Box<P> {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+    fn transmit(&mut self, frame: &FdFrame) -> io::Result<()> {
         (**self).transmit(frame)
     }
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         (**self).receive(timeout)
     }
+}
+
+/// A raw SocketCAN socket: classic frames only, or classic and CAN FD frames.
+enum Sock {
+    Classic(CanSocket),
+    Fd(CanFdSocket),
 }
 
 /// A raw SocketCAN socket bound to one interface, with `SO_TIMESTAMPNS` receive stamps
 /// (the kernel's time of arrival at the socket).
 pub struct SocketCanPort {
-    sock: CanSocket,
+    sock: Sock,
     /// The read timeout last set (avoids a system call per read).
     timeout: Option<Duration>,
 }
@@ -83,6 +94,38 @@ impl SocketCanPort {
     /// Opens a socket on `iface` (e.g. `vcan0`) with receive time stamps.
     pub fn open(iface: &str) -> io::Result<Self> {
         let sock = CanSocket::open(iface)?;
+        Self::tune(&sock)?;
+        Ok(Self {
+            sock: Sock::Classic(sock),
+            timeout: None,
+        })
+    }
+
+    /// Opens a CAN FD socket on `iface`, which must carry CAN FD frames (a vcan with MTU
+    /// 72: `ip link set vcan0 mtu 72`).
+    pub fn open_fd(iface: &str) -> io::Result<Self> {
+        let mtu = std::fs::read_to_string(format!("/sys/class/net/{iface}/mtu"))
+            .ok()
+            .and_then(|m| m.trim().parse::<u32>().ok());
+        if let Some(mtu) = mtu.filter(|&m| m < CANFD_MTU) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{iface} has MTU {mtu}: classic CAN only; CAN FD needs {CANFD_MTU} \
+                     (ip link set {iface} mtu {CANFD_MTU})"
+                ),
+            ));
+        }
+        let sock = CanFdSocket::open(iface)?;
+        Self::tune(&sock)?;
+        Ok(Self {
+            sock: Sock::Fd(sock),
+            timeout: None,
+        })
+    }
+
+    /// Receive time stamps and a receive buffer for a whole fleet's traffic.
+    fn tune(sock: &impl SocketOptions) -> io::Result<()> {
         sock.set_recv_timestamp(true)?;
         // Every node hears every frame of the fleet; a task the scheduler starves for a
         // moment (a busy host, a VM under TCG) must not have the kernel drop frames for a
@@ -98,20 +141,76 @@ impl SocketCanPort {
             // Best effort: the default still works on an idle machine.
             let _ = sock.set_socket_option_int(SOL_SOCKET, SO_RCVBUF, RECV_BUFFER_BYTES);
         }
-        Ok(Self {
-            sock,
-            timeout: None,
-        })
+        Ok(())
     }
 
-    /// A socket that only transmits: it accepts no frames, so its receive queue cannot
-    /// fill up with traffic nobody reads.
-    pub fn open_transmit_only(iface: &str) -> io::Result<Self> {
-        let port = Self::open(iface)?;
-        port.sock.set_filter_drop_all()?;
+    /// A socket that only transmits (CAN FD ones too when `fd`): it accepts no frames, so
+    /// its receive queue cannot fill up with traffic nobody reads.
+    pub fn open_transmit_only(iface: &str, fd: bool) -> io::Result<Self> {
+        let port = if fd {
+            Self::open_fd(iface)?
+        } else {
+            Self::open(iface)?
+        };
+        match &port.sock {
+            Sock::Classic(s) => s.set_filter_drop_all()?,
+            Sock::Fd(s) => s.set_filter_drop_all()?,
+        }
         Ok(port)
     }
+
+    /// Writes `frame`, retrying while the interface's queue is full.
+    fn write(&self, frame: &FdFrame) -> io::Result<()> {
+        let unrepresentable =
+            || io::Error::new(io::ErrorKind::InvalidInput, "frame not representable");
+        let classic = || CanFrame::new(frame.id(), frame.data()).ok_or_else(unrepresentable);
+        match &self.sock {
+            Sock::Classic(_) if frame.is_fd() => Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                "a CAN FD frame on a classic socket",
+            )),
+            Sock::Classic(s) => s.write_frame(&classic()?),
+            Sock::Fd(s) if frame.is_fd() => {
+                let f = CanFdFrame::new(frame.id(), frame.data()).ok_or_else(unrepresentable)?;
+                s.write_frame(&f)
+            }
+            Sock::Fd(s) => s.write_frame(&classic()?),
+        }
+    }
+
+    /// Reads one frame and its time stamp.
+    fn read(&self) -> io::Result<(Option<FdFrame>, SystemTime)> {
+        match &self.sock {
+            Sock::Classic(s) => {
+                let (frame, at) = s.read_frame_with_timestamp()?;
+                let f = match frame {
+                    CanFrame::Remote(r) => FdFrame::new_remote(r.id(), r.dlc()),
+                    other => FdFrame::new(other.id(), other.data()),
+                };
+                Ok((f, at))
+            }
+            Sock::Fd(s) => {
+                let (frame, at) = s.read_frame_with_timestamp()?;
+                let f = match frame {
+                    CanAnyFrame::Remote(r) => FdFrame::new_remote(r.id(), r.dlc()),
+                    CanAnyFrame::Fd(f) => FdFrame::new_fd(f.id(), f.data()),
+                    other => FdFrame::new(other.id(), other.data()),
+                };
+                Ok((f, at))
+            }
+        }
+    }
+
+    fn set_read_timeout(&self, t: Duration) -> io::Result<()> {
+        match &self.sock {
+            Sock::Classic(s) => s.set_read_timeout(t),
+            Sock::Fd(s) => s.set_read_timeout(t),
+        }
+    }
 }
+
+/// The MTU of a CAN FD interface (`struct canfd_frame`).
+const CANFD_MTU: u32 = 72;
 
 impl fmt::Debug for SocketCanPort {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -120,13 +219,10 @@ impl fmt::Debug for SocketCanPort {
 }
 
 impl CanPort for SocketCanPort {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
-        let f = CanFrame::new(frame.id(), frame.data()).ok_or_else(|| {
-            io::Error::new(io::ErrorKind::InvalidInput, "frame not representable")
-        })?;
+    fn transmit(&mut self, frame: &FdFrame) -> io::Result<()> {
         let mut tries = 0;
         loop {
-            match self.sock.write_frame(&f) {
+            match self.write(frame) {
                 Ok(()) => return Ok(()),
                 Err(e) if e.raw_os_error() == Some(ENOBUFS) && tries < TX_RETRIES => {
                     tries += 1;
@@ -137,21 +233,15 @@ impl CanPort for SocketCanPort {
         }
     }
 
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         // SO_RCVTIMEO of zero means "block forever"; a microsecond is the shortest wait.
         let t = timeout.max(Duration::from_micros(1));
         if self.timeout != Some(t) {
-            self.sock.set_read_timeout(t)?;
+            self.set_read_timeout(t)?;
             self.timeout = Some(t);
         }
-        match self.sock.read_frame_with_timestamp() {
-            Ok((frame, at)) => {
-                let plain = match frame {
-                    CanFrame::Remote(r) => PlainFrame::new_remote(r.id(), r.dlc()),
-                    other => PlainFrame::new(other.id(), other.data()),
-                };
-                Ok(plain.map(|p| (p, at)))
-            }
+        match self.read() {
+            Ok((frame, at)) => Ok(frame.map(|f| (f, at))),
             Err(e)
                 if matches!(
                     e.kind(),
@@ -193,7 +283,7 @@ fn steering_warning(iface: &str, cpus: usize, path: &str, mask: &str) -> Option<
 /// Linux's ENOBUFS (no `ErrorKind` of std names it).
 const ENOBUFS: i32 = 105;
 
-type Queues = Vec<VecDeque<(PlainFrame, SystemTime)>>;
+type Queues = Vec<VecDeque<(FdFrame, SystemTime)>>;
 
 /// Frames a hub port holds for its reader before it overruns. A CAN controller's receive
 /// FIFO (and a SocketCAN socket's buffer) is bounded the same way: a reader that stops
@@ -242,7 +332,7 @@ fn poisoned<T>(_: T) -> io::Error {
 }
 
 impl CanPort for HubPort {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+    fn transmit(&mut self, frame: &FdFrame) -> io::Result<()> {
         let (lock, cv) = &*self.hub;
         let mut queues = lock.lock().map_err(poisoned)?;
         let now = SystemTime::now();
@@ -256,7 +346,7 @@ impl CanPort for HubPort {
         Ok(())
     }
 
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         let (lock, cv) = &*self.hub;
         let deadline = Instant::now() + timeout;
         let mut queues = lock.lock().map_err(poisoned)?;
@@ -408,6 +498,8 @@ pub struct CanNode<P> {
     /// The node's time on the fleet's clock (ms): freshness of what it sends, and the
     /// centre of its acceptance window.
     now_ms: u64,
+    /// It sends each message as one CAN FD frame.
+    fd: bool,
 }
 
 impl<P> fmt::Debug for CanNode<P> {
@@ -430,7 +522,15 @@ impl<P: CanPort> CanNode<P> {
             stats: CanStats::default(),
             security: None,
             now_ms: 0,
+            fd: false,
         }
+    }
+
+    /// This node, sending each message (with its authenticator, if any) as one CAN FD
+    /// frame; it receives both kinds.
+    pub fn with_fd(mut self) -> Self {
+        self.fd = true;
+        self
     }
 
     /// This node, authenticating with `keys` (its own among them).
@@ -462,18 +562,29 @@ impl<P: CanPort> CanNode<P> {
     pub fn send_wire(&mut self, msg: &wire::Message<f64>) -> Result<(), CanError> {
         let k = msg.kind() as usize;
         let counter = self.counters.get(k).copied().unwrap_or(0);
+        let (sa, fd) = (self.sa, self.fd);
         match &mut self.security {
+            None if fd => {
+                let frame: FdFrame = encode_fd(msg, sa, counter).map_err(CanError::Encode)?;
+                self.transmit_all(&[frame])?;
+            }
             None => {
                 let frames: Frames<PlainFrame> =
-                    encode(msg, self.sa, counter).map_err(CanError::Encode)?;
+                    encode(msg, sa, counter).map_err(CanError::Encode)?;
                 self.transmit_all(&frames)?;
             }
             Some(s) => {
-                let key = *s.keys.get(self.sa).ok_or(CanError::NoKey(self.sa))?;
+                let key = *s.keys.get(sa).ok_or(CanError::NoKey(sa))?;
                 let fv = s.tx.next(msg.kind() as u8, self.now_ms);
-                let frames: SecuredFrames<PlainFrame> =
-                    encode_secured(msg, self.sa, counter, &key, fv).map_err(CanError::Encode)?;
-                self.transmit_all(&frames)?;
+                if fd {
+                    let frame: FdFrame =
+                        encode_fd_secured(msg, sa, counter, &key, fv).map_err(CanError::Encode)?;
+                    self.transmit_all(&[frame])?;
+                } else {
+                    let frames: SecuredFrames<PlainFrame> =
+                        encode_secured(msg, sa, counter, &key, fv).map_err(CanError::Encode)?;
+                    self.transmit_all(&frames)?;
+                }
             }
         }
         if let Some(c) = self.counters.get_mut(k) {
@@ -482,9 +593,9 @@ impl<P: CanPort> CanNode<P> {
         Ok(())
     }
 
-    fn transmit_all(&mut self, frames: &[PlainFrame]) -> Result<(), CanError> {
+    fn transmit_all<Fr: Into<FdFrame> + Copy>(&mut self, frames: &[Fr]) -> Result<(), CanError> {
         for f in frames {
-            self.port.transmit(f)?;
+            self.port.transmit(&(*f).into())?;
             self.stats.frames_sent += 1;
         }
         Ok(())

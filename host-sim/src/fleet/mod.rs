@@ -149,6 +149,8 @@ pub struct FleetSummary {
     /// Every message carried a SecOC-style authenticator, and every node accepted only
     /// those that verified (issue 17).
     pub authenticated: bool,
+    /// Every message went as one CAN FD frame (its authenticator inside).
+    pub can_fd: bool,
     /// States: publication (before the first frame is written) to the receiving socket's
     /// time stamp of the last frame.
     pub state_latency: Latency,
@@ -328,17 +330,19 @@ pub fn run(
     medium: &Medium,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Result<FleetSummary, FleetError> {
-    run_keyed(spec, solver, seed, medium, None, trace)
+    run_keyed(spec, solver, seed, medium, None, false, trace)
 }
 
 /// [`run`], every node authenticating what it sends and verifying what it accepts with
-/// `keys` (issue 17); `None` runs without.
+/// `keys` (issue 17; `None` runs without), and sending each message as one CAN FD frame
+/// when `fd` (an interface must then carry CAN FD: MTU 72).
 pub fn run_keyed(
     spec: WorldSpec,
     solver: SolverChoice,
     seed: Option<u64>,
     medium: &Medium,
     keys: Option<Arc<Keys>>,
+    fd: bool,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Result<FleetSummary, FleetError> {
     let name = medium.to_string();
@@ -347,6 +351,7 @@ pub fn run_keyed(
         seed,
         medium: &name,
         keys,
+        fd,
     };
     match medium {
         Medium::SocketCan(iface) => {
@@ -355,7 +360,8 @@ pub fn run_keyed(
             }
             let iface = iface.clone();
             let open = move |n: Node| match n {
-                Node::Clock => SocketCanPort::open_transmit_only(&iface),
+                Node::Clock => SocketCanPort::open_transmit_only(&iface, fd),
+                _ if fd => SocketCanPort::open_fd(&iface),
                 _ => SocketCanPort::open(&iface),
             };
             fleet.run(spec, open, trace)
@@ -382,6 +388,7 @@ pub fn run_with_ports<P: CanPort + 'static>(
         seed,
         medium,
         keys: None,
+        fd: false,
     };
     fleet.run(spec, open, trace)
 }
@@ -396,6 +403,8 @@ pub struct Fleet<'a> {
     pub medium: &'a str,
     /// With keys, every message is authenticated (issue 17).
     pub keys: Option<Arc<Keys>>,
+    /// Every message goes as one CAN FD frame.
+    pub fd: bool,
 }
 
 impl Fleet<'_> {
@@ -409,10 +418,10 @@ impl Fleet<'_> {
         if let Some(why) = unsupported(&spec) {
             return Err(FleetError::Unsupported(why));
         }
-        let (solver, seed, keys) = (self.solver, self.seed, self.keys);
+        let (solver, seed, keys, fd) = (self.solver, self.seed, self.keys, self.fd);
         match spec.horizon {
-            50 => Harness::<50>::new(spec, solver, seed, keys).run(self.medium, open, trace),
-            _ => Harness::<20>::new(spec, solver, seed, keys).run(self.medium, open, trace),
+            50 => Harness::<50>::new(spec, solver, seed, keys, fd).run(self.medium, open, trace),
+            _ => Harness::<20>::new(spec, solver, seed, keys, fd).run(self.medium, open, trace),
         }
     }
 }
@@ -424,6 +433,7 @@ struct Harness<const N: usize> {
     seed: u64,
     lim: Limits,
     keys: Option<Arc<Keys>>,
+    fd: bool,
 }
 
 /// The latencies and counts the harness gathers.
@@ -476,6 +486,7 @@ impl<const N: usize> Harness<N> {
         solver: SolverChoice,
         seed: Option<u64>,
         keys: Option<Arc<Keys>>,
+        fd: bool,
     ) -> Self {
         Self {
             seed: seed.unwrap_or(spec.seed),
@@ -483,6 +494,7 @@ impl<const N: usize> Harness<N> {
             solver,
             lim: Limits::table_i(),
             keys,
+            fd,
         }
     }
 
@@ -516,6 +528,9 @@ impl<const N: usize> Harness<N> {
         let mut nodes = Nodes::open(&mut open, &vehicles, &managers, &map)?;
         if let Some(keys) = &self.keys {
             nodes = nodes.with_keys(keys);
+        }
+        if self.fd {
+            nodes = nodes.with_fd();
         }
         let order: Vec<u16> = vehicles.iter().map(|v| v.id).collect();
         let ctx = TaskCtx {
@@ -636,6 +651,7 @@ impl<const N: usize> Harness<N> {
             messages: msgs,
             can,
             authenticated: self.keys.is_some(),
+            can_fd: self.fd,
             state_latency: Latency::of(tally.state),
             request_latency: Latency::of(tally.request),
             grant_latency: Latency::of(tally.grant),
@@ -678,6 +694,16 @@ impl<P: CanPort> Nodes<P> {
 }
 
 impl<P: CanPort> Nodes<P> {
+    /// Every node sending CAN FD frames.
+    fn with_fd(self) -> Self {
+        let fd = |v: Vec<CanNode<P>>| v.into_iter().map(CanNode::with_fd).collect();
+        Self {
+            clock: self.clock.with_fd(),
+            vehicles: fd(self.vehicles),
+            managers: fd(self.managers),
+        }
+    }
+
     /// Every node authenticating with `keys`.
     fn with_keys(self, keys: &Arc<Keys>) -> Self {
         let keyed = |v: Vec<CanNode<P>>| v.into_iter().map(|n| n.with_keys(keys.clone())).collect();

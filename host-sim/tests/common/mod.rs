@@ -2,7 +2,7 @@
 // Each test file uses part of these helpers.
 #![allow(dead_code)]
 
-use can_gateway::PlainFrame;
+use can_gateway::FdFrame;
 use host_sim::fleet::can::{CanPort, HubPort};
 use host_sim::world::summary::Summary;
 use host_sim::world::{SolverChoice, World, WorldSpec};
@@ -85,14 +85,14 @@ pub struct Failing {
 }
 
 impl CanPort for Failing {
-    fn transmit(&mut self, frame: &PlainFrame) -> io::Result<()> {
+    fn transmit(&mut self, frame: &FdFrame) -> io::Result<()> {
         if self.left == 0 {
             return Err(io::Error::other("bus-off"));
         }
         self.left -= 1;
         self.inner.transmit(frame)
     }
-    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(PlainFrame, SystemTime)>> {
+    fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         self.inner.receive(timeout)
     }
 }
