@@ -190,5 +190,15 @@ mod tests {
         assert_eq!((f.id(), f.data()), (p.id(), p.data()));
         let r = FdFrame::from(PlainFrame::new_remote(id, 4).unwrap());
         assert!(r.is_remote_frame() && r.data().is_empty() && r.dlc() == 4);
+        assert!(FdFrame::new(id, &[1]).unwrap().is_extended());
+        assert!(!FdFrame::new(id, &[1]).unwrap().is_remote_frame());
+        for dlc in 0..=9 {
+            let r = FdFrame::new_remote(id, dlc);
+            assert_eq!(r.is_some(), dlc <= 8, "{dlc}");
+            if let Some(r) = r {
+                assert!(r.is_remote_frame() && !r.is_fd() && r.data().is_empty());
+                assert_eq!((r.dlc(), r.id()), (dlc, Id::Extended(id)));
+            }
+        }
     }
 }

@@ -233,7 +233,11 @@ fn cli_bus_option() {
         (vec!["--bus", "no such iface"], 2, "network interface name"),
         (vec!["--bus", ""], 2, "network interface name"),
         (vec!["--bus", "vcan-none9"], 4, "vcan-none9"),
-        (vec!["--can-fd"], 2, "--can-fd puts messages on CAN FD frames"),
+        (
+            vec!["--can-fd"],
+            2,
+            "--can-fd puts messages on CAN FD frames",
+        ),
         (vec!["--bus", "vcan-none9", "--can-fd"], 4, "vcan-none9"),
     ] {
         let out = bin()
