@@ -347,10 +347,6 @@ fn protected<F: Real>(
     Ok(bytes)
 }
 
-/// The most data bytes of a CAN FD message frame: header, the longest payload, trailer.
-const FD_MAX: usize = 1 + MAX_FRAMES * CHUNK + TRAILER_LEN;
-const _: () = assert!(FD_MAX <= 64, "a secured message must fit one CAN FD frame");
-
 /// Encodes `msg` into one CAN FD frame ([`crate::wire`]: index [`FD_INDEX`], the header,
 /// the payload chunks back to back, zero padding to a CAN FD length). `Fr` must take
 /// data beyond 8 bytes (e.g. [`crate::FdFrame`]), else [`EncodeError::Frame`].
@@ -375,6 +371,9 @@ pub fn encode_fd_secured<F: Real, Fr: Frame>(
     fd_frame(msg, sa, counter, Some((key, fv)))
 }
 
+/// The frame of [`encode_fd`] or, with a key, [`encode_fd_secured`]. The longest, a
+/// secured located state, takes 1 + 28 + 6 = 35 bytes: a 48-byte frame (`fd::` tests
+/// check every kind's length).
 fn fd_frame<F: Real, Fr: Frame>(
     msg: &Message<F>,
     sa: u8,

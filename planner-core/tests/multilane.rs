@@ -144,6 +144,7 @@ fn declares_then_starts_then_completes() {
     let c = pl.step(&obs(0.0, 1.8, 15.0, &[], 1)).unwrap();
     assert_eq!(c.event, Some(LaneEvent::Declared(1)));
     assert_eq!(c.beta, Some(1));
+    assert_eq!((pl.lane(), pl.alpha(), pl.beta()), (0, None, Some(1)));
     // Drive the exact model until the change completes.
     let (mut q, mut v, mut w) = (
         Pose {
@@ -166,10 +167,14 @@ fn declares_then_starts_then_completes() {
             "{:?}",
             c.status
         );
-        started |= c.event == Some(LaneEvent::Started(1));
+        if c.event == Some(LaneEvent::Started(1)) {
+            started = true;
+            assert_eq!((pl.lane(), pl.alpha(), pl.beta()), (0, Some(1), None));
+        }
         if c.event == Some(LaneEvent::Completed(1)) {
             assert!(started);
             assert_eq!((c.lane, c.alpha, c.beta), (1, None, None));
+            assert_eq!((pl.lane(), pl.alpha(), pl.beta()), (1, None, None));
             assert!(
                 (q.y - 5.4).abs() < 0.5,
                 "ends near lane 1's centre, y = {}",
@@ -667,4 +672,30 @@ fn the_road_end_is_an_obstacle_at_its_extent_adjusted_position() {
     }
     let want = 80.0 - 0.5 * p.length() - p.d0() - 40.0;
     assert!((c.gap - want).abs() < 1e-9, "{} against {want}", c.gap);
+}
+
+/// A sensed vehicle ahead is taken `position_error_m` nearer than measured (its true rear
+/// may be that much closer); one heard over V2V is taken where it says it was.
+#[test]
+fn a_sensed_vehicle_ahead_is_taken_its_position_error_nearer() {
+    let sensing = planner_core::sensing::Sensing {
+        ahead_m: 150.0,
+        behind_m: 100.0,
+        position_error_m: 0.5,
+        speed_error_mps: 0.0,
+    };
+    let command = |x: f64, sensed: bool| {
+        let mut pl = LanePlanner::<f64, 20>::new(p(), CostWeights::default(), 0).unwrap();
+        pl.set_sensing(Some(sensing)).unwrap();
+        let mut o = other(2, x, 10.0, 0);
+        o.sensed = sensed;
+        let others = [o];
+        let c = pl.step(&obs(0.0, 1.8, 15.0, &others, 0)).unwrap();
+        (c.v, c.omega)
+    };
+    // Close enough that the gap shapes the plan.
+    for x in [22.0, 24.0, 26.0] {
+        assert_eq!(command(x, true), command(x - 0.5, false), "at {x}");
+        assert_ne!(command(x, true), command(x, false), "at {x}");
+    }
 }
