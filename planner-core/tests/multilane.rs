@@ -699,3 +699,32 @@ fn a_sensed_vehicle_ahead_is_taken_its_position_error_nearer() {
         assert_ne!(command(x, true), command(x, false), "at {x}");
     }
 }
+
+/// With sensors, the road beyond the forward range is unknown and not taken as free: at
+/// vmax with the shortest range allowed the planner slows, and less the longer the range.
+#[test]
+fn the_end_of_the_forward_range_is_not_free_road() {
+    let vmax = p().v_max();
+    let command = |sensing: Option<planner_core::sensing::Sensing<f64>>| {
+        let mut pl = LanePlanner::<f64, 20>::new(p(), CostWeights::default(), 0).unwrap();
+        pl.set_sensing(sensing).unwrap();
+        pl.step(&obs(0.0, 1.8, vmax, &[], 0)).unwrap().v
+    };
+    let free = command(None);
+    let least = planner_core::sensing::Sensing::min_range(&p());
+    let blind: Vec<f64> = [least, least + 0.5, least + 1.0]
+        .into_iter()
+        .map(|ahead_m| {
+            command(Some(planner_core::sensing::Sensing {
+                ahead_m,
+                behind_m: 100.0,
+                position_error_m: 0.0,
+                speed_error_mps: 0.0,
+            }))
+        })
+        .collect();
+    assert!(
+        blind[0] < blind[1] && blind[1] < blind[2] && blind[2] < free,
+        "{blind:?} {free}"
+    );
+}
