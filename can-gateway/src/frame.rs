@@ -188,6 +188,8 @@ mod tests {
         let f = FdFrame::from(p);
         assert!(!f.is_fd() && !f.is_extended());
         assert_eq!((f.id(), f.data()), (p.id(), p.data()));
+        assert!(PlainFrame::new(id, &[1]).unwrap().is_extended());
+        assert!(!p.is_extended());
         let r = FdFrame::from(PlainFrame::new_remote(id, 4).unwrap());
         assert!(r.is_remote_frame() && r.data().is_empty() && r.dlc() == 4);
         assert!(FdFrame::new(id, &[1]).unwrap().is_extended());

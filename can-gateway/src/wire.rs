@@ -262,3 +262,30 @@ pub fn split_id(raw: u32) -> Option<(u8, u8, u8)> {
     let ps = ((raw >> 8) & 0xFF) as u8;
     Some((ps >> 4, ps & 0x0F, (raw & 0xFF) as u8))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn managers_have_the_addresses_0xf1_to_0xfd() {
+        assert_eq!(manager_address(0), Some(MANAGER_ADDRESS));
+        assert_eq!(manager_address(1), Some(0xF2));
+        assert_eq!(manager_address(12), Some(MANAGER_LAST));
+        assert_eq!(manager_address(13), None);
+        assert_eq!(manager_address(300), None);
+    }
+
+    #[test]
+    fn identifiers_split_back_into_their_fields() {
+        let id = frame_id(MessageKind::Located, FD_SECURED_INDEX, 0x2A);
+        assert_eq!(id, 0x18FF_7E2A);
+        assert_eq!(split_id(id), Some((7, FD_SECURED_INDEX, 0x2A)));
+        assert_eq!(split_id(id ^ 1 << 26), None);
+        assert_eq!(fd_len(0), Some(0));
+        assert_eq!(fd_len(9), Some(12));
+        assert_eq!(fd_len(35), Some(48));
+        assert_eq!(fd_len(64), Some(64));
+        assert_eq!(fd_len(65), None);
+    }
+}
