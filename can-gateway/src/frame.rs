@@ -1,92 +1,48 @@
 //! CAN frame values implementing [`embedded_can::Frame`] — [`PlainFrame`] (classic) and
-//! [`FdFrame`] (classic or CAN FD) — for in-process buses, logs and tests, where no
-//! driver's frame type is at hand.
+//! [`FdFrame`] (classic or CAN FD), one type with room for 8 or 64 data bytes — for
+//! in-process buses, logs and tests, where no driver's frame type is at hand.
 
 use embedded_can::{Frame, Id};
 
-/// A classic CAN frame held by value (identifier, up to 8 data bytes, remote flag).
+/// A CAN frame held by value with room for `CAP` data bytes: classic (up to 8 data
+/// bytes, or a remote frame) or, when `CAP` allows, CAN FD (a data length of
+/// [`crate::wire::fd_len`]). Through [`Frame::new`] data of up to 8 bytes makes a classic
+/// frame and longer data an FD frame; [`FrameValue::new_fd`] makes an FD frame of any
+/// valid length that fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PlainFrame {
+pub struct FrameValue<const CAP: usize> {
     id: Id,
     len: u8,
-    data: [u8; 8],
-    remote: bool,
-}
-
-impl Frame for PlainFrame {
-    fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
-        let mut buf = [0u8; 8];
-        buf.get_mut(..data.len())?.copy_from_slice(data);
-        Some(Self {
-            id: id.into(),
-            len: data.len() as u8,
-            data: buf,
-            remote: false,
-        })
-    }
-
-    fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
-        (dlc <= 8).then(|| Self {
-            id: id.into(),
-            len: dlc as u8,
-            data: [0; 8],
-            remote: true,
-        })
-    }
-
-    fn is_extended(&self) -> bool {
-        matches!(self.id, Id::Extended(_))
-    }
-
-    fn is_remote_frame(&self) -> bool {
-        self.remote
-    }
-
-    fn id(&self) -> Id {
-        self.id
-    }
-
-    fn dlc(&self) -> usize {
-        usize::from(self.len)
-    }
-
-    fn data(&self) -> &[u8] {
-        if self.remote {
-            &[]
-        } else {
-            self.data.get(..usize::from(self.len)).unwrap_or(&[])
-        }
-    }
-}
-
-/// A CAN frame held by value, classic (up to 8 data bytes) or CAN FD (a data length of
-/// [`crate::wire::fd_len`]: up to 64 bytes): what a host's CAN FD socket carries. Through
-/// [`Frame::new`] data of up to 8 bytes makes a classic frame and longer data an FD frame;
-/// [`FdFrame::new_fd`] makes an FD frame of any valid length.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct FdFrame {
-    id: Id,
-    len: u8,
-    data: [u8; 64],
+    data: [u8; CAP],
     remote: bool,
     fd: bool,
 }
 
-impl FdFrame {
-    /// A CAN FD frame: `None` unless `data`'s length is a CAN FD data length.
+/// A classic CAN frame (identifier, up to 8 data bytes, remote flag).
+pub type PlainFrame = FrameValue<8>;
+
+/// A classic or CAN FD frame (up to 64 data bytes): what a host's CAN FD socket carries.
+pub type FdFrame = FrameValue<64>;
+
+impl<const CAP: usize> FrameValue<CAP> {
+    fn of(id: Id, data: &[u8], fd: bool) -> Option<Self> {
+        let mut buf = [0u8; CAP];
+        buf.get_mut(..data.len())?.copy_from_slice(data);
+        Some(Self {
+            id,
+            len: u8::try_from(data.len()).ok()?,
+            data: buf,
+            remote: false,
+            fd,
+        })
+    }
+
+    /// A CAN FD frame: `None` unless `data`'s length is a CAN FD data length that fits.
     pub fn new_fd(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
         if crate::wire::fd_len(data.len()) != Some(data.len()) {
             return None;
         }
-        let mut buf = [0u8; 64];
-        buf.get_mut(..data.len())?.copy_from_slice(data);
-        Some(Self {
-            id: id.into(),
-            len: data.len() as u8,
-            data: buf,
-            remote: false,
-            fd: true,
-        })
+        Self::of(id.into(), data, true)
     }
 
     /// Whether it is a CAN FD frame.
@@ -95,27 +51,19 @@ impl FdFrame {
     }
 }
 
-impl Frame for FdFrame {
+impl<const CAP: usize> Frame for FrameValue<CAP> {
     fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
         if data.len() > 8 {
             return Self::new_fd(id, data);
         }
-        let mut buf = [0u8; 64];
-        buf.get_mut(..data.len())?.copy_from_slice(data);
-        Some(Self {
-            id: id.into(),
-            len: data.len() as u8,
-            data: buf,
-            remote: false,
-            fd: false,
-        })
+        Self::of(id.into(), data, false)
     }
 
     fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
         (dlc <= 8).then(|| Self {
             id: id.into(),
             len: dlc as u8,
-            data: [0; 64],
+            data: [0; CAP],
             remote: true,
             fd: false,
         })
@@ -149,15 +97,15 @@ impl Frame for FdFrame {
 impl From<PlainFrame> for FdFrame {
     fn from(p: PlainFrame) -> Self {
         let mut data = [0u8; 64];
-        if let Some(dst) = data.get_mut(..p.data().len()) {
-            dst.copy_from_slice(p.data());
+        if let Some(dst) = data.get_mut(..p.data.len()) {
+            dst.copy_from_slice(&p.data);
         }
         Self {
-            id: p.id(),
-            len: p.dlc() as u8,
+            id: p.id,
+            len: p.len,
             data,
-            remote: p.is_remote_frame(),
-            fd: false,
+            remote: p.remote,
+            fd: p.fd,
         }
     }
 }
@@ -184,6 +132,9 @@ mod tests {
             }
         }
         assert!(FdFrame::new(id, &[0; 65]).is_none());
+        // A classic frame type takes no more than 8 bytes.
+        assert!(PlainFrame::new(id, &[0; 12]).is_none());
+        assert!(PlainFrame::new(id, &[0; 8]).is_some_and(|f| !f.is_fd()));
         let p = PlainFrame::new(StandardId::new(0x123).unwrap(), &[1, 2, 3]).unwrap();
         let f = FdFrame::from(p);
         assert!(!f.is_fd() && !f.is_extended());
