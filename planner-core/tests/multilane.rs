@@ -728,3 +728,62 @@ fn the_end_of_the_forward_range_is_not_free_road() {
         "{blind:?} {free}"
     );
 }
+
+/// The entry check (issue 21): a change under way whose rectangle is not yet in the
+/// target lane does not enter it in front of a vehicle there that does not cooperate and
+/// could not stop behind it; with the lane clear, the same step steers in.
+#[test]
+fn a_change_under_way_waits_for_a_vehicle_behind_that_cannot_stop() {
+    let mut pl = LanePlanner::<f64, 20>::new(p(), CostWeights::default(), 0).unwrap();
+    let (mut q, mut v, mut w) = (
+        Pose {
+            x: 0.0,
+            y: 1.8,
+            theta: 0.0,
+        },
+        15.0,
+        0.0,
+    );
+    for _ in 0..300 {
+        let mut o = obs(q.x, q.y, v, &[], 1);
+        o.pose = q;
+        o.omega_prev = w;
+        let c = pl.step(&o).unwrap();
+        (v, w) = (c.v, c.omega);
+        q = step(q, v, w, 0.01);
+        if c.event == Some(LaneEvent::Started(1)) {
+            break;
+        }
+    }
+    assert_eq!(pl.alpha(), Some(1), "the change started");
+    // Still in lane 0 with its whole rectangle.
+    assert!(q.y + 0.5 * p().width() < 3.6, "y = {}", q.y);
+    // A vehicle 12 m behind the ego in lane 1 at 25 m/s, not cooperating: it would not
+    // brake for the ego.
+    let held_back = |q: Pose<f64>, v: f64, w: f64, pl: &LanePlanner<f64, 20>| {
+        let mut fast = other(9, q.x - 12.0, 25.0, 1);
+        fast.cooperative = false;
+        let others = [fast];
+        let mut o = obs(q.x, q.y, v, &others, 1);
+        o.pose = q;
+        o.omega_prev = w;
+        pl.clone().step(&o).unwrap()
+    };
+    let mut refused = 0;
+    // Drive the change with the lane clear until the rectangle reaches lane 1; at every
+    // step, ask what the planner would do with the fast vehicle there.
+    while q.y + 0.5 * p().width() < 3.6 {
+        let mut o = obs(q.x, q.y, v, &[], 1);
+        o.pose = q;
+        o.omega_prev = w;
+        let clear = pl.step(&o).unwrap();
+        let held = held_back(q, v, w, &pl);
+        // Held back: it turns toward lane 1 less (straightening within Ω's rate).
+        if held.omega < clear.omega - 1e-9 {
+            refused += 1;
+        }
+        (v, w) = (clear.v, clear.omega);
+        q = step(q, v, w, 0.01);
+    }
+    assert!(refused > 0, "the fast vehicle never held the change back");
+}
