@@ -787,3 +787,32 @@ fn a_change_under_way_waits_for_a_vehicle_behind_that_cannot_stop() {
     }
     assert!(refused > 0, "the fast vehicle never held the change back");
 }
+
+/// Sensor fusion at the start of a change (issue 21): a vehicle behind in the target lane
+/// known only from the ego's sensor is taken as one that does not cooperate; with a
+/// V2V record of the same vehicle it is trusted to (cooperation is what the vehicle is,
+/// not how fresh its record: entering stays guarded by the entry check).
+/// Trusting never blocks a start that distrust allows, and somewhere it allows one.
+#[test]
+fn a_sensed_vehicle_behind_is_trusted_to_cooperate_only_with_a_v2v_record() {
+    let mut pl = LanePlanner::<f64, 20>::new(p(), CostWeights::default(), 0).unwrap();
+    pl.set_sensing(Some(planner_core::sensing::Sensing::radar()))
+        .unwrap();
+    let check = |others: &[Other<f64>]| pl.start_check(&obs(0.0, 1.8, 15.0, others, 1), 1);
+    let mut trusted_start = 0;
+    // Centimetre by centimetre: the difference is one period of unaware motion (h).
+    for d in (500..8000).map(|cm| f64::from(cm) / 100.0) {
+        let mut seen = other(2, -d, 15.0, 1);
+        seen.sensed = true;
+        let record = other(2, -d, 15.0, 1);
+        let alone = check(&[seen]);
+        let both = check(&[seen, record]);
+        if alone.is_ok() {
+            assert_eq!(both, Ok(()), "{d} m");
+        } else if both.is_ok() {
+            assert_eq!(alone, Err(StartBlock::Behind(2)), "{d} m");
+            trusted_start += 1;
+        }
+    }
+    assert!(trusted_start > 0, "a fresh record never made a difference");
+}
