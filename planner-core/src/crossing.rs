@@ -255,7 +255,12 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                         progress: s - entry,
                         to_line,
                         stopped_at: stopped.then_some(now),
-                        permitted: false,
+                        // First heard already inside A_S: a manager restarted mid-crossing
+                        // (issue 17), or a vehicle that entered without a permission.
+                        // Either way it occupies its route's conflict zones until it
+                        // leaves, so it holds them as a permission would: no conflicting
+                        // route is granted over it.
+                        permitted: to_line < F::ZERO,
                     })
                     .map_err(|_| ManagerError::Full)?;
             }

@@ -628,17 +628,16 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         }
         if let Some(s) = &self.sensing {
             let p = self.params();
-            let phantom = Other {
-                cooperative: false,
-                ..Other::v2v(
-                    u16::MAX,
-                    x - p.length() - s.behind_m,
-                    p.v_max(),
-                    p.length(),
-                    m,
-                    F::ZERO,
-                )
-            };
+            let phantom = Other::v2v(
+                u16::MAX,
+                x - p.length() - s.behind_m,
+                p.v_max(),
+                p.length(),
+                m,
+                F::ZERO,
+            );
+            // Handed on as a vehicle that does not cooperate (the last argument, which is
+            // what the checks read): nothing is known of it.
             f(&phantom, phantom.x, phantom.v, false)?;
         }
         Ok(())
@@ -766,11 +765,10 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let p = *self.params();
         if let Some(m) = self.alpha {
             let lane_m = obs.road.band(m, None);
-            let ext = lateral_half_extent(p.length(), p.width(), obs.pose.theta);
-            let inside = lane_m.lo <= obs.pose.y - ext && obs.pose.y + ext <= lane_m.hi;
             let centred = (obs.pose.y - obs.road.lane_centre(m)).abs() <= F::from_f64(CENTRED_M);
-            if inside
-                && centred
+            // The tail's certificate starts with the pose itself: the rectangle inside
+            // lane m, with its heading in bounds.
+            if centred
                 && obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD)
                 && braking_tail_ok(&p, obs.pose, obs.v_prev, lane_m)
             {
@@ -1407,3 +1405,7 @@ mod tests {
         panic!("no plan whose last state's tail leaves while its first state's does not");
     }
 }
+
+#[cfg(test)]
+#[path = "lane_change_audit.rs"]
+mod audit;

@@ -363,3 +363,48 @@ fn pipelined_grants_a_head_and_its_follower_in_one_scan() {
     m.update();
     assert!(m.permitted(1) && m.permitted(2));
 }
+
+/// A manager restarted mid-crossing (issue 17) rebuilds its state from the next reports:
+/// a vehicle first heard inside A_S holds its zones as a permission would, under every
+/// algorithm, so a conflicting route waits for it — even one whose vehicle was heard
+/// first and waits at its line — and is granted once it has left.
+#[test]
+fn a_vehicle_first_heard_inside_a_s_holds_its_route_after_a_restart() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let x = (0..ROUTES)
+        .find(|&x| l.conflict(a, x) && inlet(&l, x) != inlet(&l, a))
+        .unwrap();
+    for alg in Algorithm::ALL {
+        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+        m.observe(&at(&l, 2, x, 0.5, 0.0), 10.0).unwrap();
+        m.observe(&at(&l, 1, a, -3.0, 5.0), 10.0).unwrap();
+        m.update();
+        assert!(
+            entry(&m, 1).permitted,
+            "{alg:?}: inside A_S when first heard"
+        );
+        assert!(
+            !m.permitted(2),
+            "{alg:?}: its route conflicts with one inside"
+        );
+        // Vehicle 1 leaves (its rear past A_S: off the manager's list); 2 is granted.
+        let exit = l.route(a).unwrap().path.exit();
+        let gone = CrossingReport {
+            s: exit + HALF + 1.0,
+            ..at(&l, 1, a, 0.0, 5.0)
+        };
+        m.observe(&gone, 11.0).unwrap();
+        m.update();
+        assert!(m.entries().iter().all(|e| e.id != 1), "{alg:?}");
+        if alg == Algorithm::AllWayStop {
+            m.observe(&at(&l, 2, x, 0.5, 0.0), 11.5).unwrap();
+            m.update();
+        }
+        assert!(m.permitted(2), "{alg:?}: granted once the zone is clear");
+    }
+    // Heard before its line (the normal case): registered without a permission.
+    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    m.observe(&at(&l, 1, a, 0.0, 5.0), 0.0).unwrap();
+    assert!(!entry(&m, 1).permitted);
+}
