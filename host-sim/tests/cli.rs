@@ -220,6 +220,28 @@ fn scale_prints_its_figures() {
 }
 
 #[test]
+fn bench_can_carries_every_message_in_each_configuration() {
+    let out = bin()
+        .args(["bench-can", "--messages", "400", "--json"])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(&out.stdout, &["results"]);
+    let rows = v["results"].as_array().expect("rows");
+    let configs: Vec<&str> = rows.iter().filter_map(|r| r["config"].as_str()).collect();
+    assert_eq!(configs, ["classic", "classic+secoc", "fd", "fd+secoc"]);
+    // A state is 3 classic frames, 4 with its authenticator, and 1 CAN FD frame either way.
+    for (r, frames) in rows.iter().zip([1200, 1600, 400, 400]) {
+        assert_eq!(r["received"], 400, "{r}");
+        assert_eq!(r["frames"], frames, "{r}");
+    }
+}
+
+#[test]
 fn clarabel_can_drive_the_planners() {
     // A follower closing on a braking leader, planned by Clarabel: the verifier accepts
     // its plans (no fallback) and the run is safe.

@@ -52,6 +52,20 @@ fn boundary(v: f64) -> f64 {
 }
 
 #[test]
+fn the_monitors_safe_distance_is_planner_cores_by_another_formula() {
+    // The monitor's closed form (v + |amin| h)² / (2|amin|) against planner-core's dS of
+    // (8)(9) (braking distance plus the period's travel), and against values by hand.
+    let p = planner_core::Params::<f64>::table_i();
+    for i in 0..=278 {
+        let v = 0.1 * f64::from(i);
+        let (ours, theirs) = (lim().safe_distance(v), planner_core::safety::d_s(&p, v));
+        assert!((ours - theirs).abs() < 1e-9, "v {v}: {ours} vs {theirs}");
+    }
+    assert!((lim().safe_distance(0.0) - 0.079 * 0.079 / 15.8).abs() < 1e-15);
+    assert!((lim().safe_distance(20.0) - 20.079f64.powi(2) / 15.8).abs() < 1e-12);
+}
+
+#[test]
 fn the_invariant_is_judged_in_every_lane_to_the_millimetre() {
     for lane in 0..3 {
         let y = centre(lane);
@@ -107,6 +121,56 @@ fn a_vehicle_straddling_two_lanes_is_in_both() {
 }
 
 #[test]
+fn a_rectangle_exactly_touching_a_lane_line_is_not_in_the_lane_beyond() {
+    let tight = LENGTH_M + boundary(20.0) - MM;
+    // Its top edge exactly on the line between lanes 0 and 1 (checked as computed), a
+    // leader in lane 1 just ahead: not a follower in lane 1.
+    let below = car(100.0 - tight, 2.75, 20.0);
+    assert_eq!(host_sim::monitor::lateral_span(&below).1, LANE_WIDTH_M);
+    let f = road(&[car(100.0, centre(1), 20.0), below], None);
+    assert_eq!((f.invariant_violations, f.off_road), (0, 0));
+    // Its bottom edge exactly on that line, a follower in lane 0 just behind: not a leader
+    // in lane 0.
+    let above = car(100.0, 4.45, 20.0);
+    assert_eq!(host_sim::monitor::lateral_span(&above).0, LANE_WIDTH_M);
+    let f = road(&[above, car(100.0 - tight, centre(0), 20.0)], None);
+    assert_eq!(f.invariant_violations, 0);
+    // The top lane's vehicles are on the road (3 lanes: up to 10.8 m), beyond its edge
+    // they are not; exactly on either edge of the road, or with the front exactly at its
+    // end, a vehicle is still on it.
+    let top = car(100.0, centre(2), 20.0);
+    assert_eq!(road(&[top], None).off_road, 0);
+    let beyond = car(100.0, 3.0 * LANE_WIDTH_M - 0.85 + MM, 20.0);
+    assert_eq!(road(&[beyond], None).off_road, 1);
+    for (edge, side) in [(0.0, 0), (3.0 * LANE_WIDTH_M, 1)] {
+        let c = touching(edge, side);
+        assert_eq!(road(&[c], None).off_road, 0, "edge {edge}");
+    }
+    let at_end = car(500.0 - 0.5 * LENGTH_M, centre(1), 0.0);
+    assert_eq!(road(&[at_end], Some(500.0)).road_end_overruns, 0);
+    let past_end = car(500.0 - 0.5 * LENGTH_M + MM, centre(1), 0.0);
+    assert_eq!(road(&[past_end], Some(500.0)).road_end_overruns, 1);
+}
+
+/// A car whose lateral span's bottom (`side` 0) or top (1) is exactly `edge` as the
+/// monitor computes it (found by stepping y one unit in the last place at a time).
+fn touching(edge: f64, side: usize) -> Truth {
+    let mut y = if side == 0 { edge + 0.85 } else { edge - 0.85 };
+    for _ in 0..16 {
+        let c = car(100.0, y, 20.0);
+        let (lo, hi) = host_sim::monitor::lateral_span(&c);
+        let got = if side == 0 { lo } else { hi };
+        if got == edge {
+            return c;
+        }
+        // One unit in the last place up or down (y is positive and normal here).
+        let bits = y.to_bits();
+        y = f64::from_bits(if got < edge { bits + 1 } else { bits - 1 });
+    }
+    panic!("no y puts the span's edge exactly on {edge}");
+}
+
+#[test]
 fn the_road_end_is_judged_like_a_stopped_leader() {
     let end = 500.0;
     for (room, violated) in [(boundary(10.0) - MM, true), (boundary(10.0) + MM, false)] {
@@ -145,6 +209,34 @@ fn leaving_the_road_and_breaking_the_limits_are_seen() {
     c = car(0.0, centre(1), 10.0);
     c.theta = l.theta_max + 1e-6;
     assert_eq!(road(&[c], None).limit_violations, 1);
+    // The heading bound holds to 1e-12 rad, both ways, and not beyond.
+    for theta in [l.theta_max, -l.theta_max, l.theta_max + 1e-12, 0.1] {
+        c.theta = theta;
+        assert_eq!(road(&[c], None).limit_violations, 0, "θ {theta}");
+    }
+    c.theta = -(l.theta_max + 2e-12);
+    assert_eq!(road(&[c], None).limit_violations, 1);
+    // A negative speed beyond the tolerance is a violation, at the tolerance it is not.
+    c = car(0.0, centre(1), -1e-3);
+    c.v_before = c.v;
+    assert_eq!(road(&[c], None).limit_violations, 1);
+    c.v = -host_sim::monitor::LIMIT_TOL;
+    c.v_before = c.v;
+    assert_eq!(road(&[c], None).limit_violations, 0);
+    // Standing, at vmax, at vmax plus the tolerance: within the limits; braking or
+    // accelerating by exactly the table's rates over a period too.
+    let tol = host_sim::monitor::LIMIT_TOL;
+    for (v, before) in [
+        (0.0, 0.0),
+        (l.v_max, l.v_max),
+        (l.v_max + tol, l.v_max + tol),
+        (10.0, 10.0 + l.brake * l.h),
+        (10.0, 10.0 - l.a_max * l.h),
+    ] {
+        let mut c = car(0.0, centre(1), v);
+        c.v_before = before;
+        assert_eq!(road(&[c], None).limit_violations, 0, "v {v} after {before}");
+    }
 }
 
 #[test]
@@ -159,11 +251,23 @@ fn collisions_of_rotated_rectangles_are_seen() {
         road(&[a, car(LENGTH_M + MM, centre(1), 10.0)], None).collisions,
         0
     );
-    // Exactly touching counts (the separating-axis test is strict).
+    // Exactly touching counts (the separating-axis test is strict), whichever of the two
+    // is listed first (each order compares the other pair of projections).
     assert_eq!(
         road(&[a, car(LENGTH_M, centre(1), 10.0)], None).collisions,
         1
     );
+    assert_eq!(
+        road(&[car(LENGTH_M, centre(1), 10.0), a], None).collisions,
+        1
+    );
+    // Near the origin, where coordinates are small (the speed shortcut must compare
+    // differences, not ratios): overlapping by 0.5 m along, by 1.3 m across.
+    for (p, q) in [((5.0, 1.8), (1.0, 1.8)), ((1.0, 0.5), (0.0, 0.1))] {
+        let (one, two) = (car(p.0, p.1, 1.0), car(q.0, q.1, 1.0));
+        assert_eq!(road(&[one, two], None).collisions, 1, "{p:?} {q:?}");
+        assert_eq!(road(&[two, one], None).collisions, 1, "{q:?} {p:?}");
+    }
     // Rotated 45° beside it: the corner reaches in, or its bounding boxes overlap while
     // the rectangles do not.
     let mut b = car(3.6, centre(1) + 2.2, 10.0);
@@ -257,6 +361,60 @@ fn the_invariant_is_judged_on_shared_paths_of_a_junction() {
     assert_eq!(junction(&w, &cars).invariant_violations, 1);
     let cars = [on(1, a, xa + 30.0, 0.0), on(2, b, xb + 30.0 - loose, 10.0)];
     assert_eq!(junction(&w, &cars).invariant_violations, 0);
+    // ... but not while either is still before its exit, however close their s.
+    let cars = [on(1, a, xa - 1.0, 0.0), on(2, b, xb - 1.0 - tight, 10.0)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 0, "both inside");
+    let cars = [on(1, a, xa + 30.0, 0.0), on(2, b, xb - 1.0, 10.0)];
+    assert_eq!(
+        junction(&w, &cars).invariant_violations,
+        0,
+        "the follower inside"
+    );
+    let cars = [on(1, a, xa - 1.0, 0.0), on(2, b, xb + 30.0, 10.0)];
+    assert_eq!(
+        junction(&w, &cars).invariant_violations,
+        0,
+        "the leader inside"
+    );
+}
+
+#[test]
+fn paths_that_share_nothing_are_not_judged_together() {
+    let l = layout();
+    let w = JunctionWatch::default();
+    let tight = LENGTH_M + boundary(10.0) - MM;
+    // Two inlets, two outlets: positions along different paths mean nothing together.
+    let (a, b) = (0..l.routes.len())
+        .flat_map(|a| (0..l.routes.len()).map(move |b| (a, b)))
+        .find(|&(a, b)| {
+            let (ra, rb) = (l.route(a).expect("a"), l.route(b).expect("b"));
+            ra.inlet != rb.inlet && ra.outlet != rb.outlet
+        })
+        .expect("two routes sharing no inlet or outlet");
+    let (ra, rb) = (l.route(a).expect("a"), l.route(b).expect("b"));
+    for (sa, sb) in [
+        (ra.path.entry() - 10.0, rb.path.entry() - 10.0 - tight),
+        (ra.path.exit() + 10.0, rb.path.exit() + 10.0 - tight),
+    ] {
+        let cars = [on(1, a as u8, sa, 0.0), on(2, b as u8, sb, 10.0)];
+        assert_eq!(junction(&w, &cars).invariant_violations, 0, "{sa} {sb}");
+    }
+    // One inlet lane: judged while the one ahead is on it (its centre before A_S), not
+    // from the moment its centre reaches A_S's entry (its route is then its own).
+    let r0 = l.route(0).expect("route 0");
+    let other = (0..l.routes.len())
+        .find(|&k| k != 0 && l.route(k).is_some_and(|q| q.inlet == r0.inlet))
+        .expect("another route from route 0's inlet") as u8;
+    let at_entry = l.route(usize::from(other)).expect("route").path.entry();
+    let cars = [
+        on(1, other, at_entry, 0.0),
+        on(2, 0, at_entry - tight, 10.0),
+    ];
+    assert_eq!(junction(&w, &cars).invariant_violations, 0);
+    // Two vehicles at the very same place: a collision (the rectangles' business), not a
+    // follower short of its leader: the invariant is judged toward the one strictly ahead.
+    let cars = [on(1, 0, 50.0, 10.0), on(2, 0, 50.0, 10.0)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 0);
 }
 
 #[test]
@@ -277,6 +435,23 @@ fn entering_a_s_without_a_permission_is_seen() {
         junction(&w, &[on(8, 3, r.path.entry() + 2.0, 5.0)]).unpermitted_entries,
         1
     );
+}
+
+#[test]
+fn a_s_is_entered_past_its_entry_and_left_once_the_rear_is_past_its_exit() {
+    let l = layout();
+    let r = l.route(3).expect("route 3");
+    let w = JunctionWatch::default();
+    let count = |s: f64| junction(&w, &[on(9, 3, s, 5.0)]).unpermitted_entries;
+    let half = 0.5 * LENGTH_M;
+    // The front exactly on the entry line: not yet in.
+    assert_eq!(count(r.path.entry() - half), 0);
+    // Centre past the exit, rear still inside: in; the rear exactly on the exit line or
+    // past it: out.
+    assert_eq!(count(r.path.exit() + 1.0), 1);
+    assert_eq!(count(r.path.exit() + half), 0);
+    assert_eq!(count(r.path.exit() + half + MM), 0);
+    assert_eq!(count(r.path.exit() + half - MM), 1);
 }
 
 // ---- the network's monitor ----

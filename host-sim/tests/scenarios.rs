@@ -54,6 +54,10 @@ fn builtin_single_lane_scenarios_are_safe_and_live() {
         assert!(s.goals > 0, "{name} must have liveness goals");
         assert_eq!(s.fallback_steps, 0, "{name}: {s:?}");
         assert_eq!(s.messages_rejected, 0);
+        assert_eq!(
+            s.messages_implausible, 0,
+            "an honest fleet is never implausible"
+        );
     }
 }
 

@@ -1,5 +1,6 @@
 //! Faults the in-process bus injects (scenario `[faults]`, experiment flags).
 
+use super::Message;
 use serde::{Deserialize, Serialize};
 
 /// Faults the in-process bus injects, per message and receiver (scenario `[faults]`).
@@ -21,6 +22,31 @@ pub struct Faults {
     pub reorder_s: f64,
     /// A vehicle whose transmitter goes silent from a time on (it still receives).
     pub silent: Option<Silent>,
+    /// A vehicle that lies about its position from a time on (issue 17 §3).
+    pub liar: Option<Liar>,
+    /// A junction's manager that stops, then restarts with nothing remembered.
+    pub manager_down: Option<ManagerDown>,
+}
+
+/// Junction `junction`'s manager stops at `from_s` (it hears and sends nothing; the
+/// leases it gave run out) and restarts at `until_s` as a new manager, its state rebuilt
+/// from the reports it hears from then on (issue 17 §3).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ManagerDown {
+    /// The junction (index; 0 for a scenario's single intersection).
+    pub junction: usize,
+    /// When it stops (s).
+    pub from_s: f64,
+    /// When it restarts (s).
+    pub until_s: f64,
+}
+
+impl ManagerDown {
+    /// `true` while the manager is down.
+    pub fn is_down(&self, t: f64) -> bool {
+        self.from_s <= t && t < self.until_s
+    }
 }
 
 /// A vehicle going silent.
@@ -31,6 +57,48 @@ pub struct Silent {
     pub id: u16,
     /// From when (s).
     pub from_s: f64,
+}
+
+/// A vehicle that, from `from_s` on, broadcasts its position `offset_m` further along
+/// its road (or its route at a junction) than it is; it drives by the truth. Receivers
+/// refuse the jump as implausible and stop taking its word (`world::plausible`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Liar {
+    /// The vehicle.
+    pub id: u16,
+    /// From when (s).
+    pub from_s: f64,
+    /// How much further on it claims to be (m; negative: further back).
+    pub offset_m: f64,
+}
+
+impl Liar {
+    /// `msg` as the liar sends it at `t`: its position moved by the offset once lying.
+    pub fn told(&self, from: u16, msg: Message, t: f64) -> Message {
+        if from != self.id || t < self.from_s {
+            return msg;
+        }
+        match msg {
+            Message::State { mut state, segment } => {
+                state.x += self.offset_m;
+                Message::State { state, segment }
+            }
+            Message::Crossing {
+                mut report,
+                stamp,
+                junction,
+            } => {
+                report.s += self.offset_m;
+                Message::Crossing {
+                    report,
+                    stamp,
+                    junction,
+                }
+            }
+            other => other,
+        }
+    }
 }
 
 impl Default for Faults {
@@ -49,6 +117,8 @@ impl Faults {
         reorder: 0.0,
         reorder_s: 0.02,
         silent: None,
+        liar: None,
+        manager_down: None,
     };
 
     /// Checks the values: probabilities in [0, 1) (a bus that loses everything carries
@@ -81,6 +151,29 @@ impl Faults {
                 return Err(format!("faults.silent.from_s = {}: must be ≥ 0", s.from_s));
             }
         }
+        if let Some(l) = self.liar {
+            if !(l.from_s.is_finite() && l.from_s >= 0.0) {
+                return Err(format!("faults.liar.from_s = {}: must be ≥ 0", l.from_s));
+            }
+            if !(l.offset_m.is_finite() && l.offset_m.abs() <= MAX_LIE_M) {
+                return Err(format!(
+                    "faults.liar.offset_m = {}: must be within ±{MAX_LIE_M} m",
+                    l.offset_m
+                ));
+            }
+        }
+        if let Some(d) = self.manager_down {
+            if !(d.from_s.is_finite()
+                && d.from_s >= 0.0
+                && d.until_s.is_finite()
+                && d.until_s > d.from_s)
+            {
+                return Err(format!(
+                    "faults.manager_down: from_s = {}, until_s = {}: need 0 ≤ from_s < until_s",
+                    d.from_s, d.until_s
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -92,6 +185,13 @@ impl Faults {
             && self.duplicate == 0.0
             && self.reorder == 0.0
             && self.silent.is_none()
+            && self.liar.is_none()
+            && self.manager_down.is_none()
+    }
+
+    /// `msg` as vehicle `from` puts it on the bus at `t` (a liar's lie, if any).
+    pub fn told(&self, from: u16, msg: Message, t: f64) -> Message {
+        self.liar.map_or(msg, |l| l.told(from, msg, t))
     }
 
     /// A bound on the time until a receiver has a message sent now, given period `h`:
@@ -112,6 +212,9 @@ impl Faults {
         h + self.delay_s + self.jitter_s + held + lost
     }
 }
+
+/// The largest lie a scenario may script (m): beyond any road's frame it means nothing.
+pub const MAX_LIE_M: f64 = 100.0;
 
 /// The longest delay, jitter or hold-back a bus may be given (s).
 pub const MAX_FAULT_TIME_S: f64 = 10.0;

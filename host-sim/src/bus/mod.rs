@@ -17,7 +17,7 @@
 pub mod faults;
 pub mod inprocess;
 
-pub use faults::{FaultStats, Faults, Silent, LOSS_PERIODS};
+pub use faults::{FaultStats, Faults, Liar, ManagerDown, Silent, LOSS_PERIODS};
 pub use inprocess::InProcessBus;
 use planner_core::crossing::CrossingReport;
 use planner_core::VehicleState;

@@ -1,5 +1,5 @@
-//! Benchmarks: `scale` (vehicles in real time) and `bench-planner` (our solver vs
-//! Clarabel).
+//! Benchmarks: `scale` (vehicles in real time), `bench-planner` (our solver vs
+//! Clarabel) and `bench-can` (the CAN gateway with and without SecOC).
 
 use super::output::{bad_input, finish, print_json};
 use std::process::ExitCode;
@@ -42,6 +42,62 @@ pub struct BenchArgs {
     /// Seed of the instances.
     #[arg(long, default_value_t = 7)]
     seed: u64,
+}
+
+/// `host-sim bench-can`.
+#[derive(clap::Args)]
+pub struct CanBenchArgs {
+    /// Messages per configuration (vehicle states, 40 vehicles per 10 ms period).
+    #[arg(long, default_value_t = 200_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    messages: u64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `bench-can`: the four configurations in one run, each against plain classic CAN.
+pub fn bench_can(a: CanBenchArgs) -> ExitCode {
+    use host_sim::fleet::throughput::measure;
+    let mut rows = Vec::new();
+    for (fd, secured) in [(false, false), (false, true), (true, false), (true, true)] {
+        match measure(a.messages, fd, secured) {
+            Ok(r) if r.received == r.messages => rows.push(r),
+            Ok(r) => {
+                eprintln!(
+                    "error: {}: {} of {} messages arrived",
+                    r.config, r.received, r.messages
+                );
+                return ExitCode::FAILURE;
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    if a.json {
+        return match print_json(&serde_json::json!({ "results": rows })) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(code) => code,
+        };
+    }
+    let base = rows.first().map_or(1.0, |r| r.messages_per_s);
+    println!(
+        "{:<14} {:>10} {:>10} {:>14} {:>14} {:>16}",
+        "config", "messages", "frames", "messages/s", "frames/s", "msg/s vs classic"
+    );
+    for r in &rows {
+        println!(
+            "{:<14} {:>10} {:>10} {:>14.0} {:>14.0} {:>16.2}",
+            r.config,
+            r.messages,
+            r.frames,
+            r.messages_per_s,
+            r.frames_per_s,
+            r.messages_per_s / base
+        );
+    }
+    ExitCode::SUCCESS
 }
 
 /// `scale`.

@@ -124,6 +124,9 @@ enum Command {
     Scale(bench::ScaleArgs),
     /// Our solver and Clarabel on identical instances of (10), N = 20 and 50, cold and warm.
     BenchPlanner(bench::BenchArgs),
+    /// The CAN gateway's messages/s and frames/s: classic, classic + SecOC, CAN FD, CAN FD +
+    /// SecOC, side by side.
+    BenchCan(bench::CanBenchArgs),
 }
 
 /// Parses the command line and runs it.
@@ -162,5 +165,6 @@ pub fn main() -> ExitCode {
         Command::Experiment(e) => experiment::run(e),
         Command::Scale(a) => bench::scale(a),
         Command::BenchPlanner(a) => bench::bench(a),
+        Command::BenchCan(a) => bench::bench_can(a),
     }
 }

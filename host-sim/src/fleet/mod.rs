@@ -25,6 +25,7 @@
 //! receive time stamps measure the latency from publication to reception.
 
 pub mod can;
+pub mod throughput;
 
 use crate::bus::{Message, Received, Silent};
 use crate::monitor::liveness::DeadlockDetector;

@@ -254,8 +254,82 @@ mod tests {
     }
 
     #[test]
+    fn the_report_follows_every_kind_of_wait_and_says_what_it_is() {
+        let d = DeadlockDetector::new(10.0);
+        let stopped = |id, waits_on| Status {
+            id,
+            moving: false,
+            unmet: true,
+            waits_on,
+        };
+        // 1 waits on 2 ahead, 2 on a lane change that 3 blocks, 3 on a grant whose
+        // conflicting permission 1 holds: a cycle through all three kinds; 4 moves.
+        let statuses = [
+            stopped(1, vec![WaitsOn::Vehicle { id: 2 }]),
+            stopped(2, vec![WaitsOn::LaneChange { ids: vec![3] }]),
+            stopped(
+                3,
+                vec![WaitsOn::Grant {
+                    junction: 0,
+                    holders: vec![1],
+                }],
+            ),
+            Status {
+                id: 4,
+                moving: true,
+                unmet: true,
+                waits_on: vec![WaitsOn::RoadEnd],
+            },
+        ];
+        let r = d.report(12.0, &statuses);
+        assert_eq!(r.cycle, Some(vec![1, 2, 3, 1]));
+        assert_eq!(r.waits.iter().map(|w| w.id).collect::<Vec<_>>(), [1, 2, 3]);
+        // A chain that ends at a road end is no cycle.
+        let chain = [
+            stopped(1, vec![WaitsOn::Vehicle { id: 2 }]),
+            stopped(2, vec![WaitsOn::RoadEnd]),
+        ];
+        let r = d.report(12.0, &chain);
+        assert_eq!(r.cycle, None);
+        assert!(
+            r.to_string().contains("vehicle 1 waits on vehicle 2 ahead"),
+            "{r}"
+        );
+        assert!(r.to_string().contains("no cycle"), "{r}");
+        let said: Vec<String> = [
+            WaitsOn::Vehicle { id: 7 },
+            WaitsOn::LaneChange { ids: vec![] },
+            WaitsOn::LaneChange { ids: vec![1, 2] },
+            WaitsOn::Grant {
+                junction: 3,
+                holders: vec![],
+            },
+            WaitsOn::Grant {
+                junction: 3,
+                holders: vec![5],
+            },
+            WaitsOn::RoadEnd,
+        ]
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+        assert_eq!(
+            said,
+            [
+                "vehicle 7 ahead",
+                "room to change lanes",
+                "room to change lanes (vehicles [1, 2])",
+                "a grant of junction 3",
+                "a grant of junction 3 (permissions held by [5])",
+                "the end of its road"
+            ]
+        );
+    }
+
+    #[test]
     fn the_window_counts_from_the_last_movement() {
         let mut d = DeadlockDetector::new(10.0);
+        assert_eq!(d.window_s(), 10.0);
         assert!(!d.tick(0.0, true, true));
         assert!(!d.tick(9.99, false, true));
         assert!(d.tick(10.0, false, true));

@@ -65,6 +65,8 @@ pub fn tables() -> Vec<(&'static str, &'static [&'static str])> {
     t.extend(super::network::keys());
     t.push(("[faults]", fields::<crate::bus::Faults>()));
     t.push(("[faults.silent]", fields::<crate::bus::Silent>()));
+    t.push(("[faults.liar]", fields::<crate::bus::Liar>()));
+    t.push(("[faults.manager_down]", fields::<crate::bus::ManagerDown>()));
     t.push(("[sensing]", fields::<super::common::SensingToml>()));
     t
 }

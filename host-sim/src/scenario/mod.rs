@@ -59,9 +59,27 @@ pub fn load(path: &Path) -> Result<WorldSpec, ScenarioError> {
 
 /// Parses and validates scenario text; `path` only names it in errors.
 pub fn parse(text: &str, path: &Path) -> Result<WorldSpec, ScenarioError> {
-    match format_of(text) {
+    let spec = match format_of(text) {
         Format::Road => road::RoadScenario::parse(text, path).map(|s| s.world()),
         Format::Junction => junction::JunctionScenario::parse(text, path).map(|s| s.world()),
         Format::Network => network::NetworkScenario::parse(text, path).map(|s| s.world()),
+    }?;
+    faults_fit(&spec).map_err(|problem| ScenarioError {
+        file: path.to_path_buf(),
+        line: None,
+        problem,
+    })?;
+    Ok(spec)
+}
+
+/// The faults name what the world has: a manager that goes down is one of its junctions.
+fn faults_fit(spec: &WorldSpec) -> Result<(), String> {
+    let junctions = spec.network.junctions.len();
+    match spec.faults.manager_down {
+        Some(d) if d.junction >= junctions => Err(format!(
+            "faults.manager_down.junction = {}: the scenario has {junctions} junction(s)",
+            d.junction
+        )),
+        _ => Ok(()),
     }
 }

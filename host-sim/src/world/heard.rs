@@ -16,6 +16,7 @@
 //! receiver, which may now miss a vehicle near it, drives on its certified fallback.
 
 use super::network::Network;
+use super::plausible::{Bounds, Implausible};
 use crate::bus::Message;
 use planner_core::crossing::CrossingReport;
 use planner_core::{Other, VehicleState};
@@ -46,6 +47,44 @@ pub enum Record {
 }
 
 impl Record {
+    /// `self` (newer) against `last`, the record held of the same sender: checked when
+    /// both are in the same frame (a state on the same segment, a report at the same
+    /// junction); a move between frames is checked only for its speed.
+    fn plausible(&self, last: Option<&Record>, b: &Bounds) -> Result<(), Implausible> {
+        match (*self, last) {
+            (
+                Record::Lane { state, segment },
+                Some(&Record::Lane {
+                    state: l,
+                    segment: ls,
+                }),
+            ) if ls == segment => b.state(Some(&l), &state),
+            (Record::Lane { state, .. }, _) => b.state(None, &state),
+            (
+                Record::Crossing {
+                    report,
+                    junction,
+                    stamp,
+                },
+                Some(&Record::Crossing {
+                    report: l,
+                    junction: lj,
+                    stamp: at,
+                }),
+            ) if lj == junction => b.report(Some((&l, at)), &report, stamp),
+            (Record::Crossing { report, stamp, .. }, _) => b.report(None, &report, stamp),
+        }
+    }
+
+    /// Marks the record's vehicle as one that does not cooperate (a state; a crossing
+    /// report carries no such flag).
+    fn distrusted(mut self) -> Self {
+        if let Record::Lane { state, .. } = &mut self {
+            state.cooperative = false;
+        }
+        self
+    }
+
     fn id_stamp(&self) -> (u16, f64) {
         match *self {
             Record::Lane { state, .. } => (state.id, state.stamp),
@@ -65,6 +104,11 @@ pub enum Reject {
     Stale,
     /// The view is full of vehicles nearer than this one.
     Full,
+    /// Physically impossible after the last message accepted from the sender
+    /// ([`super::plausible`]): the sender is a suspect from now on.
+    Implausible(Implausible),
+    /// From a suspect: nothing it says is taken any more ([`View::take`]).
+    Distrusted,
 }
 
 /// Where a record's vehicle is in the world (m), for keeping the nearest.
@@ -90,6 +134,10 @@ fn where_is(r: &Record, net: &Network) -> (f64, f64) {
 pub struct View {
     own: u16,
     records: Vec<Record>,
+    bounds: Bounds,
+    /// Senders that have sent an implausible message (at most [`VIEW_CAP`]; the oldest
+    /// suspicion is forgotten first).
+    suspects: Vec<u16>,
 }
 
 impl View {
@@ -98,6 +146,8 @@ impl View {
         Self {
             own,
             records: Vec::new(),
+            bounds: Bounds::table_i(),
+            suspects: Vec::new(),
         }
     }
 
@@ -106,7 +156,20 @@ impl View {
     /// junction (not a state the vehicle has sent since, from its next segment); `Gone`
     /// drops every record of a vehicle that left the network. Grants are not for the view
     /// (`Ok`).
+    ///
+    /// A sender that has sent one implausible state or report is a suspect: nothing more
+    /// it says is taken — not its states (a lie of a few metres becomes "plausible" again
+    /// a few periods after the jump), not its `Left` or `Gone` (which would make the
+    /// others forget it). Its last trusted record stays, ageing, and marked as a vehicle
+    /// that does not cooperate, so the planners take it at the worst case reachable from
+    /// there: a vehicle ahead no further on than that position (v ≥ 0), one behind
+    /// inflated at amax for the age, and no lane change starting in front of it (stale
+    /// data). Safety never rests on its word again; what that costs in liveness, the
+    /// attack experiment reports.
     pub fn take(&mut self, msg: &Message, net: &Network, me: (f64, f64)) -> Result<(), Reject> {
+        if !matches!(msg, Message::Grant { .. }) && self.suspects.contains(&msg.sender()) {
+            return Err(Reject::Distrusted);
+        }
         let rec = match *msg {
             Message::State { state, segment } => {
                 let f = [
@@ -157,8 +220,16 @@ impl View {
             return Err(Reject::Own);
         }
         let full = self.records.len() >= VIEW_CAP;
-        match self.records.iter_mut().find(|r| r.id_stamp().0 == id) {
-            Some(r) if !(stamp > r.id_stamp().1) => Err(Reject::Stale),
+        let held = self.records.iter().position(|r| r.id_stamp().0 == id);
+        let last = held.and_then(|i| self.records.get(i));
+        if last.is_some_and(|r| !(stamp > r.id_stamp().1)) {
+            return Err(Reject::Stale);
+        }
+        if let Err(why) = rec.plausible(last, &self.bounds) {
+            self.suspect(id);
+            return Err(Reject::Implausible(why));
+        }
+        match held.and_then(|i| self.records.get_mut(i)) {
             Some(r) => {
                 *r = rec;
                 Ok(())
@@ -168,6 +239,21 @@ impl View {
                 self.records.push(rec);
                 Ok(())
             }
+        }
+    }
+
+    /// Makes `id` a suspect: its record held now says it does not cooperate (it may
+    /// accelerate at amax and ignores intentions, planner-core's conservative reading),
+    /// and nothing it sends is taken from now on.
+    fn suspect(&mut self, id: u16) {
+        if !self.suspects.contains(&id) {
+            if self.suspects.len() >= VIEW_CAP {
+                self.suspects.remove(0);
+            }
+            self.suspects.push(id);
+        }
+        for r in self.records.iter_mut().filter(|r| r.id_stamp().0 == id) {
+            *r = r.distrusted();
         }
     }
 

@@ -26,6 +26,8 @@ pub struct ManagerNode {
     pub junction: usize,
     /// The manager.
     pub manager: Manager<f64, MANAGER_CAP>,
+    /// It has been restarted (after an outage).
+    pub restarted: bool,
 }
 
 impl ManagerNode {
@@ -38,7 +40,17 @@ impl ManagerNode {
         Self {
             junction,
             manager: Manager::new(layout, algorithm),
+            restarted: false,
         }
+    }
+
+    /// A restart: a new manager of the same junction and algorithm, remembering nothing.
+    /// It rebuilds its state from the reports it hears (every vehicle repeats its report
+    /// every period); a vehicle first heard inside A_S holds its zones as a permission
+    /// would (planner-core's `Manager::observe`), so nothing conflicting is granted over it.
+    pub fn restart(&mut self) {
+        self.manager = Manager::new(self.manager.layout().clone(), self.manager.algorithm());
+        self.restarted = true;
     }
 
     /// Its bus node.

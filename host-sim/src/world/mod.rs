@@ -20,6 +20,7 @@
 pub mod heard;
 pub mod junction;
 pub mod network;
+pub mod plausible;
 pub mod sensor;
 pub mod spawn;
 pub mod step;

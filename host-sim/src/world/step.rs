@@ -319,7 +319,8 @@ impl<const N: usize, B: Bus> World<N, B> {
             self.bus.send(id, &Message::departure(id, at, from), t)?;
         }
         for v in &self.vehicles {
-            self.bus.send(v.id, &v.message(t), t)?;
+            let msg = self.spec.faults.told(v.id, v.message(t), t);
+            self.bus.send(v.id, &msg, t)?;
         }
         self.messages_sent += self.vehicles.len() as u64;
         Ok(())
@@ -331,6 +332,18 @@ impl<const N: usize, B: Bus> World<N, B> {
         for m in &mut self.managers {
             inbox.clear();
             self.bus.receive(m.node(), t, &mut inbox)?;
+            let down = self
+                .spec
+                .faults
+                .manager_down
+                .filter(|d| d.junction == m.junction);
+            if down.is_some_and(|d| d.is_down(t)) {
+                // Stopped: what it hears is lost, and it grants nothing.
+                continue;
+            }
+            if down.is_some_and(|d| t >= d.until_s) && !m.restarted {
+                m.restart();
+            }
             let granted = m.manage(&inbox, t);
             self.monitor.granted(m.junction, &granted);
             for id in granted {

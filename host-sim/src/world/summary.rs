@@ -88,8 +88,11 @@ pub struct Summary {
     pub last_goal_time_s: Option<f64>,
     /// Messages the vehicles broadcast.
     pub messages_sent: u64,
-    /// Messages a vehicle's view rejected (stale, invalid).
+    /// Messages a vehicle's view rejected (stale, invalid, implausible).
     pub messages_rejected: u64,
+    /// Of those, states and crossing reports refused as physically implausible
+    /// (`world::plausible`: a jump, a speed, a speed change or a lane beyond the bounds).
+    pub messages_implausible: u64,
     /// What the bus's injected faults did.
     pub bus_faults: FaultStats,
     /// Solver used by the multi-lane planners.
@@ -253,6 +256,7 @@ pub fn summarize<'v, const N: usize>(
         last_goal_time_s: reached.iter().copied().reduce(f64::max),
         messages_sent: o.messages_sent,
         messages_rejected: c.rejected,
+        messages_implausible: c.implausible,
         bus_faults: o.bus_faults,
         solver: o.solver,
         seed: o.seed,

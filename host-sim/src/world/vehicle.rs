@@ -261,6 +261,8 @@ pub struct Counters {
     pub solver_iterations: u64,
     /// Messages a view rejected.
     pub rejected: u64,
+    /// Of those, states and reports refused as physically implausible.
+    pub implausible: u64,
 }
 
 impl Counters {
@@ -274,6 +276,7 @@ impl Counters {
         self.solved_steps += o.solved_steps;
         self.solver_iterations += o.solver_iterations;
         self.rejected += o.rejected;
+        self.implausible += o.implausible;
     }
 }
 
@@ -440,6 +443,11 @@ impl<const N: usize> Vehicle<N> {
                         counters.rejected += 1;
                     }
                 }
+                Err(Reject::Implausible(_)) => {
+                    counters.rejected += 1;
+                    counters.implausible += 1;
+                }
+                Err(Reject::Distrusted) => counters.rejected += 1,
                 Err(Reject::Own) | Ok(()) => {}
             }
             if let (Some(c), At::Crossing { junction, .. }) = (&mut b.crossing, self.at) {
