@@ -11,7 +11,7 @@
 //! with one payload bit flipped is pushed and must be refused, so the figures are those of
 //! a check that works.
 
-use can_gateway::codec::{encode_fd_secured, encode_secured, SecuredFrames, Verifier};
+use can_gateway::codec::{encode_fd_secured, encode_secured, Verifier};
 use can_gateway::secoc::{FreshnessRx, Key, KeyStore};
 use can_gateway::{FdFrame, Message, PlainFrame, Reassembler};
 use embedded_can::Frame;
@@ -93,6 +93,22 @@ fn flipped<Fr: Frame>(f: &Fr) -> Option<Fr> {
     Fr::new(f.id(), data.get(..n)?)
 }
 
+/// Pushes `frames` into `r`, timing it with `now` into `record(k, ticks)`; `true` if they
+/// completed a verified message.
+fn timed<Fr: Frame>(
+    r: &mut Receiver,
+    frames: &[Fr],
+    now_ms: u64,
+    k: u32,
+    now: &mut dyn FnMut() -> u32,
+    record: &mut dyn FnMut(usize, u32),
+) -> bool {
+    let t0 = now();
+    let ok = r.take(frames, now_ms);
+    record(k as usize, now().wrapping_sub(t0));
+    ok
+}
+
 /// Signs, sends and verifies [`MESSAGES`] states as classic CAN (`fd` false) or CAN FD,
 /// timing each verification with `now` (ticks) into `record(i, ticks)`.
 pub fn run(fd: bool, now: &mut dyn FnMut() -> u32, record: &mut dyn FnMut(usize, u32)) -> Verified {
@@ -106,28 +122,22 @@ pub fn run(fd: bool, now: &mut dyn FnMut() -> u32, record: &mut dyn FnMut(usize,
         let now_ms = u64::from(k) * 10;
         let counter = (k % 16) as u8;
         let msg = state(k);
-        // A tampered copy first (same freshness): refused, and it must not stop the genuine one.
         let ok = if fd {
             let Ok(f) = encode_fd_secured::<f32, FdFrame>(&msg, SA, counter, &key, now_ms) else {
                 return out;
             };
+            // A tampered copy first (same freshness): refused, and it must not stop the
+            // genuine one.
             if let Some(bad) = flipped(&f) {
                 out.forged_accepted += u32::from(r.take(&[bad], now_ms));
             }
-            let t0 = now();
-            let ok = r.take(&[f], now_ms);
-            record(k as usize, now().wrapping_sub(t0));
-            ok
+            timed(&mut r, &[f], now_ms, k, now, record)
         } else {
             let Ok(frames) = encode_secured::<f32, PlainFrame>(&msg, SA, counter, &key, now_ms)
             else {
                 return out;
             };
-            let frames: SecuredFrames<PlainFrame> = frames;
-            let t0 = now();
-            let ok = r.take(&frames, now_ms);
-            record(k as usize, now().wrapping_sub(t0));
-            ok
+            timed(&mut r, &frames, now_ms, k, now, record)
         };
         out.accepted += u32::from(ok);
     }

@@ -147,14 +147,10 @@ impl Faults {
             }
         }
         if let Some(s) = self.silent {
-            if !(s.from_s.is_finite() && s.from_s >= 0.0) {
-                return Err(format!("faults.silent.from_s = {}: must be ≥ 0", s.from_s));
-            }
+            start_ok("silent", s.from_s)?;
         }
         if let Some(l) = self.liar {
-            if !(l.from_s.is_finite() && l.from_s >= 0.0) {
-                return Err(format!("faults.liar.from_s = {}: must be ≥ 0", l.from_s));
-            }
+            start_ok("liar", l.from_s)?;
             if !(l.offset_m.is_finite() && l.offset_m.abs() <= MAX_LIE_M) {
                 return Err(format!(
                     "faults.liar.offset_m = {}: must be within ±{MAX_LIE_M} m",
@@ -210,6 +206,15 @@ impl Faults {
             0.0
         };
         h + self.delay_s + self.jitter_s + held + lost
+    }
+}
+
+/// A fault's start time `from_s` (of `[faults.<what>]`): finite and ≥ 0.
+fn start_ok(what: &str, from_s: f64) -> Result<(), String> {
+    if from_s.is_finite() && from_s >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!("faults.{what}.from_s = {from_s}: must be ≥ 0"))
     }
 }
 
