@@ -217,6 +217,104 @@ fn scale_prints_its_figures() {
     );
     assert_eq!(v["vehicles"], 60);
     assert_eq!(v["collisions"], 0);
+    assert_eq!(v["kind"], "platoons");
+    // Every follower plans every step and solves it; the leader drives at random.
+    assert_eq!(v["solves_per_step"], 1.0);
+    assert_eq!(v["step"]["steps"], 57 * 200);
+    let p = |k: &str| v["step"][k].as_f64().expect("µs");
+    assert!(0.0 < p("p50_us") && p("p50_us") <= p("p90_us") && p("p90_us") <= p("p99_us"));
+    assert!(p("p99_us") <= p("max_us"));
+}
+
+#[test]
+fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
+    let out = bin()
+        .args([
+            "scale",
+            "--vehicles",
+            "60",
+            "--duration",
+            "4",
+            "--traffic",
+            "--json",
+        ])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(
+        &out.stdout,
+        &["kind", "step", "solves_per_step", "lane_changes"],
+    );
+    assert_eq!(v["kind"], "traffic");
+    assert_eq!(
+        (v["collisions"].clone(), v["invariant_violations"].clone()),
+        (0.into(), 0.into())
+    );
+    assert!(v["lane_changes"].as_u64().expect("count") > 0, "{v}");
+    assert!(
+        v["lateral_iterations_per_step"].as_f64().expect("mean") > 0.0,
+        "{v}"
+    );
+    assert_eq!(v["step"]["steps"], 60 * 400);
+
+    let plot = tmp("scale.svg");
+    let _ = std::fs::remove_file(&plot);
+    let out = bin()
+        .args([
+            "scale",
+            "--sweep",
+            "--sweep-vehicles",
+            "10,20",
+            "--sweep-threads",
+            "1",
+        ])
+        .args(["--duration", "0.5", "--json", "--plot"])
+        .arg(&plot)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(&out.stdout, &["runs", "sim_seconds"]);
+    let runs = v["runs"].as_array().expect("runs");
+    let kinds: Vec<(&str, u64)> = runs
+        .iter()
+        .map(|r| {
+            (
+                r["kind"].as_str().unwrap_or(""),
+                r["vehicles"].as_u64().unwrap_or(0),
+            )
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            ("platoons", 10),
+            ("platoons", 20),
+            ("traffic", 10),
+            ("traffic", 20)
+        ]
+    );
+    let svg = std::fs::read_to_string(&plot).expect("the plot");
+    assert!(
+        svg.contains("<svg") && svg.contains("Traffic, 1 thread"),
+        "{plot:?}"
+    );
+    // The sweep's flags need --sweep; a bad list is refused before anything runs.
+    for bad in [
+        vec!["--sweep-vehicles", "10"],
+        vec!["--sweep", "--sweep-threads", "0"],
+        vec!["--sweep", "--plot", "x.txt"],
+    ] {
+        let out = bin().arg("scale").args(&bad).output().expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{bad:?}");
+    }
 }
 
 #[test]
@@ -238,6 +336,59 @@ fn bench_can_carries_every_message_in_each_configuration() {
     for (r, frames) in rows.iter().zip([1200, 1600, 400, 400]) {
         assert_eq!(r["received"], 400, "{r}");
         assert_eq!(r["frames"], frames, "{r}");
+    }
+}
+
+#[test]
+fn experiment_attacks_prints_its_rows_and_refuses_unknown_names() {
+    let out = bin()
+        .args([
+            "experiment",
+            "attacks",
+            "--only",
+            "forged-grant",
+            "--world",
+            "intersection",
+            "--json",
+        ])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(
+        &out.stdout,
+        &["medium", "authenticated", "can_fd", "algorithm", "results"],
+    );
+    let rows = v["results"].as_array().expect("rows");
+    assert_eq!(rows.len(), 1);
+    for key in [
+        "attack",
+        "attempts",
+        "accepted",
+        "collisions",
+        "invariant_violations",
+        "unpermitted_entries",
+        "completed",
+    ] {
+        assert!(rows[0].get(key).is_some(), "{key}: {}", rows[0]);
+    }
+    assert_eq!(rows[0]["accepted"], 0);
+    for bad in [
+        ["--only", "teleport"],
+        ["--world", "moon"],
+        ["--algorithm", "CON"],
+        ["--bus", "not/an/iface"],
+    ] {
+        let out = bin()
+            .args(["experiment", "attacks"])
+            .args(bad)
+            .output()
+            .expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{bad:?}");
+        assert!(out.stdout.is_empty(), "{bad:?}");
     }
 }
 

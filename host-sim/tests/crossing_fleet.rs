@@ -408,6 +408,7 @@ fn with_impostors(
         medium: "impostors' hub",
         keys: keys.clone(),
         fd: false,
+        attack: None,
     }
     .run(
         sc.clone(),

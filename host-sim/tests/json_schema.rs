@@ -172,6 +172,7 @@ fn the_page_parses_into_every_section() {
         "experiment demand",
         "experiment network",
         "scale",
+        "scale --sweep",
         "bench-planner",
     ] {
         assert!(d.get(s).is_some_and(|k| k.len() >= 3), "section {s}");
@@ -229,6 +230,16 @@ fn experiment_outputs_match_the_page() {
     check(
         "experiment throughput",
         &["experiment", "throughput", "--seeds", "1"],
+        &[],
+    );
+    check(
+        "experiment attacks",
+        &[
+            "experiment",
+            "attacks",
+            "--only",
+            "forged-grant,manager-crash",
+        ],
         &[],
     );
     check(
@@ -293,6 +304,25 @@ fn benchmark_outputs_match_the_page() {
     check(
         "scale",
         &["scale", "--vehicles", "20", "--duration", "1"],
+        &[],
+    );
+    check(
+        "scale",
+        &["scale", "--vehicles", "20", "--duration", "1", "--traffic"],
+        &[],
+    );
+    check(
+        "scale --sweep",
+        &[
+            "scale",
+            "--sweep",
+            "--sweep-vehicles",
+            "10",
+            "--sweep-threads",
+            "1",
+            "--duration",
+            "0.5",
+        ],
         &[],
     );
     check(

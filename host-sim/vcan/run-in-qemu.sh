@@ -11,6 +11,9 @@
 # Usage: host-sim/vcan/run-in-qemu.sh [SCENARIO.toml ...] [--can-fd SCENARIO.toml ...]
 #   (default: multilane.toml). Scenarios after --can-fd run with `--can-fd`: every
 #   message in one CAN FD frame (vcan0 has MTU 72, so both kinds travel on it).
+# Then, on vcan0 too, `host-sim experiment attacks --bus vcan0 $VCAN_ATTACKS` (default:
+# the forged grant at the intersection, authenticated, on CAN FD); its JSON must show no forgery
+# accepted, no unsafe event and every vehicle done. VCAN_ATTACKS="" skips it.
 # Results go to $VCAN_OUT (default: vcan-qemu in cargo's target directory).
 # Needs: qemu-system-x86_64, apt-get (Debian's archive), cargo with the
 # x86_64-unknown-linux-musl target, python3 with cantools (.ci/run installs all of them).
@@ -95,6 +98,7 @@ for sc in "${scenarios[@]}"; do # numbered: run in the order given
   echo "${fd[$((i - 1))]}" > "$r/work/scenarios/$i-$(basename "$sc" .toml).args"
 done
 echo "${HOST_SIM_ARGS:-}" > "$r/work/args"
+echo "${VCAN_ATTACKS-"--only forged-grant --world intersection --can-fd"}" > "$r/work/attacks"
 (cd "$r" && find . | "$r/bin/busybox" cpio -o -H newc 2>/dev/null | gzip -1) > "$out/initramfs.gz"
 
 echo "== boot linux $kver under qemu-system-x86_64 (TCG)"
@@ -137,4 +141,12 @@ for sc in "${scenarios[@]}"; do
   python3 "$here/check_vcan_run.py" "$root/can-gateway/can-gateway.dbc" \
     "$d/summary.json" "$d/candump.log" "$trace" "${status:-none}" || failed=1
 done
+if [ -n "${VCAN_ATTACKS-x}" ]; then
+  status="$(sed -n 's/^=== ATTACKS STATUS //p' "$out/console.txt" | tail -1)"
+  echo "== experiment attacks on vcan0: host-sim exit status in the VM: ${status:-none}"
+  section attacks.json > "$out/attacks.json"
+  cat "$out/attacks.json"
+  echo
+  python3 "$here/check_attacks.py" "$out/attacks.json" "${status:-none}" || failed=1
+fi
 exit "$failed"

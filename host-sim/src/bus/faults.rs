@@ -74,6 +74,15 @@ pub struct Liar {
 }
 
 impl Liar {
+    /// `true` if `msg` is one of its lies (a state or report it sent from `from_s` on).
+    pub fn lied(&self, msg: &Message) -> bool {
+        match *msg {
+            Message::State { state, .. } => state.id == self.id && state.stamp >= self.from_s,
+            Message::Crossing { report, stamp, .. } => report.id == self.id && stamp >= self.from_s,
+            _ => false,
+        }
+    }
+
     /// `msg` as the liar sends it at `t`: its position moved by the offset once lying.
     pub fn told(&self, from: u16, msg: Message, t: f64) -> Message {
         if from != self.id || t < self.from_s {

@@ -13,9 +13,32 @@ pub struct ScaleArgs {
     /// Simulated seconds.
     #[arg(long, default_value_t = 10.0)]
     duration: f64,
-    /// Vehicles per road (platoon).
+    /// Vehicles per road (a platoon, or a traffic road's three lanes).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..=128))]
     platoon: u64,
+    /// Three-lane roads of planners changing lanes to random targets at dense spacing,
+    /// instead of platoons.
+    #[arg(long)]
+    traffic: bool,
+    /// Instead: platoons and traffic at each of --sweep-vehicles on each of
+    /// --sweep-threads, one Markdown table row (or JSON record) each.
+    #[arg(long, conflicts_with_all = ["vehicles", "threads", "traffic"])]
+    sweep: bool,
+    /// With --sweep: vehicle counts (comma-separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "500,1000,2000,5000",
+        requires = "sweep"
+    )]
+    sweep_vehicles: Vec<u64>,
+    /// With --sweep: thread counts (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,2", requires = "sweep")]
+    sweep_threads: Vec<usize>,
+    /// With --sweep: draw planner steps/s against vehicles (and the real-time line) to a
+    /// .png or .svg file.
+    #[arg(long, value_name = "out.png|out.svg", requires = "sweep")]
+    plot: Option<std::path::PathBuf>,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -108,13 +131,44 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
             a.duration
         ));
     }
-    let r = host_sim::experiments::scale::run(
-        a.vehicles as usize,
-        a.duration,
-        a.platoon as usize,
-        a.threads,
-        a.seed,
-    );
+    use host_sim::experiments::scale::{run, sweep, Kind, ScaleSettings};
+    if let Some(p) = &a.plot {
+        if let Err(code) = super::output::check_plot(p) {
+            return code;
+        }
+    }
+    if a.sweep_vehicles.iter().any(|&v| v == 0 || v > 1_000_000)
+        || a.sweep_threads.iter().any(|&t| t == 0 || t > 1024)
+    {
+        return bad_input("--sweep-vehicles in 1..=1000000, --sweep-threads in 1..=1024");
+    }
+    let settings = ScaleSettings {
+        kind: if a.traffic {
+            Kind::Traffic
+        } else {
+            Kind::Platoons
+        },
+        vehicles: a.vehicles as usize,
+        duration_s: a.duration,
+        per_road: a.platoon as usize,
+        threads: a.threads,
+        seed: a.seed,
+    };
+    if a.sweep {
+        let vehicles: Vec<usize> = a.sweep_vehicles.iter().map(|&v| v as usize).collect();
+        let r = sweep(&settings, &vehicles, &a.sweep_threads);
+        if let Some(p) = &a.plot {
+            if let Err(e) = host_sim::output::plot::scale(&r, p) {
+                return bad_input(e.to_string());
+            }
+        }
+        let safe = r
+            .runs
+            .iter()
+            .all(|x| x.collisions + x.invariant_violations + x.limit_violations == 0);
+        return finish(&r, a.json, safe, true);
+    }
+    let r = run(&settings);
     finish(
         &r,
         a.json,

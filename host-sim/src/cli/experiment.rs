@@ -158,6 +158,34 @@ pub enum Experiment {
         #[arg(long)]
         json: bool,
     },
+    /// Issue 17's attacks on the Fig. 8 intersection and the multi-lane road, each a fleet
+    /// on CAN with every node authenticating: forged grant, replayed grant, replayed
+    /// state, spoofed id, flood, a lying vehicle, the manager's crash and restart (exit 1
+    /// on a forgery or replay accepted, or an unsafe event).
+    Attacks {
+        /// The fleets' medium: `can-hub` or a SocketCAN interface such as `vcan0`.
+        #[arg(long, default_value = "can-hub")]
+        bus: String,
+        /// Run without authentication, to see what it keeps out.
+        #[arg(long)]
+        without_auth: bool,
+        /// Every message as one CAN FD frame.
+        #[arg(long)]
+        can_fd: bool,
+        /// The intersection's algorithm (STOP, FIFO, CON-fair, PIPE).
+        #[arg(long, default_value = "FIFO")]
+        algorithm: String,
+        /// Only these rows (comma-separated): forged-grant, replayed-grant,
+        /// replayed-state, spoofed-id, flood, lying-vehicle, manager-crash.
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
+        /// Only these worlds (comma-separated): intersection, multilane.
+        #[arg(long, value_delimiter = ',')]
+        world: Vec<String>,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
     Multilane {
         /// Number of runs (seeds 1..=K, or from --seed).
@@ -224,6 +252,21 @@ impl FaultArgs {
 /// Runs an experiment.
 pub fn run(e: Experiment) -> ExitCode {
     match e {
+        Experiment::Attacks {
+            bus,
+            without_auth,
+            can_fd,
+            algorithm,
+            only,
+            world,
+            json,
+        } => attacks(
+            &bus,
+            (!without_auth, can_fd),
+            &algorithm,
+            (only, world),
+            json,
+        ),
         Experiment::Multilane {
             seeds,
             seed,
@@ -688,5 +731,129 @@ fn faults(
             let live = r.multilane_faulty.completed == r.multilane_faulty.runs;
             finish(&r, json, r.faulty_unsafe_events == 0, live)
         }
+    }
+}
+
+/// `experiment attacks`: checks every flag, runs, prints; exit 1 when a forgery or replay
+/// got through (authenticated runs only: without authentication they are expected to)
+/// or a row saw an unsafe event, exit 3 when a row other than the liar's left a vehicle
+/// undone.
+fn attacks(
+    bus: &str,
+    (authenticated, fd): (bool, bool),
+    algorithm: &str,
+    (only, worlds): (Vec<String>, Vec<String>),
+    json: bool,
+) -> ExitCode {
+    use host_sim::experiments::attacks::{experiment, row_names, Settings, WORLDS};
+    let medium = match super::fleet::medium(bus) {
+        Ok(m) => m,
+        Err(e) => return bad_input(e),
+    };
+    let Some(&algorithm) = Algorithm::ALL
+        .iter()
+        .find(|a| a.name().eq_ignore_ascii_case(algorithm))
+        .filter(|a| **a != Algorithm::Concurrent)
+    else {
+        return bad_input(format!(
+            "--algorithm: {algorithm:?} is not a live algorithm (STOP, FIFO, CON-fair, PIPE)"
+        ));
+    };
+    let names = row_names();
+    if let Some(bad) = only.iter().find(|o| !names.contains(&o.as_str())) {
+        return bad_input(format!(
+            "--only: unknown row {bad:?} ({})",
+            names.join(", ")
+        ));
+    }
+    if let Some(bad) = worlds.iter().find(|w| !WORLDS.contains(&w.as_str())) {
+        return bad_input(format!("--world: unknown {bad:?} ({})", WORLDS.join(", ")));
+    }
+    let settings = Settings {
+        medium,
+        authenticated,
+        fd,
+        algorithm,
+        only,
+        worlds,
+    };
+    let report = match experiment(&settings) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(super::output::EXIT_BUS);
+        }
+    };
+    let forged = [
+        "forged-grant",
+        "replayed-grant",
+        "replayed-state",
+        "spoofed-id",
+        "flood",
+    ];
+    let kept_out = !authenticated
+        || report
+            .results
+            .iter()
+            .all(|r| !forged.contains(&r.attack.as_str()) || r.accepted == 0);
+    let safe = report.results.iter().all(|r| r.unsafe_events() == 0);
+    // A liar's cost in liveness is reported, not required away: the others stop taking
+    // its word and plan around the worst case of it.
+    let done = report
+        .results
+        .iter()
+        .all(|r| r.completed || r.attack == "lying-vehicle");
+    finish(&AttacksText(&report), json, safe && kept_out, done)
+}
+
+/// `experiment attacks`'s table for a terminal.
+struct AttacksText<'a>(&'a host_sim::experiments::attacks::AttackReport);
+
+impl serde::Serialize for AttacksText<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.0.serialize(s)
+    }
+}
+
+impl std::fmt::Display for AttacksText<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self.0;
+        writeln!(
+            f,
+            "attacks on {} (authenticated: {}, CAN FD: {}, intersection {})",
+            r.medium, r.authenticated, r.can_fd, r.algorithm
+        )?;
+        writeln!(
+            f,
+            "{:<15} {:<13} {:>8} {:>8} {:>6} {:>6} {:>6} {:>5} {:>9} {:>9}",
+            "attack",
+            "world",
+            "attempts",
+            "accepted",
+            "coll",
+            "viol",
+            "unperm",
+            "done",
+            "done at",
+            "clean"
+        )?;
+        let s = |x: Option<f64>| x.map_or("-".into(), |v| format!("{v:.1} s"));
+        for x in &r.results {
+            writeln!(
+                f,
+                "{:<15} {:<13} {:>8} {:>8} {:>6} {:>6} {:>6} {:>5} {:>9} {:>9}",
+                x.attack,
+                x.scenario,
+                x.attempts,
+                x.accepted,
+                x.collisions,
+                x.invariant_violations,
+                x.unpermitted_entries,
+                format!("{}/{}", x.done, x.vehicles),
+                s(x.done_at_s),
+                s(x.clean_done_at_s)
+            )?;
+        }
+        Ok(())
     }
 }

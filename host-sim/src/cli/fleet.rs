@@ -62,10 +62,7 @@ pub fn run(
     fleet::run_keyed(spec, solver, seed, &m, link.keys, link.fd, trace)
 }
 
-/// The public master key of simulations: `--auth` derives every node's key from it. It
-/// is in this source, so it protects nothing outside a simulation; a fleet that must
-/// keep secrets takes a key file (`--keys`).
-pub const SIMULATION_MASTER: Key = Key(*b"host-sim master!");
+pub use host_sim::fleet::can::SIMULATION_MASTER;
 
 /// The fleet's keys: none without `auth`; from `file`; else derived from
 /// [`SIMULATION_MASTER`].

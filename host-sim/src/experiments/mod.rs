@@ -1,6 +1,7 @@
 //! The paper's experiments and the theorems' sweeps, each a function from settings to a
 //! result struct that serialises to its JSON (printing is the CLI's).
 
+pub mod attacks;
 pub mod crossings;
 pub mod deadends;
 pub mod demand;

@@ -1,18 +1,44 @@
-//! `host-sim scale`: many vehicles at h = 0.01 on all cores, as parallel single-lane
-//! roads, each a platoon behind a randomly driven leader on its own in-process bus (V2V
-//! range is local: vehicles on different roads do not hear each other).
+//! `host-sim scale`: many vehicles at h = 0.01 on all cores, as parallel roads, each on
+//! its own in-process bus (V2V range is local: vehicles on different roads do not hear
+//! each other). Two kinds of road:
+//!
+//! - platoons (the default): one lane, a randomly driven leader and planner followers;
+//! - traffic (`--traffic`, issue 19 §2): three lanes, every vehicle a planner with a
+//!   random target lane and reference speed, packed at the smallest safe spacing plus
+//!   0.5–5 m — lane changes among dense neighbours, the planners' expensive case.
+//!
+//! Besides the realtime factor, the report gives what a planner step costs in wall-clock
+//! time (percentiles over every step of every vehicle) and solves and solver iterations
+//! per step. `--sweep` runs the grid of vehicles × threads × kinds for README's table.
 
 use crate::monitor::Limits;
 use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
+use crate::world::cost::{StepCosts, StepPercentiles};
 use crate::world::summary::Summary;
+use crate::world::vehicle::Counters;
 use crate::world::{SolverChoice, World, LENGTH_M, START_MARGIN_M};
 use rand::Rng;
 use serde::Serialize;
 
+/// The kind of road a scale run is made of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    /// Single-lane platoons behind random leaders.
+    Platoons,
+    /// Three-lane roads of planners changing lanes to random targets.
+    Traffic,
+}
+
+/// Lanes of a traffic road.
+pub const TRAFFIC_LANES: u8 = 3;
+
 /// The `scale` summary.
 #[derive(Debug, Clone, Serialize)]
 pub struct ScaleReport {
+    /// The kind of road.
+    pub kind: Kind,
     /// Vehicles simulated.
     pub vehicles: usize,
     /// Roads (platoons) they were split into.
@@ -35,6 +61,20 @@ pub struct ScaleReport {
     pub limit_violations: u64,
     /// Planner fallback steps (excluding forced standstills).
     pub fallback_steps: u64,
+    /// Wall-clock time of one planner step (a vehicle's decide: hear, plan, verify).
+    pub step: StepPercentiles,
+    /// Steps whose MPC was solved (the rest: standstill, fallback), per planner step.
+    pub solves_per_step: f64,
+    /// Interior-point iterations per planner step.
+    pub solver_iterations_per_step: f64,
+    /// Lateral-QP iterations per planner step (lane changes; 0 on platoons).
+    pub lateral_iterations_per_step: f64,
+    /// Lane changes completed.
+    pub lane_changes: u64,
+    /// Steps braking under the Yield Protocol (certified braking, no solve).
+    pub yield_steps: u64,
+    /// Steps standing with no room (no solve).
+    pub waiting_steps: u64,
 }
 
 /// One road of the scale run: `n` vehicles, a random leader, planner followers.
@@ -81,52 +121,122 @@ pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> RoadScenario 
     )
 }
 
-/// Runs `vehicles` vehicles for `duration_s` on `threads` threads (0 = all cores).
-pub fn run(
-    vehicles: usize,
-    duration_s: f64,
-    platoon: usize,
-    threads: usize,
-    seed: u64,
-) -> ScaleReport {
-    let platoon = platoon.clamp(2, crate::scenario::road::MAX_VEHICLES);
-    let roads: Vec<usize> = (0..vehicles.div_ceil(platoon))
-        .map(|r| platoon.min(vehicles - r * platoon))
-        .collect();
-    let threads = super::par::threads(threads);
-    let t0 = std::time::Instant::now();
-    let sums = super::par::map_indexed(roads.len(), threads, |r| {
-        let n = roads.get(r).copied().unwrap_or(0);
-        let world = road(r, n, duration_s, seed).world();
-        let mut sim = World::<20>::new(world, SolverChoice::Ours, None);
-        while !sim.finished() {
-            if sim.step(&mut |_| {}).is_err() {
-                break;
-            }
+/// One road of the traffic run: `n` planners on [`TRAFFIC_LANES`] lanes, dealt to the
+/// lanes in turn, each behind the one ahead in its lane at the smallest safe spacing plus
+/// 0.5–5 m, at random speeds and reference speeds, each with a random target lane.
+pub fn traffic_road(index: usize, n: usize, duration_s: f64, seed: u64) -> RoadScenario {
+    let lim = Limits::table_i();
+    let mut rng = crate::reference::instances::rng(seed ^ (index as u64).wrapping_mul(0x7AFF_1C5D));
+    let mut back = [0.0f64; TRAFFIC_LANES as usize];
+    let mut vehicles = Vec::with_capacity(n);
+    for i in 0..n {
+        let lane = (i % usize::from(TRAFFIC_LANES)) as u8;
+        let v = rng.random_range(5.0..0.9 * lim.v_max);
+        let slot = &mut back[usize::from(lane)];
+        let x = if i < usize::from(TRAFFIC_LANES) {
+            rng.random_range(0.0..10.0)
+        } else {
+            *slot - super::multilane::safe_spacing(v) - rng.random_range(0.5..5.0)
+        };
+        *slot = x;
+        vehicles.push(RoadVehicle {
+            cooperative: None,
+            id: i as u16 + 1,
+            x,
+            lane,
+            v,
+            target_lane: Some(rng.random_range(0..TRAFFIC_LANES)),
+            driver: DriverKind::Planner,
+            script: Vec::new(),
+            goal_x: None,
+            v_ref: Some(rng.random_range(5.0..lim.v_max)),
+        });
+    }
+    RoadScenario::new(
+        format!("scale-traffic-{index}"),
+        duration_s,
+        seed.wrapping_add(index as u64),
+        Road {
+            lanes: TRAFFIC_LANES,
+            end_x: None,
+        },
+        vehicles,
+    )
+}
+
+/// A scale run's settings.
+#[derive(Debug, Clone, Copy)]
+pub struct ScaleSettings {
+    /// The kind of road.
+    pub kind: Kind,
+    /// Vehicles in all.
+    pub vehicles: usize,
+    /// Simulated seconds.
+    pub duration_s: f64,
+    /// Vehicles per road.
+    pub per_road: usize,
+    /// Worker threads (0 = all cores).
+    pub threads: usize,
+    /// Seed.
+    pub seed: u64,
+}
+
+/// One road's world run to its end: its summary, counters and step costs.
+fn run_road(s: &ScaleSettings, r: usize, n: usize) -> (Summary, Counters, StepCosts) {
+    let road = match s.kind {
+        Kind::Platoons => road(r, n, s.duration_s, s.seed),
+        Kind::Traffic => traffic_road(r, n, s.duration_s, s.seed),
+    };
+    let mut sim = World::<20>::new(road.world(), SolverChoice::Ours, None);
+    while !sim.finished() {
+        if sim.step(&mut |_| {}).is_err() {
+            break;
         }
-        sim.summary(0.0)
+    }
+    (sim.summary(0.0), *sim.counters(), sim.step_costs().clone())
+}
+
+/// Runs the vehicles of `s` on its roads, on its threads.
+pub fn run(s: &ScaleSettings) -> ScaleReport {
+    let per_road = s.per_road.clamp(2, crate::scenario::road::MAX_VEHICLES);
+    let vehicles = s.vehicles;
+    let roads: Vec<usize> = (0..vehicles.div_ceil(per_road))
+        .map(|r| per_road.min(vehicles - r * per_road))
+        .collect();
+    let threads = super::par::threads(s.threads);
+    let t0 = std::time::Instant::now();
+    let runs = super::par::map_indexed(roads.len(), threads, |r| {
+        run_road(s, r, roads.get(r).copied().unwrap_or(0))
     });
     let wall = t0.elapsed().as_secs_f64();
-    let sum = |f: fn(&Summary) -> u64| sums.iter().map(f).sum::<u64>();
-    let (steps, col, inv, lim, fb) = (
-        sum(|s| s.planner_steps),
-        sum(|s| s.collisions),
-        sum(|s| s.invariant_violations),
-        sum(|s| s.limit_violations),
-        sum(|s| s.fallback_steps),
-    );
+    let (mut costs, mut counters) = (StepCosts::default(), Counters::default());
+    for (_, c, k) in &runs {
+        costs.merge(k);
+        counters.add(c);
+    }
+    let sum = |f: fn(&Summary) -> u64| runs.iter().map(|(s, _, _)| f(s)).sum::<u64>();
+    let steps = counters.planner_steps;
+    let per_step = |x: u64| x as f64 / steps.max(1) as f64;
     ScaleReport {
+        kind: s.kind,
         vehicles,
         roads: roads.len(),
         threads,
-        sim_seconds: duration_s,
+        sim_seconds: s.duration_s,
         wall_seconds: wall,
-        realtime_factor: duration_s / wall,
+        realtime_factor: s.duration_s / wall,
         planner_steps_per_second: steps as f64 / wall,
-        collisions: col,
-        invariant_violations: inv,
-        limit_violations: lim,
-        fallback_steps: fb,
+        collisions: sum(|s| s.collisions),
+        invariant_violations: sum(|s| s.invariant_violations),
+        limit_violations: sum(|s| s.limit_violations),
+        fallback_steps: sum(|s| s.fallback_steps),
+        step: costs.percentiles(),
+        solves_per_step: per_step(counters.solved_steps),
+        solver_iterations_per_step: per_step(counters.solver_iterations),
+        lateral_iterations_per_step: per_step(counters.lateral_iterations),
+        lane_changes: sum(|s| s.lane_changes.changes as u64),
+        yield_steps: counters.yield_steps,
+        waiting_steps: counters.waiting_steps,
     }
 }
 
@@ -134,20 +244,90 @@ impl core::fmt::Display for ScaleReport {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
             f,
-            "{} vehicles on {} roads, {} threads: {:.1} s simulated in {:.2} s = {:.2}x real time, \
-             {:.0} planner steps/s\n  {} collisions, {} invariant violations, {} limit violations, \
-             {} fallback steps",
+            "{} vehicles on {} roads ({:?}), {} threads: {:.1} s simulated in {:.2} s = {:.2}x real time, \
+             {:.0} planner steps/s\n  step p50 {:.1} µs, p90 {:.1} µs, p99 {:.1} µs, max {:.0} µs; \
+             {:.2} solves, {:.1} solver iterations, {:.1} lateral iterations per step; {} lane changes\n  \
+             {} collisions, {} invariant violations, {} limit violations, {} fallback steps",
             self.vehicles,
             self.roads,
+            self.kind,
             self.threads,
             self.sim_seconds,
             self.wall_seconds,
             self.realtime_factor,
             self.planner_steps_per_second,
+            self.step.p50_us,
+            self.step.p90_us,
+            self.step.p99_us,
+            self.step.max_us,
+            self.solves_per_step,
+            self.solver_iterations_per_step,
+            self.lateral_iterations_per_step,
+            self.lane_changes,
             self.collisions,
             self.invariant_violations,
             self.limit_violations,
             self.fallback_steps
         )
+    }
+}
+
+/// `scale --sweep`: every kind of road at each count of vehicles on each count of
+/// threads, in one run (README's table and plot).
+#[derive(Debug, Clone, Serialize)]
+pub struct ScaleSweep {
+    /// Simulated seconds per run.
+    pub sim_seconds: f64,
+    /// Planner steps per second that real time needs per vehicle (1 / h).
+    pub steps_per_vehicle_second: f64,
+    /// One report per kind, vehicle count and thread count.
+    pub runs: Vec<ScaleReport>,
+}
+
+/// Runs `base` for each kind, each of `vehicles` and each of `threads`.
+pub fn sweep(base: &ScaleSettings, vehicles: &[usize], threads: &[usize]) -> ScaleSweep {
+    let mut runs = Vec::new();
+    for kind in [Kind::Platoons, Kind::Traffic] {
+        for &n in vehicles {
+            for &t in threads {
+                runs.push(run(&ScaleSettings {
+                    kind,
+                    vehicles: n,
+                    threads: t,
+                    ..*base
+                }));
+            }
+        }
+    }
+    ScaleSweep {
+        sim_seconds: base.duration_s,
+        steps_per_vehicle_second: 1.0 / Limits::table_i().h,
+        runs,
+    }
+}
+
+impl core::fmt::Display for ScaleSweep {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        writeln!(
+            f,
+            "| roads | vehicles | threads | planner steps/s | × real time | step p50 µs | step p99 µs | solves/step | iterations/step |"
+        )?;
+        writeln!(f, "|---|---|---|---|---|---|---|---|---|")?;
+        for r in &self.runs {
+            writeln!(
+                f,
+                "| {:?} | {} | {} | {:.0} | {:.2} | {:.1} | {:.1} | {:.2} | {:.1} |",
+                r.kind,
+                r.vehicles,
+                r.threads,
+                r.planner_steps_per_second,
+                r.realtime_factor,
+                r.step.p50_us,
+                r.step.p99_us,
+                r.solves_per_step,
+                r.solver_iterations_per_step
+            )?;
+        }
+        Ok(())
     }
 }

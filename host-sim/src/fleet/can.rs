@@ -466,6 +466,11 @@ pub const KEY_SLOTS: usize = 256;
 /// A fleet's keys, shared by its nodes.
 pub type Keys = KeyStore<KEY_SLOTS>;
 
+/// The public master key of simulations: `--auth` derives every node's key from it. It
+/// is in this source, so it protects nothing outside a simulation; a fleet that must
+/// keep secrets takes a key file (`--keys`).
+pub const SIMULATION_MASTER: Key = Key(*b"host-sim master!");
+
 /// Every address's key derived from a simulation's `master` key
 /// ([`can_gateway::secoc::derive_key`]): for simulations only, where every node is ours.
 pub fn simulation_keys(master: &Key) -> Keys {
@@ -500,6 +505,9 @@ pub struct CanNode<P> {
     now_ms: u64,
     /// It sends each message as one CAN FD frame.
     fd: bool,
+    /// The attack experiment's oracle: what it sends is recorded there, and what it
+    /// accepts is checked against it (never by the node itself).
+    ledger: Option<Arc<super::ledger::Ledger>>,
 }
 
 impl<P> fmt::Debug for CanNode<P> {
@@ -523,7 +531,14 @@ impl<P: CanPort> CanNode<P> {
             security: None,
             now_ms: 0,
             fd: false,
+            ledger: None,
         }
+    }
+
+    /// This node, a genuine one, telling `ledger` what it sends and accepts.
+    pub fn with_ledger(mut self, ledger: Arc<super::ledger::Ledger>) -> Self {
+        self.ledger = Some(ledger);
+        self
     }
 
     /// This node, sending each message (with its authenticator, if any) as one CAN FD
@@ -595,7 +610,12 @@ impl<P: CanPort> CanNode<P> {
 
     fn transmit_all<Fr: Into<FdFrame> + Copy>(&mut self, frames: &[Fr]) -> Result<(), CanError> {
         for f in frames {
-            self.port.transmit(&(*f).into())?;
+            let frame: FdFrame = (*f).into();
+            // Recorded first: a receiver may check the frame before `transmit` returns.
+            if let Some(l) = &self.ledger {
+                l.sent(&frame);
+            }
+            self.port.transmit(&frame)?;
             self.stats.frames_sent += 1;
         }
         Ok(())
@@ -640,6 +660,9 @@ impl<P: CanPort> CanNode<P> {
         match pushed {
             Ok(Some(m)) => {
                 self.stats.messages_received += 1;
+                if let Some(l) = &self.ledger {
+                    l.accepted(&frame, self.sa);
+                }
                 let sa = match frame.id() {
                     embedded_can::Id::Extended(x) => (x.as_raw() & 0xFF) as u8,
                     embedded_can::Id::Standard(_) => 0,

@@ -25,9 +25,11 @@
 //! receive time stamps measure the latency from publication to reception.
 
 pub mod can;
+pub mod intruder;
+pub mod ledger;
 pub mod throughput;
 
-use crate::bus::{Message, Received, Silent};
+use crate::bus::{Faults, Message, Received};
 use crate::monitor::liveness::DeadlockDetector;
 use crate::monitor::Limits;
 use crate::world::junction::ManagerNode;
@@ -39,6 +41,8 @@ use crate::world::vehicle::{Counters, PlannerSetup, StepCtx, Vehicle, VehicleTru
 use crate::world::{SolverChoice, TraceRow, WorldSpec};
 use can::{CanError, CanNode, CanPort, CanStats, Hub, Keys, Polled, SocketCanPort, WireMap};
 use can_gateway::wire::{self, CLOCK_ADDRESS};
+use intruder::{Attack, Intruder, INTRUDER_ADDRESS};
+use ledger::Ledger;
 use serde::Serialize;
 use std::fmt;
 use std::io;
@@ -79,6 +83,8 @@ pub enum Node {
     Vehicle(u16),
     /// Junction (index)'s manager.
     Manager(usize),
+    /// The attack experiment's intruder ([`intruder`]).
+    Intruder,
 }
 
 /// Latency percentiles (µs) from publication to reception, by receive time stamps.
@@ -161,6 +167,25 @@ pub struct FleetSummary {
     pub grant_latency: Latency,
     /// SYNC: written by the master to received by the node that acts on it.
     pub sync_latency: Latency,
+    /// The intruder's attack and what of it was accepted (attack runs only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub intrusion: Option<Intrusion>,
+    /// Grants the managers sent while `[faults.manager_down]` had theirs down (runs with
+    /// an outage only; 0 is the only right answer).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub grants_while_down: Option<u64>,
+}
+
+/// An intruder's attack on a fleet run, and what of it the receivers accepted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Intrusion {
+    /// The attack.
+    pub attack: Attack,
+    /// Messages it wrote (frames, for a flood).
+    pub attempts: u64,
+    /// Messages receivers accepted that no genuine node sent — forgeries, and copies
+    /// beyond the genuine ones (replays) — summed over receivers ([`ledger::Ledger`]).
+    pub accepted: u64,
 }
 
 impl FleetSummary {
@@ -237,13 +262,21 @@ impl From<CanError> for FleetError {
 }
 
 /// Why `spec` cannot run as a fleet, if it cannot: the bus carries frames as they are
-/// (no injected faults); no vehicle enters during the run (every node's socket is open
-/// before anyone transmits); every vehicle id a CAN source address; at most as many
-/// junctions as manager addresses.
+/// (no loss, delay, duplicates or reordering injected — a silent vehicle, a liar and a
+/// manager's outage are the nodes' own faults, and run); no vehicle enters during the
+/// run (every node's socket is open before anyone transmits); every vehicle id a CAN
+/// source address; at most as many junctions as manager addresses.
 pub fn unsupported(spec: &WorldSpec) -> Option<String> {
-    if !spec.faults.is_none() {
+    let nodes_only = Faults {
+        silent: None,
+        liar: None,
+        manager_down: None,
+        ..spec.faults
+    };
+    if !nodes_only.is_none() {
         return Some(
-            "[faults] are injected by the in-process bus; a fleet carries frames as they are"
+            "[faults] loss, delay, jitter, duplicates and reordering are injected by the \
+             in-process bus; a fleet carries frames as they are"
                 .into(),
         );
     }
@@ -346,30 +379,48 @@ pub fn run_keyed(
     fd: bool,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Result<FleetSummary, FleetError> {
-    let name = medium.to_string();
     let fleet = Fleet {
         solver,
         seed,
-        medium: &name,
+        medium: "",
         keys,
         fd,
+        attack: None,
     };
-    match medium {
-        Medium::SocketCan(iface) => {
-            if let Some(w) = can::order_warning(iface) {
-                eprintln!("warning: {w}");
+    fleet.on(spec, medium, trace)
+}
+
+impl Fleet<'_> {
+    /// Runs `spec` on `medium` (its name is `medium`'s, whatever `self.medium` says).
+    pub fn on(
+        self,
+        spec: WorldSpec,
+        medium: &Medium,
+        trace: &mut dyn FnMut(&TraceRow),
+    ) -> Result<FleetSummary, FleetError> {
+        let name = medium.to_string();
+        let fd = self.fd;
+        let fleet = Fleet {
+            medium: &name,
+            ..self
+        };
+        match medium {
+            Medium::SocketCan(iface) => {
+                if let Some(w) = can::order_warning(iface) {
+                    eprintln!("warning: {w}");
+                }
+                let iface = iface.clone();
+                let open = move |n: Node| match n {
+                    Node::Clock => SocketCanPort::open_transmit_only(&iface, fd),
+                    _ if fd => SocketCanPort::open_fd(&iface),
+                    _ => SocketCanPort::open(&iface),
+                };
+                fleet.run(spec, open, trace)
             }
-            let iface = iface.clone();
-            let open = move |n: Node| match n {
-                Node::Clock => SocketCanPort::open_transmit_only(&iface, fd),
-                _ if fd => SocketCanPort::open_fd(&iface),
-                _ => SocketCanPort::open(&iface),
-            };
-            fleet.run(spec, open, trace)
-        }
-        Medium::Hub => {
-            let hub = Hub::new();
-            fleet.run(spec, move |_| Ok(hub.port()), trace)
+            Medium::Hub => {
+                let hub = Hub::new();
+                fleet.run(spec, move |_| Ok(hub.port()), trace)
+            }
         }
     }
 }
@@ -390,6 +441,7 @@ pub fn run_with_ports<P: CanPort + 'static>(
         medium,
         keys: None,
         fd: false,
+        attack: None,
     };
     fleet.run(spec, open, trace)
 }
@@ -406,7 +458,12 @@ pub struct Fleet<'a> {
     pub keys: Option<Arc<Keys>>,
     /// Every message goes as one CAN FD frame.
     pub fd: bool,
+    /// An intruder carries out this attack from [`ATTACK_FROM_S`] on (issue 17 §4).
+    pub attack: Option<Attack>,
 }
+
+/// When the intruder starts (s): the fleet has settled into its traffic by then.
+pub const ATTACK_FROM_S: f64 = 1.0;
 
 impl Fleet<'_> {
     /// Runs `spec` on ports from `open` (one per node, the master's included).
@@ -419,10 +476,20 @@ impl Fleet<'_> {
         if let Some(why) = unsupported(&spec) {
             return Err(FleetError::Unsupported(why));
         }
-        let (solver, seed, keys, fd) = (self.solver, self.seed, self.keys, self.fd);
+        if self.attack.is_some()
+            && spec
+                .vehicles
+                .iter()
+                .any(|v| v.id == u16::from(INTRUDER_ADDRESS))
+        {
+            return Err(FleetError::Unsupported(format!(
+                "vehicle {INTRUDER_ADDRESS} holds the intruder's address"
+            )));
+        }
+        let medium = self.medium;
         match spec.horizon {
-            50 => Harness::<50>::new(spec, solver, seed, keys, fd).run(self.medium, open, trace),
-            _ => Harness::<20>::new(spec, solver, seed, keys, fd).run(self.medium, open, trace),
+            50 => Harness::<50>::new(spec, self).run(medium, open, trace),
+            _ => Harness::<20>::new(spec, self).run(medium, open, trace),
         }
     }
 }
@@ -435,6 +502,7 @@ struct Harness<const N: usize> {
     lim: Limits,
     keys: Option<Arc<Keys>>,
     fd: bool,
+    attack: Option<Attack>,
 }
 
 /// The latencies and counts the harness gathers.
@@ -447,6 +515,8 @@ struct Tally {
     grants: u64,
     exits: u64,
     ticks: u64,
+    /// Grants managers sent while down (`[faults.manager_down]`).
+    grants_while_down: u64,
 }
 
 impl Tally {
@@ -482,20 +552,15 @@ impl Tally {
 }
 
 impl<const N: usize> Harness<N> {
-    fn new(
-        spec: WorldSpec,
-        solver: SolverChoice,
-        seed: Option<u64>,
-        keys: Option<Arc<Keys>>,
-        fd: bool,
-    ) -> Self {
+    fn new(spec: WorldSpec, fleet: Fleet<'_>) -> Self {
         Self {
-            seed: seed.unwrap_or(spec.seed),
+            seed: fleet.seed.unwrap_or(spec.seed),
             spec,
-            solver,
+            solver: fleet.solver,
             lim: Limits::table_i(),
-            keys,
-            fd,
+            keys: fleet.keys,
+            fd: fleet.fd,
+            attack: fleet.attack,
         }
     }
 
@@ -533,6 +598,14 @@ impl<const N: usize> Harness<N> {
         if self.fd {
             nodes = nodes.with_fd();
         }
+        let ledger = self.attack.map(|_| Arc::new(Ledger::new()));
+        if let Some(l) = &ledger {
+            nodes = nodes.with_ledger(l);
+        }
+        let intruder = match self.attack {
+            Some(a) => Some(self.intruder(a, open(Node::Intruder).map_err(CanError::Io)?)),
+            None => None,
+        };
         let order: Vec<u16> = vehicles.iter().map(|v| v.id).collect();
         let ctx = TaskCtx {
             net: &net,
@@ -541,7 +614,7 @@ impl<const N: usize> Harness<N> {
             total: (self.spec.duration_s / self.lim.h).round() as u64,
             with_managers: !managers.is_empty(),
             lim: self.lim,
-            silent: self.spec.faults.silent,
+            faults: self.spec.faults,
         };
         let (n, m) = (vehicles.len(), managers.len());
         let (ran, master) = std::thread::scope(|sc| {
@@ -552,6 +625,7 @@ impl<const N: usize> Harness<N> {
                 managers: mnodes,
             } = nodes;
             let mut master = Master::new(&self, &ctx, clock, rx);
+            master.intruder = intruder;
             let spawned = Tasks::spawn(
                 sc,
                 &mut master.clock,
@@ -576,7 +650,22 @@ impl<const N: usize> Harness<N> {
             (result.map(|()| ran), master.into_parts())
         });
         let ran = ran?;
-        Ok(self.summary(medium, (n, m), ran, master, &net, t0))
+        let mut summary = self.summary(medium, (n, m), ran, master, &net, t0);
+        if let (Some(i), Some(l)) = (&mut summary.intrusion, &ledger) {
+            i.accepted = l.forged_accepted();
+        }
+        Ok(summary)
+    }
+
+    /// The intruder of `attack` on `port`, with its own address's key if the fleet
+    /// authenticates.
+    fn intruder<P: CanPort>(&self, attack: Attack, port: P) -> Intruder<P> {
+        let key = self
+            .keys
+            .as_ref()
+            .and_then(|k| k.get(INTRUDER_ADDRESS).copied());
+        let from = (ATTACK_FROM_S / self.lim.h).round() as u64;
+        Intruder::new(attack, port, key, self.fd, from)
     }
 
     /// Every junction's manager, at the bus's position resolution.
@@ -617,6 +706,7 @@ impl<const N: usize> Harness<N> {
             findings,
             deadlock,
             periods,
+            intrusion,
         } = master;
         msgs.grants = tally.grants;
         msgs.exits = tally.exits;
@@ -657,6 +747,12 @@ impl<const N: usize> Harness<N> {
             request_latency: Latency::of(tally.request),
             grant_latency: Latency::of(tally.grant),
             sync_latency: Latency::of(tally.sync),
+            intrusion,
+            grants_while_down: self
+                .spec
+                .faults
+                .manager_down
+                .map(|_| tally.grants_while_down),
         }
     }
 }
@@ -702,6 +798,20 @@ impl<P: CanPort> Nodes<P> {
             clock: self.clock.with_fd(),
             vehicles: fd(self.vehicles),
             managers: fd(self.managers),
+        }
+    }
+
+    /// Every node telling `ledger` what it sends and accepts.
+    fn with_ledger(self, ledger: &Arc<Ledger>) -> Self {
+        let told = |v: Vec<CanNode<P>>| {
+            v.into_iter()
+                .map(|n| n.with_ledger(ledger.clone()))
+                .collect()
+        };
+        Self {
+            clock: self.clock.with_ledger(ledger.clone()),
+            vehicles: told(self.vehicles),
+            managers: told(self.managers),
         }
     }
 
@@ -802,6 +912,8 @@ struct Master<'a, P: CanPort, const N: usize> {
     last_tick: Option<SystemTime>,
     /// Per junction, the permissions its manager holds (for the wait-for relation).
     holders: Vec<Vec<(u16, u8)>>,
+    /// The attack experiment's intruder, acting before each planning tick.
+    intruder: Option<Intruder<P>>,
 }
 
 /// What the master hands back for the summary.
@@ -810,6 +922,7 @@ struct MasterParts {
     findings: crate::monitor::Findings,
     deadlock: Option<crate::monitor::liveness::Deadlock>,
     periods: u64,
+    intrusion: Option<Intrusion>,
 }
 
 /// One period's vehicle reports, in vehicle order.
@@ -840,6 +953,7 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
             grants_at: None,
             last_tick: None,
             holders: vec![Vec::new(); ctx.net.junctions.len()],
+            intruder: None,
         }
     }
 
@@ -849,6 +963,11 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
             findings: self.monitor.findings,
             deadlock: self.deadlock,
             periods: self.periods,
+            intrusion: self.intruder.map(|i| Intrusion {
+                attack: i.attack(),
+                attempts: i.attempts(),
+                accepted: 0,
+            }),
         }
     }
 
@@ -883,6 +1002,11 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
                 return Ok(true);
             }
             self.manager_reports(k, at)?;
+        }
+        if let Some(i) = &mut self.intruder {
+            let (ctx, h) = (self.ctx, self.ctx.lim.h);
+            let junctions = ctx.net.junctions.len();
+            i.act((k, k as f64 * h, h), &present, ctx.map, junctions)?;
         }
         // Sensor returns from ground truth at kh, as in the in-process world.
         let h = self.harness;
@@ -980,6 +1104,15 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
                 }) if period == k => {
                     self.monitor.granted(junction, &granted);
                     self.tally.grants += granted.len() as u64;
+                    let t = k as f64 * self.ctx.lim.h;
+                    if self
+                        .ctx
+                        .faults
+                        .manager_down
+                        .is_some_and(|d| d.junction == junction && d.is_down(t))
+                    {
+                        self.tally.grants_while_down += granted.len() as u64;
+                    }
                     if !granted.is_empty() {
                         self.grants_at = Some(published);
                     }
@@ -1055,7 +1188,8 @@ struct TaskCtx<'a> {
     total: u64,
     with_managers: bool,
     lim: Limits,
-    silent: Option<Silent>,
+    /// The nodes' own faults: a silent vehicle, a liar, a manager's outage.
+    faults: Faults,
 }
 
 /// One vehicle: publish, report, wait for SYNC, plan, move — until the last SYNC.
@@ -1097,8 +1231,12 @@ fn vehicle_task<const N: usize, P: CanPort>(
         }
         let in_world = car.log.left_at.is_none();
         let mut kind = None;
-        if in_world {
-            let m = car.message(t);
+        let mute = ctx
+            .faults
+            .silent
+            .is_some_and(|s| s.id == id && t >= s.from_s);
+        if in_world && !mute {
+            let m = ctx.faults.told(id, car.message(t), t);
             kind = Some(kind_of(&m));
             node.send(&m, ctx.map, car.log.arrived_at.unwrap_or(t))
                 .map_err(|e| fail(e.to_string()))?;
@@ -1140,7 +1278,8 @@ fn vehicle_task<const N: usize, P: CanPort>(
             steps_done: k,
             net: ctx.net,
             lim: ctx.lim,
-            silent: ctx.silent,
+            silent: ctx.faults.silent,
+            liar: ctx.faults.liar,
             returns: &sensed,
         };
         let ((v, w), r) = car.decide(&step, &received, &mut counters);
@@ -1185,7 +1324,8 @@ fn manager_task<P: CanPort>(
             break;
         };
         let received = in_order(&mut inbox, ctx.order, t);
-        let granted = mgr.manage(&received, t);
+        let granted =
+            outage(&mut mgr, ctx.faults, t).map_or_else(Vec::new, |m| m.manage(&received, t));
         let published = SystemTime::now();
         for &id in &granted {
             let g = mgr.grant(id, t, ctx.lim.h, ctx.lim.h);
@@ -1206,6 +1346,22 @@ fn manager_task<P: CanPort>(
         }
     }
     Ok(node.stats().clone())
+}
+
+/// `mgr` at `t` under `faults`' outage, if any: `None` while it is down (what it hears is
+/// lost and it grants nothing); at its first period back it restarts, remembering
+/// nothing but the bus's resolution.
+fn outage(mgr: &mut ManagerNode, faults: Faults, t: f64) -> Option<&mut ManagerNode> {
+    let down = faults.manager_down.filter(|d| d.junction == mgr.junction);
+    if down.is_some_and(|d| d.is_down(t)) {
+        return None;
+    }
+    if down.is_some_and(|d| t >= d.until_s) && !mgr.restarted {
+        mgr.restart();
+        // The restarted manager hears the same bus as before.
+        let _ = mgr.manager.set_position_resolution(RESOLUTION.0);
+    }
+    Some(mgr)
 }
 
 /// Reads frames until SYNC(`tick`), keeping every message before it (sent in the period

@@ -799,3 +799,81 @@ where
         .map_err(e)?;
     Ok(())
 }
+
+/// `scale --sweep`: planner steps/s against vehicles, one curve per kind of road and
+/// thread count, and the steps/s real time needs (vehicles / h).
+pub fn scale(r: &crate::experiments::scale::ScaleSweep, path: &Path) -> Result<(), PlotError> {
+    render!(path, (1100, 700), |root| draw_scale(r, &root))
+}
+
+fn draw_scale<DB: DrawingBackend>(
+    r: &crate::experiments::scale::ScaleSweep,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(e)?;
+    let x1 = r.runs.iter().map(|x| x.vehicles as f64).fold(1.0, f64::max) * 1.05;
+    let need = |n: f64| n * r.steps_per_vehicle_second;
+    let y1 = r
+        .runs
+        .iter()
+        .map(|x| x.planner_steps_per_second)
+        .fold(need(x1), f64::max)
+        * 1.05;
+    let mut c = ChartBuilder::on(root)
+        .margin(20)
+        .caption(
+            format!(
+                "host-sim scale --sweep: planner steps/s ({} s simulated per run, h = {} s)",
+                r.sim_seconds,
+                1.0 / r.steps_per_vehicle_second
+            ),
+            ("sans-serif", 20),
+        )
+        .x_label_area_size(45)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0.0..x1, 0.0..y1)
+        .map_err(e)?;
+    c.configure_mesh()
+        .x_desc("vehicles")
+        .y_desc("planner steps per second")
+        .draw()
+        .map_err(e)?;
+    c.draw_series(LineSeries::new(
+        [(0.0, 0.0), (x1, need(x1))],
+        BLACK.stroke_width(1),
+    ))
+    .map_err(e)?
+    .label("real time (vehicles / h): above it, faster than real time")
+    .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], BLACK));
+    let mut curves: Vec<(crate::experiments::scale::Kind, usize)> = Vec::new();
+    for x in &r.runs {
+        if !curves.contains(&(x.kind, x.threads)) {
+            curves.push((x.kind, x.threads));
+        }
+    }
+    for (i, &(kind, threads)) in curves.iter().enumerate() {
+        let col = palette(i);
+        let pts: Vec<(f64, f64)> = r
+            .runs
+            .iter()
+            .filter(|x| x.kind == kind && x.threads == threads)
+            .map(|x| (x.vehicles as f64, x.planner_steps_per_second))
+            .collect();
+        c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
+            .map_err(e)?
+            .label(format!("{kind:?}, {threads} thread(s)"))
+            .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
+        c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))
+            .map_err(e)?;
+    }
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(e)?;
+    Ok(())
+}

@@ -17,6 +17,7 @@
 //! 7. the monitors judge the ground truth: safety, then liveness
 //! ```
 
+pub mod cost;
 pub mod heard;
 pub mod junction;
 pub mod network;
@@ -268,6 +269,8 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     detector: DeadlockDetector,
     deadlock: Option<Deadlock>,
     counters: Counters,
+    /// Wall-clock time of each planner step (`host-sim scale`).
+    costs: Box<cost::StepCosts>,
     messages_sent: u64,
     solver: SolverChoice,
     seed: u64,
@@ -338,6 +341,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             rng,
             deadlock: None,
             counters: Counters::default(),
+            costs: Box::default(),
             messages_sent: 0,
             solver,
             seed,

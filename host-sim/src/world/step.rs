@@ -280,9 +280,14 @@ impl<const N: usize, B: Bus> World<N, B> {
                 net: &self.net,
                 lim: self.lim,
                 silent: self.spec.faults.silent,
+                liar: self.spec.faults.liar,
                 returns: sensed.get(i).unwrap_or(&empty),
             };
+            let t0 = std::time::Instant::now();
             let (cmd, row) = v.decide(&ctx, &inbox, &mut self.counters);
+            if v.is_planner() {
+                self.costs.add(t0.elapsed().as_nanos() as u64);
+            }
             commands.push(cmd);
             trace(&row);
         }

@@ -8,6 +8,15 @@ use crate::monitor::liveness::Deadlock;
 use crate::monitor::Findings;
 use serde::Serialize;
 
+/// A liar's states and reports, as planners took them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Lies {
+    /// Heard by planners (one per lie and receiver).
+    pub heard: u64,
+    /// Of those, taken into a view.
+    pub taken: u64,
+}
+
 /// Lane changes of a run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct LaneChangeStats {
@@ -93,6 +102,10 @@ pub struct Summary {
     /// Of those, states and crossing reports refused as physically implausible
     /// (`world::plausible`: a jump, a speed, a speed change or a lane beyond the bounds).
     pub messages_implausible: u64,
+    /// A liar's states and reports (`[faults.liar]` runs only): heard by planners, and
+    /// of those taken into a view (0 when every lie is refused).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lies: Option<Lies>,
     /// What the bus's injected faults did.
     pub bus_faults: FaultStats,
     /// Solver used by the multi-lane planners.
@@ -257,6 +270,10 @@ pub fn summarize<'v, const N: usize>(
         messages_sent: o.messages_sent,
         messages_rejected: c.rejected,
         messages_implausible: c.implausible,
+        lies: o.spec.faults.liar.map(|_| Lies {
+            heard: c.lies_heard,
+            taken: c.lies_taken,
+        }),
         bus_faults: o.bus_faults,
         solver: o.solver,
         seed: o.seed,
@@ -281,6 +298,11 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// The counters so far.
     pub fn counters(&self) -> &Counters {
         &self.counters
+    }
+
+    /// What its planner steps cost in wall-clock time.
+    pub fn step_costs(&self) -> &super::cost::StepCosts {
+        &self.costs
     }
 
     /// `true` if vehicle `v` should have met its goals by now: always in a world whose

@@ -226,6 +226,50 @@ pub struct VehicleTruth {
     pub target_lane: u8,
 }
 
+/// What vehicle `id` at `at`, moving at (v, ω) = `vw`, broadcasts at `t`: its state on a
+/// segment, its crossing report in a junction.
+pub fn announce(id: u16, at: At, (v, omega): (f64, f64), cooperative: bool, t: f64) -> Message {
+    match at {
+        At::Lane {
+            seg,
+            x,
+            y,
+            theta,
+            lane,
+            alpha,
+            beta,
+        } => Message::State {
+            state: VehicleState {
+                id,
+                x,
+                y,
+                theta,
+                v,
+                omega,
+                lane,
+                alpha,
+                beta,
+                stamp: t,
+                cooperative,
+            },
+            segment: seg,
+        },
+        At::Crossing {
+            junction, route, s, ..
+        } => Message::Crossing {
+            report: CrossingReport {
+                id,
+                route,
+                s,
+                v,
+                length: LENGTH_M,
+            },
+            stamp: t,
+            junction,
+        },
+    }
+}
+
 /// What a vehicle's decision at time t needs besides its own state and inbox.
 pub struct StepCtx<'a> {
     /// Now (s).
@@ -238,6 +282,9 @@ pub struct StepCtx<'a> {
     pub lim: Limits,
     /// A vehicle whose transmitter fails, and from when.
     pub silent: Option<crate::bus::Silent>,
+    /// A vehicle that lies about its position: only to count the lies heard and taken
+    /// (ground truth, as the monitors have it; no decision reads it).
+    pub liar: Option<crate::bus::Liar>,
     /// This vehicle's sensor returns (empty without sensors).
     pub returns: &'a Sensed,
 }
@@ -263,6 +310,10 @@ pub struct Counters {
     pub rejected: u64,
     /// Of those, states and reports refused as physically implausible.
     pub implausible: u64,
+    /// A liar's states and reports heard by planners (`[faults.liar]`).
+    pub lies_heard: u64,
+    /// Of those, taken into a planner's view.
+    pub lies_taken: u64,
 }
 
 impl Counters {
@@ -277,6 +328,8 @@ impl Counters {
         self.solver_iterations += o.solver_iterations;
         self.rejected += o.rejected;
         self.implausible += o.implausible;
+        self.lies_heard += o.lies_heard;
+        self.lies_taken += o.lies_taken;
     }
 }
 
@@ -385,58 +438,26 @@ impl<const N: usize> Vehicle<N> {
     /// What it broadcasts about itself at `t`: its state on a segment, its crossing
     /// report in a junction.
     pub fn message(&self, t: f64) -> Message {
-        match self.at {
-            At::Lane {
-                seg,
-                x,
-                y,
-                theta,
-                lane,
-                alpha,
-                beta,
-            } => Message::State {
-                state: VehicleState {
-                    id: self.id,
-                    x,
-                    y,
-                    theta,
-                    v: self.v,
-                    omega: self.omega,
-                    lane,
-                    alpha,
-                    beta,
-                    stamp: t,
-                    // Scripted and random drivers neither hear intentions nor yield.
-                    cooperative: self.cooperative,
-                },
-                segment: seg,
-            },
-            At::Crossing {
-                junction, route, s, ..
-            } => Message::Crossing {
-                report: CrossingReport {
-                    id: self.id,
-                    route,
-                    s,
-                    v: self.v,
-                    length: LENGTH_M,
-                },
-                stamp: t,
-                junction,
-            },
-        }
+        // Scripted and random drivers neither hear intentions nor yield.
+        announce(self.id, self.at, (self.v, self.omega), self.cooperative, t)
     }
 
     /// Takes the messages the bus delivered into its view (counting those rejected), and
     /// its grants; `false` if its view overflowed (it may miss a vehicle near it).
-    fn hear(&mut self, net: &Network, inbox: &[Received], counters: &mut Counters) -> bool {
+    fn hear(&mut self, ctx: &StepCtx<'_>, inbox: &[Received], counters: &mut Counters) -> bool {
+        let net = ctx.net;
         let me = self.position(net);
         let Driver::Planner(b) = &mut self.driver else {
             return true;
         };
         let mut whole = true;
         for r in inbox {
-            match b.view.take(&r.msg, net, me) {
+            let taken = b.view.take(&r.msg, net, me);
+            if ctx.liar.is_some_and(|l| l.lied(&r.msg)) {
+                counters.lies_heard += 1;
+                counters.lies_taken += u64::from(taken.is_ok());
+            }
+            match taken {
                 Err(Reject::Full) => whole = false,
                 Err(Reject::Stale | Reject::Invalid) => {
                     if matches!(r.msg, Message::State { .. }) {
@@ -502,7 +523,7 @@ impl<const N: usize> Vehicle<N> {
                 self.trip.target_lane = lane;
             }
         }
-        let whole = self.hear(ctx.net, inbox, counters);
+        let whole = self.hear(ctx, inbox, counters);
         let cmd = match self.at {
             _ if !whole => self.blind(ctx, counters),
             At::Lane { .. } => match &self.driver {

@@ -1,0 +1,287 @@
+//! `host-sim experiment attacks` (issue 17 §4): every attack of the threat model on the
+//! paper's intersection (Fig. 8, under a live algorithm) and on its multi-lane road, each
+//! run as a fleet on a CAN medium — the in-process hub by default — with every node
+//! authenticating (SecOC-style, keys derived from the simulation master key) unless
+//! asked to run without, to show what the authentication is for.
+//!
+//! Rows, per world:
+//! - an intruder's attacks ([`Attack`]): forged grant, replayed grant, replayed state,
+//!   spoofed id, flood — `attempts` are the messages (flood: frames) it wrote, `accepted`
+//!   those receivers took that no genuine node sent in that period, summed over receivers
+//!   (the fleet's [`crate::fleet::ledger::Ledger`]);
+//! - a vehicle lying about its position ([`LIE_M`] further on, from [`LIE_FROM_S`]):
+//!   `attempts` are its lies as planners heard them, `accepted` those taken into a view
+//!   (the codec accepts them — the key is the liar's own; the plausibility checks do not);
+//! - the manager's crash and restart (intersection only; down over [`OUTAGE_S`]):
+//!   `attempts` its periods down, `accepted` the grants it sent while down.
+//!
+//! Every row reports the monitors' collisions, invariant violations and unpermitted
+//! entries, whether every vehicle reached its goal (`completed`), and what the attack
+//! cost in liveness: when the last goal was reached, beside the same world's run without
+//! any attack.
+
+use crate::bus::{Faults, Liar, ManagerDown};
+use crate::fleet::can::{simulation_keys, Keys, SIMULATION_MASTER};
+use crate::fleet::intruder::Attack;
+use crate::fleet::{Fleet, FleetError, FleetSummary, Medium};
+use crate::world::{SolverChoice, WorldSpec};
+use planner_core::crossing::Algorithm;
+use serde::Serialize;
+use std::path::Path;
+use std::sync::Arc;
+
+/// The liar: vehicle 1, claiming to be this much further on (m)…
+pub const LIE_M: f64 = 5.0;
+/// …from this time on (s).
+pub const LIE_FROM_S: f64 = 2.0;
+/// The manager's outage (s): down from, restarted at — while vehicles are inside A_S.
+pub const OUTAGE_S: (f64, f64) = (3.0, 6.0);
+
+const INTERSECTION: &str = include_str!("../../../scenarios/intersection.toml");
+const MULTILANE: &str = include_str!("../../../scenarios/multilane.toml");
+
+/// The attack experiment's settings.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Where the fleets' frames travel.
+    pub medium: Medium,
+    /// Every node authenticates (SecOC); `false` shows the attacks on a bus without.
+    pub authenticated: bool,
+    /// Every message as one CAN FD frame.
+    pub fd: bool,
+    /// The intersection's algorithm.
+    pub algorithm: Algorithm,
+    /// Only these rows (by name), if any.
+    pub only: Vec<String>,
+    /// Only these worlds (`intersection`, `multilane`), if any.
+    pub worlds: Vec<String>,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            medium: Medium::Hub,
+            authenticated: true,
+            fd: false,
+            algorithm: Algorithm::Fifo,
+            only: Vec::new(),
+            worlds: Vec::new(),
+        }
+    }
+}
+
+/// One attack on one world.
+#[derive(Debug, Clone, Serialize)]
+pub struct AttackRow {
+    /// The attack (`forged-grant`, …, `lying-vehicle`, `manager-crash`).
+    pub attack: String,
+    /// The world (`intersection`, `multilane`).
+    pub scenario: &'static str,
+    /// What the attacker tried (see the module docs per kind).
+    pub attempts: u64,
+    /// Of those, what got through (see the module docs per kind).
+    pub accepted: u64,
+    /// Colliding pairs × steps (monitor).
+    pub collisions: u64,
+    /// Invariant violations (monitor).
+    pub invariant_violations: u64,
+    /// Entries into A_S without a live permission (monitor).
+    pub unpermitted_entries: u64,
+    /// Every vehicle reached its goal (crossed and left; is in its target lane).
+    pub completed: bool,
+    /// Vehicles.
+    pub vehicles: usize,
+    /// Of those, done: crossed, or in their target lane.
+    pub done: u64,
+    /// When the last was done, if all were (s).
+    pub done_at_s: Option<f64>,
+    /// The same world without any attack: when its last vehicle was done (s).
+    pub clean_done_at_s: Option<f64>,
+    /// Frames the nodes' decoders refused (CRC, MAC, freshness, sender …).
+    pub frames_rejected: u64,
+    /// Wall-clock time of the run (s).
+    pub wall_seconds: f64,
+    /// Wall-clock time of the same world's run without any attack (s): what receiving
+    /// and refusing the attack's frames cost the nodes.
+    pub clean_wall_seconds: f64,
+}
+
+impl AttackRow {
+    /// Collisions, invariant violations and unpermitted entries.
+    pub fn unsafe_events(&self) -> u64 {
+        self.collisions + self.invariant_violations + self.unpermitted_entries
+    }
+}
+
+/// The experiment's JSON.
+#[derive(Debug, Clone, Serialize)]
+pub struct AttackReport {
+    /// The medium (`can-hub`, `socketcan:vcan0`).
+    pub medium: String,
+    /// Every node authenticated.
+    pub authenticated: bool,
+    /// CAN FD frames.
+    pub can_fd: bool,
+    /// The intersection's algorithm.
+    pub algorithm: &'static str,
+    /// One row per attack and world.
+    pub results: Vec<AttackRow>,
+}
+
+/// Every row's name, in order.
+pub fn row_names() -> Vec<&'static str> {
+    let mut v: Vec<&'static str> = Attack::ALL.iter().map(|a| a.name()).collect();
+    v.extend(["lying-vehicle", "manager-crash"]);
+    v
+}
+
+/// The worlds' names.
+pub const WORLDS: [&str; 2] = ["intersection", "multilane"];
+
+/// The two worlds: the Fig. 8 intersection under `algorithm`, and the multi-lane road.
+pub fn worlds(algorithm: Algorithm) -> Result<Vec<(&'static str, WorldSpec)>, String> {
+    let parse = |text: &str, name: &str| {
+        crate::scenario::parse(text, Path::new(name)).map_err(|e| e.to_string())
+    };
+    let mut junction = parse(INTERSECTION, "intersection.toml")?;
+    for j in &mut junction.network.junctions {
+        j.algorithm = algorithm;
+    }
+    Ok(vec![
+        ("intersection", junction),
+        ("multilane", parse(MULTILANE, "multilane.toml")?),
+    ])
+}
+
+/// Runs the experiment.
+pub fn experiment(s: &Settings) -> Result<AttackReport, FleetError> {
+    let keys = s
+        .authenticated
+        .then(|| Arc::new(simulation_keys(&SIMULATION_MASTER)));
+    let worlds = worlds(s.algorithm).map_err(FleetError::Unsupported)?;
+    let wanted = |name: &str| s.only.is_empty() || s.only.iter().any(|o| o == name);
+    let mut results = Vec::new();
+    let chosen = |w: &str| s.worlds.is_empty() || s.worlds.iter().any(|o| o == w);
+    for (name, spec) in worlds.into_iter().filter(|(w, _)| chosen(w)) {
+        let clean = run(s, &keys, spec.clone(), None)?;
+        let mut push = |attack: String, attempts: u64, accepted: u64, f: &FleetSummary| {
+            results.push(row(name, attack, (attempts, accepted), f, &clean.run));
+        };
+        for a in Attack::ALL.into_iter().filter(|a| wanted(a.name())) {
+            let f = run(s, &keys, spec.clone(), Some(a))?;
+            let i = f.intrusion.unwrap_or(crate::fleet::Intrusion {
+                attack: a,
+                attempts: 0,
+                accepted: 0,
+            });
+            push(a.name().into(), i.attempts, i.accepted, &f);
+        }
+        if wanted("lying-vehicle") {
+            let f = run(s, &keys, lying(spec.clone()), None)?;
+            let lies = f.run.lies.map_or((0, 0), |l| (l.heard, l.taken));
+            push("lying-vehicle".into(), lies.0, lies.1, &f);
+        }
+        if wanted("manager-crash") && !spec.network.junctions.is_empty() {
+            let f = run(s, &keys, crashing(spec.clone()), None)?;
+            let (from, until) = OUTAGE_S;
+            let periods = ((until - from) / crate::monitor::Limits::table_i().h).round() as u64;
+            push(
+                "manager-crash".into(),
+                periods,
+                f.grants_while_down.unwrap_or(0),
+                &f,
+            );
+        }
+    }
+    Ok(AttackReport {
+        medium: s.medium.to_string(),
+        authenticated: s.authenticated,
+        can_fd: s.fd,
+        algorithm: s.algorithm.name(),
+        results,
+    })
+}
+
+/// One fleet run of `spec` under the settings, with an intruder carrying out `attack`.
+fn run(
+    s: &Settings,
+    keys: &Option<Arc<Keys>>,
+    spec: WorldSpec,
+    attack: Option<Attack>,
+) -> Result<FleetSummary, FleetError> {
+    Fleet {
+        solver: SolverChoice::Ours,
+        seed: None,
+        medium: "",
+        keys: keys.clone(),
+        fd: s.fd,
+        attack,
+    }
+    .on(spec, &s.medium, &mut |_| {})
+}
+
+/// `spec` with vehicle 1 lying about its position.
+fn lying(mut spec: WorldSpec) -> WorldSpec {
+    spec.faults = Faults {
+        liar: Some(Liar {
+            id: 1,
+            from_s: LIE_FROM_S,
+            offset_m: LIE_M,
+        }),
+        ..spec.faults
+    };
+    spec
+}
+
+/// `spec` with junction 0's manager down over [`OUTAGE_S`].
+fn crashing(mut spec: WorldSpec) -> WorldSpec {
+    let (from_s, until_s) = OUTAGE_S;
+    spec.faults = Faults {
+        manager_down: Some(ManagerDown {
+            junction: 0,
+            from_s,
+            until_s,
+        }),
+        ..spec.faults
+    };
+    spec
+}
+
+fn row(
+    scenario: &'static str,
+    attack: String,
+    (attempts, accepted): (u64, u64),
+    f: &FleetSummary,
+    clean: &crate::world::summary::Summary,
+) -> AttackRow {
+    let r = &f.run;
+    AttackRow {
+        attack,
+        scenario,
+        attempts,
+        accepted,
+        collisions: r.collisions,
+        invariant_violations: r.invariant_violations,
+        unpermitted_entries: r.crossing.as_ref().map_or(0, |c| c.unpermitted_entries),
+        completed: r.completed,
+        vehicles: r.vehicles,
+        done: done(r).0,
+        done_at_s: done(r).1,
+        clean_done_at_s: done(clean).1,
+        frames_rejected: f.can.rejected_total(),
+        wall_seconds: r.wall_seconds,
+        clean_wall_seconds: clean.wall_seconds,
+    }
+}
+
+/// Vehicles done in run `r`, and when the last was, if all were: at a junction, crossed
+/// (the run ends when the last has left); on the road, in its target lane.
+fn done(r: &crate::world::summary::Summary) -> (u64, Option<f64>) {
+    match &r.crossing {
+        Some(c) => (c.crossed, r.completed.then_some(r.sim_seconds)),
+        None => (
+            r.lane_changes.in_target_lane as u64,
+            r.lane_changes.all_done_at_s,
+        ),
+    }
+}
