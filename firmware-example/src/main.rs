@@ -201,6 +201,17 @@ fn main() -> ! {
         timing.set(t);
         deadline.set(end + PERIOD_TICKS);
     };
+    // What one planner takes (issue 19 §4): on this target today each lives in its
+    // scenario's stack frame; with a view of 32 neighbours, the most a multi-lane planner
+    // is configured for.
+    defmt::info!(
+        "planner sizes (N={=usize}): Planner {=usize} B, LanePlanner {=usize} B, LanePlanner + a view of 32 neighbours {=usize} B",
+        N,
+        core::mem::size_of::<planner_core::Planner<f32, N>>(),
+        core::mem::size_of::<planner_core::LanePlanner<f32, N>>(),
+        core::mem::size_of::<planner_core::LanePlanner<f32, N>>()
+            + core::mem::size_of::<planner_core::WorldView<f32, 32>>()
+    );
     let Some(a) = scenarios::approach::<N>(&mut { now }, &mut emit) else {
         exit(false)
     };

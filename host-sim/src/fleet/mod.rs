@@ -1230,21 +1230,11 @@ fn vehicle_task<const N: usize, P: CanPort>(
             exit = true;
         }
         let in_world = car.log.left_at.is_none();
-        let mut kind = None;
-        let mute = ctx
-            .faults
-            .silent
-            .is_some_and(|s| s.id == id && t >= s.from_s);
-        if in_world && !mute {
-            let m = ctx.faults.told(id, car.message(t), t);
-            kind = Some(kind_of(&m));
-            node.send(&m, ctx.map, car.log.arrived_at.unwrap_or(t))
-                .map_err(|e| fail(e.to_string()))?;
-            match kind {
-                Some(Kind::State) => msgs.states += 1,
-                _ => msgs.requests += 1,
-            }
-        }
+        let kind = if in_world {
+            publish(&car, &mut node, ctx, t, &mut msgs).map_err(|e| fail(e.to_string()))?
+        } else {
+            None
+        };
         let report = Report::Vehicle {
             index,
             period: k,
@@ -1294,6 +1284,33 @@ fn vehicle_task<const N: usize, P: CanPort>(
         row = Some(r);
     }
     Ok((car, counters, node.stats().clone(), msgs))
+}
+
+/// Vehicle `car`'s message for the period at `t` — unless its transmitter is silent, and
+/// as a liar tells it — counted in `msgs`; its kind, if sent.
+fn publish<const N: usize, P: CanPort>(
+    car: &Vehicle<N>,
+    node: &mut CanNode<P>,
+    ctx: &TaskCtx<'_>,
+    t: f64,
+    msgs: &mut Messages,
+) -> Result<Option<Kind>, CanError> {
+    let id = car.id;
+    if ctx
+        .faults
+        .silent
+        .is_some_and(|s| s.id == id && t >= s.from_s)
+    {
+        return Ok(None);
+    }
+    let m = ctx.faults.told(id, car.message(t), t);
+    node.send(&m, ctx.map, car.log.arrived_at.unwrap_or(t))?;
+    let kind = kind_of(&m);
+    match kind {
+        Kind::State => msgs.states += 1,
+        _ => msgs.requests += 1,
+    }
+    Ok(Some(kind))
 }
 
 /// A junction's manager: wait for SYNC(2k), decide on what preceded it, grant — until the

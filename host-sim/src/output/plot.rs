@@ -623,49 +623,103 @@ fn draw_demand<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(e)?;
-    let x1 = r
-        .results
+    let curves = r
+        .capacity
         .iter()
-        .map(|x| x.rate_vph_per_lane)
-        .fold(0.0, f64::max)
-        * 1.05;
-    let y1 = r.results.iter().map(|x| x.mean_delay_s).fold(1.0, f64::max) * 1.1;
+        .map(|cap| Curve {
+            label: format!(
+                "{} (capacity {:.0} veh/h/lane)",
+                cap.algorithm, cap.capacity_vph_per_lane
+            ),
+            points: r
+                .results
+                .iter()
+                .filter(|x| x.algorithm == cap.algorithm)
+                .map(|x| (x.rate_vph_per_lane, x.mean_delay_s))
+                .collect(),
+            reference: false,
+        })
+        .collect::<Vec<_>>();
+    let chart = LineChart {
+        caption: format!(
+            "Open-system demand at the SPEC §8 intersection ({} s, {} seeds; one lane's limit {:.0} veh/h)",
+            r.duration_s, r.seeds, r.lane_limit_vph
+        ),
+        axes: ("arrivals per inlet lane (veh/h)", "mean delay (s)"),
+        y_floor: 1.0,
+        y_label_area: 60,
+    };
+    line_chart(root, &chart, &curves)
+}
+
+/// A chart of curves against one x axis.
+struct LineChart<'a> {
+    caption: String,
+    /// x and y descriptions.
+    axes: (&'a str, &'a str),
+    /// The y range reaches at least this.
+    y_floor: f64,
+    y_label_area: u32,
+}
+
+/// One curve: its legend, its points; a reference line is thin, black and unmarked.
+struct Curve {
+    label: String,
+    points: Vec<(f64, f64)>,
+    reference: bool,
+}
+
+/// Draws `curves` (coloured in turn, points marked) on `root` from 0 to 5 % past the
+/// largest x and y, with the legend in the upper left.
+fn line_chart<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    chart: &LineChart<'_>,
+    curves: &[Curve],
+) -> Result<(), PlotError>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(e)?;
+    let all = || curves.iter().flat_map(|c| c.points.iter());
+    let x1 = all().map(|p| p.0).fold(0.0, f64::max) * 1.05;
+    let y1 = all().map(|p| p.1).fold(chart.y_floor, f64::max) * 1.1;
     let mut c = ChartBuilder::on(root)
         .margin(20)
-        .caption(
-            format!(
-                "Open-system demand at the SPEC §8 intersection ({} s, {} seeds; one lane's limit {:.0} veh/h)",
-                r.duration_s, r.seeds, r.lane_limit_vph
-            ),
-            ("sans-serif", 20),
-        )
+        .caption(&chart.caption, ("sans-serif", 20))
         .x_label_area_size(45)
-        .y_label_area_size(60)
+        .y_label_area_size(chart.y_label_area)
         .build_cartesian_2d(0.0..x1, 0.0..y1)
         .map_err(e)?;
     c.configure_mesh()
-        .x_desc("arrivals per inlet lane (veh/h)")
-        .y_desc("mean delay (s)")
+        .x_desc(chart.axes.0)
+        .y_desc(chart.axes.1)
         .draw()
         .map_err(e)?;
-    for (i, cap) in r.capacity.iter().enumerate() {
-        let col = palette(i);
-        let pts: Vec<(f64, f64)> = r
-            .results
-            .iter()
-            .filter(|x| x.algorithm == cap.algorithm)
-            .map(|x| (x.rate_vph_per_lane, x.mean_delay_s))
-            .collect();
-        c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
-            .map_err(e)?
-            .label(format!(
-                "{} (capacity {:.0} veh/h/lane)",
-                cap.algorithm, cap.capacity_vph_per_lane
-            ))
-            .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
-        c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))
+    let mut colour = 0;
+    for curve in curves {
+        let col = if curve.reference {
+            BLACK
+        } else {
+            colour += 1;
+            palette(colour - 1)
+        };
+        let width = if curve.reference { 1 } else { 2 };
+        c.draw_series(LineSeries::new(
+            curve.points.clone(),
+            col.stroke_width(width),
+        ))
+        .map_err(e)?
+        .label(curve.label.as_str())
+        .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
+        if !curve.reference {
+            c.draw_series(
+                curve
+                    .points
+                    .iter()
+                    .map(|&p| Circle::new(p, 4, col.filled())),
+            )
             .map_err(e)?;
+        }
     }
     c.configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)
@@ -813,67 +867,33 @@ fn draw_scale<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(e)?;
-    let x1 = r.runs.iter().map(|x| x.vehicles as f64).fold(1.0, f64::max) * 1.05;
-    let need = |n: f64| n * r.steps_per_vehicle_second;
-    let y1 = r
-        .runs
-        .iter()
-        .map(|x| x.planner_steps_per_second)
-        .fold(need(x1), f64::max)
-        * 1.05;
-    let mut c = ChartBuilder::on(root)
-        .margin(20)
-        .caption(
-            format!(
-                "host-sim scale --sweep: planner steps/s ({} s simulated per run, h = {} s)",
-                r.sim_seconds,
-                1.0 / r.steps_per_vehicle_second
-            ),
-            ("sans-serif", 20),
-        )
-        .x_label_area_size(45)
-        .y_label_area_size(80)
-        .build_cartesian_2d(0.0..x1, 0.0..y1)
-        .map_err(e)?;
-    c.configure_mesh()
-        .x_desc("vehicles")
-        .y_desc("planner steps per second")
-        .draw()
-        .map_err(e)?;
-    c.draw_series(LineSeries::new(
-        [(0.0, 0.0), (x1, need(x1))],
-        BLACK.stroke_width(1),
-    ))
-    .map_err(e)?
-    .label("real time (vehicles / h): above it, faster than real time")
-    .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], BLACK));
-    let mut curves: Vec<(crate::experiments::scale::Kind, usize)> = Vec::new();
+    let x1 = r.runs.iter().map(|x| x.vehicles as f64).fold(1.0, f64::max);
+    let mut curves = vec![Curve {
+        label: "real time (vehicles / h): above it, faster than real time".into(),
+        points: vec![(0.0, 0.0), (x1, x1 * r.steps_per_vehicle_second)],
+        reference: true,
+    }];
     for x in &r.runs {
-        if !curves.contains(&(x.kind, x.threads)) {
-            curves.push((x.kind, x.threads));
+        let label = format!("{:?}, {} thread(s)", x.kind, x.threads);
+        let point = (x.vehicles as f64, x.planner_steps_per_second);
+        match curves.iter_mut().find(|c| c.label == label) {
+            Some(c) => c.points.push(point),
+            None => curves.push(Curve {
+                label,
+                points: vec![point],
+                reference: false,
+            }),
         }
     }
-    for (i, &(kind, threads)) in curves.iter().enumerate() {
-        let col = palette(i);
-        let pts: Vec<(f64, f64)> = r
-            .runs
-            .iter()
-            .filter(|x| x.kind == kind && x.threads == threads)
-            .map(|x| (x.vehicles as f64, x.planner_steps_per_second))
-            .collect();
-        c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
-            .map_err(e)?
-            .label(format!("{kind:?}, {threads} thread(s)"))
-            .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
-        c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))
-            .map_err(e)?;
-    }
-    c.configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(e)?;
-    Ok(())
+    let chart = LineChart {
+        caption: format!(
+            "host-sim scale --sweep: planner steps/s ({} s simulated per run, h = {} s)",
+            r.sim_seconds,
+            1.0 / r.steps_per_vehicle_second
+        ),
+        axes: ("vehicles", "planner steps per second"),
+        y_floor: 0.0,
+        y_label_area: 80,
+    };
+    line_chart(root, &chart, &curves)
 }
