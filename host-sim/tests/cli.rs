@@ -376,6 +376,33 @@ fn experiment_attacks_prints_its_rows_and_refuses_unknown_names() {
         assert!(rows[0].get(key).is_some(), "{key}: {}", rows[0]);
     }
     assert_eq!(rows[0]["accepted"], 0);
+    assert!(rows[0]["clean_done_at_s"].is_f64(), "{}", rows[0]);
+    // Without the baseline run, its figures are null.
+    let out = bin()
+        .args([
+            "experiment",
+            "attacks",
+            "--only",
+            "flood",
+            "--world",
+            "multilane",
+        ])
+        .args(["--no-baseline", "--json"])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json_with(&out.stdout, &["results"]);
+    let row = &v["results"][0];
+    assert_eq!(row["attack"], "flood");
+    assert!(
+        row["clean_done_at_s"].is_null() && row["clean_wall_seconds"].is_null(),
+        "{row}"
+    );
+    assert!(row["done_at_s"].is_f64(), "{row}");
     for bad in [
         ["--only", "teleport"],
         ["--world", "moon"],

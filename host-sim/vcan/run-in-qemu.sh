@@ -12,8 +12,9 @@
 #   (default: multilane.toml). Scenarios after --can-fd run with `--can-fd`: every
 #   message in one CAN FD frame (vcan0 has MTU 72, so both kinds travel on it).
 # Then, on vcan0 too, `host-sim experiment attacks --bus vcan0 $VCAN_ATTACKS` (default:
-# the forged grant at the intersection, authenticated, on CAN FD); its JSON must show no forgery
-# accepted, no unsafe event and every vehicle done. VCAN_ATTACKS="" skips it.
+# the forged grant at the intersection, authenticated, on CAN FD, no clean run beside it);
+# its JSON must show no forgery accepted, no unsafe event and every vehicle done.
+# VCAN_ATTACKS="" skips it.
 # Results go to $VCAN_OUT (default: vcan-qemu in cargo's target directory).
 # Needs: qemu-system-x86_64, apt-get (Debian's archive), cargo with the
 # x86_64-unknown-linux-musl target, python3 with cantools (.ci/run installs all of them).
@@ -98,7 +99,7 @@ for sc in "${scenarios[@]}"; do # numbered: run in the order given
   echo "${fd[$((i - 1))]}" > "$r/work/scenarios/$i-$(basename "$sc" .toml).args"
 done
 echo "${HOST_SIM_ARGS:-}" > "$r/work/args"
-echo "${VCAN_ATTACKS-"--only forged-grant --world intersection --can-fd"}" > "$r/work/attacks"
+echo "${VCAN_ATTACKS-"--only forged-grant --world intersection --can-fd --no-baseline"}" > "$r/work/attacks"
 (cd "$r" && find . | "$r/bin/busybox" cpio -o -H newc 2>/dev/null | gzip -1) > "$out/initramfs.gz"
 
 echo "== boot linux $kver under qemu-system-x86_64 (TCG)"

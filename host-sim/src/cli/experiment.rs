@@ -182,6 +182,9 @@ pub enum Experiment {
         /// Only these worlds (comma-separated): intersection, multilane.
         #[arg(long, value_delimiter = ',')]
         world: Vec<String>,
+        /// Skip each world's run without an attack (its `clean_*` figures are then null).
+        #[arg(long)]
+        no_baseline: bool,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -259,10 +262,11 @@ pub fn run(e: Experiment) -> ExitCode {
             algorithm,
             only,
             world,
+            no_baseline,
             json,
         } => attacks(
             &bus,
-            (!without_auth, can_fd),
+            (!without_auth, can_fd, !no_baseline),
             &algorithm,
             (only, world),
             json,
@@ -740,7 +744,7 @@ fn faults(
 /// undone.
 fn attacks(
     bus: &str,
-    (authenticated, fd): (bool, bool),
+    (authenticated, fd, baseline): (bool, bool, bool),
     algorithm: &str,
     (only, worlds): (Vec<String>, Vec<String>),
     json: bool,
@@ -776,6 +780,7 @@ fn attacks(
         algorithm,
         only,
         worlds,
+        baseline,
     };
     let report = match experiment(&settings) {
         Ok(r) => r,

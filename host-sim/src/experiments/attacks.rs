@@ -55,6 +55,8 @@ pub struct Settings {
     pub only: Vec<String>,
     /// Only these worlds (`intersection`, `multilane`), if any.
     pub worlds: Vec<String>,
+    /// Also run each world without an attack, for the rows' `clean_*` figures.
+    pub baseline: bool,
 }
 
 impl Default for Settings {
@@ -66,6 +68,7 @@ impl Default for Settings {
             algorithm: Algorithm::Fifo,
             only: Vec::new(),
             worlds: Vec::new(),
+            baseline: true,
         }
     }
 }
@@ -95,15 +98,16 @@ pub struct AttackRow {
     pub done: u64,
     /// When the last was done, if all were (s).
     pub done_at_s: Option<f64>,
-    /// The same world without any attack: when its last vehicle was done (s).
+    /// The same world without any attack: when its last vehicle was done (s; `null`
+    /// without the baseline run, or if not all were).
     pub clean_done_at_s: Option<f64>,
     /// Frames the nodes' decoders refused (CRC, MAC, freshness, sender …).
     pub frames_rejected: u64,
     /// Wall-clock time of the run (s).
     pub wall_seconds: f64,
     /// Wall-clock time of the same world's run without any attack (s): what receiving
-    /// and refusing the attack's frames cost the nodes.
-    pub clean_wall_seconds: f64,
+    /// and refusing the attack's frames cost the nodes (`null` without the baseline run).
+    pub clean_wall_seconds: Option<f64>,
 }
 
 impl AttackRow {
@@ -163,9 +167,12 @@ pub fn experiment(s: &Settings) -> Result<AttackReport, FleetError> {
     let mut results = Vec::new();
     let chosen = |w: &str| s.worlds.is_empty() || s.worlds.iter().any(|o| o == w);
     for (name, spec) in worlds.into_iter().filter(|(w, _)| chosen(w)) {
-        let clean = run(s, &keys, spec.clone(), None)?;
+        let clean = match s.baseline {
+            true => Some(run(s, &keys, spec.clone(), None)?.run),
+            false => None,
+        };
         let mut push = |attack: String, attempts: u64, accepted: u64, f: &FleetSummary| {
-            results.push(row(name, attack, (attempts, accepted), f, &clean.run));
+            results.push(row(name, attack, (attempts, accepted), f, clean.as_ref()));
         };
         for a in Attack::ALL.into_iter().filter(|a| wanted(a.name())) {
             let f = run(s, &keys, spec.clone(), Some(a))?;
@@ -252,7 +259,7 @@ fn row(
     attack: String,
     (attempts, accepted): (u64, u64),
     f: &FleetSummary,
-    clean: &crate::world::summary::Summary,
+    clean: Option<&crate::world::summary::Summary>,
 ) -> AttackRow {
     let r = &f.run;
     AttackRow {
@@ -267,10 +274,10 @@ fn row(
         vehicles: r.vehicles,
         done: done(r).0,
         done_at_s: done(r).1,
-        clean_done_at_s: done(clean).1,
+        clean_done_at_s: clean.and_then(|c| done(c).1),
         frames_rejected: f.can.rejected_total(),
         wall_seconds: r.wall_seconds,
-        clean_wall_seconds: clean.wall_seconds,
+        clean_wall_seconds: clean.map(|c| c.wall_seconds),
     }
 }
 
