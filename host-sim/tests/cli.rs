@@ -22,6 +22,17 @@ fn json_with(stdout: &[u8], keys: &[&str]) -> serde_json::Value {
     v
 }
 
+/// Runs `cmd`, requires it to succeed, and parses its stdout as [`json_with`] does.
+fn json_of(cmd: &mut Command, keys: &[&str]) -> serde_json::Value {
+    let out = cmd.output().expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    json_with(&out.stdout, keys)
+}
+
 fn tmp(name: &str) -> PathBuf {
     let d = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("host-sim-cli-{}", std::process::id()));
@@ -196,17 +207,8 @@ fn missed_liveness_goal_exits_3() {
 
 #[test]
 fn scale_prints_its_figures() {
-    let out = bin()
-        .args(["scale", "--vehicles", "60", "--duration", "2", "--json"])
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v = json_with(
-        &out.stdout,
+    let v = json_of(
+        bin().args(["scale", "--vehicles", "60", "--duration", "2", "--json"]),
         &[
             "vehicles",
             "sim_seconds",
@@ -228,8 +230,8 @@ fn scale_prints_its_figures() {
 
 #[test]
 fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
-    let out = bin()
-        .args([
+    let v = json_of(
+        bin().args([
             "scale",
             "--vehicles",
             "60",
@@ -237,16 +239,7 @@ fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
             "4",
             "--traffic",
             "--json",
-        ])
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v = json_with(
-        &out.stdout,
+        ]),
         &["kind", "step", "solves_per_step", "lane_changes"],
     );
     assert_eq!(v["kind"], "traffic");
@@ -263,25 +256,20 @@ fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
 
     let plot = tmp("scale.svg");
     let _ = std::fs::remove_file(&plot);
-    let out = bin()
-        .args([
-            "scale",
-            "--sweep",
-            "--sweep-vehicles",
-            "10,20",
-            "--sweep-threads",
-            "1",
-        ])
-        .args(["--duration", "0.5", "--json", "--plot"])
-        .arg(&plot)
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let v = json_of(
+        bin()
+            .args([
+                "scale",
+                "--sweep",
+                "--sweep-vehicles",
+                "10,20",
+                "--sweep-threads",
+                "1",
+            ])
+            .args(["--duration", "0.5", "--json", "--plot"])
+            .arg(&plot),
+        &["runs", "sim_seconds"],
     );
-    let v = json_with(&out.stdout, &["runs", "sim_seconds"]);
     let runs = v["runs"].as_array().expect("runs");
     let kinds: Vec<(&str, u64)> = runs
         .iter()
@@ -319,16 +307,10 @@ fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
 
 #[test]
 fn bench_can_carries_every_message_in_each_configuration() {
-    let out = bin()
-        .args(["bench-can", "--messages", "400", "--json"])
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let v = json_of(
+        bin().args(["bench-can", "--messages", "400", "--json"]),
+        &["results"],
     );
-    let v = json_with(&out.stdout, &["results"]);
     let rows = v["results"].as_array().expect("rows");
     let configs: Vec<&str> = rows.iter().filter_map(|r| r["config"].as_str()).collect();
     assert_eq!(configs, ["classic", "classic+secoc", "fd", "fd+secoc"]);
@@ -341,8 +323,8 @@ fn bench_can_carries_every_message_in_each_configuration() {
 
 #[test]
 fn experiment_attacks_prints_its_rows_and_refuses_unknown_names() {
-    let out = bin()
-        .args([
+    let v = json_of(
+        bin().args([
             "experiment",
             "attacks",
             "--only",
@@ -350,16 +332,7 @@ fn experiment_attacks_prints_its_rows_and_refuses_unknown_names() {
             "--world",
             "intersection",
             "--json",
-        ])
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v = json_with(
-        &out.stdout,
+        ]),
         &["medium", "authenticated", "can_fd", "algorithm", "results"],
     );
     let rows = v["results"].as_array().expect("rows");
@@ -378,24 +351,19 @@ fn experiment_attacks_prints_its_rows_and_refuses_unknown_names() {
     assert_eq!(rows[0]["accepted"], 0);
     assert!(rows[0]["clean_done_at_s"].is_f64(), "{}", rows[0]);
     // Without the baseline run, its figures are null.
-    let out = bin()
-        .args([
-            "experiment",
-            "attacks",
-            "--only",
-            "flood",
-            "--world",
-            "multilane",
-        ])
-        .args(["--no-baseline", "--json"])
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let v = json_of(
+        bin()
+            .args([
+                "experiment",
+                "attacks",
+                "--only",
+                "flood",
+                "--world",
+                "multilane",
+            ])
+            .args(["--no-baseline", "--json"]),
+        &["results"],
     );
-    let v = json_with(&out.stdout, &["results"]);
     let row = &v["results"][0];
     assert_eq!(row["attack"], "flood");
     assert!(

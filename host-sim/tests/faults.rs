@@ -3,26 +3,13 @@
 
 use host_sim::bus::{Bus, Faults, InProcessBus, Message, Received, Silent};
 use host_sim::world::SolverChoice;
-use planner_core::VehicleState;
 use std::path::Path;
 
 mod common;
 use common::builtin;
 
 fn state(id: u16, stamp: f64) -> Message {
-    let state = VehicleState {
-        id,
-        x: stamp,
-        y: 1.8,
-        theta: 0.0,
-        v: 10.0,
-        omega: 0.0,
-        lane: 0,
-        alpha: None,
-        beta: None,
-        stamp,
-        cooperative: true,
-    };
+    let state = common::lane_state(id, stamp, 10.0, stamp);
     Message::State { state, segment: 0 }
 }
 

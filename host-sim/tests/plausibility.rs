@@ -13,21 +13,7 @@ fn net() -> Network {
     Network::road(2, None, 27.8)
 }
 
-fn state(id: u16, x: f64, v: f64, stamp: f64) -> VehicleState<f64> {
-    VehicleState {
-        id,
-        x,
-        y: 1.8,
-        theta: 0.0,
-        v,
-        omega: 0.0,
-        lane: 0,
-        alpha: None,
-        beta: None,
-        stamp,
-        cooperative: true,
-    }
-}
+use common::lane_state as state;
 
 fn hear(view: &mut View, net: &Network, s: VehicleState<f64>) -> Result<(), Reject> {
     view.take(

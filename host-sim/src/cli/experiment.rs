@@ -750,6 +750,7 @@ fn attacks(
     json: bool,
 ) -> ExitCode {
     use host_sim::experiments::attacks::{experiment, row_names, Settings, WORLDS};
+    use host_sim::fleet::intruder::Attack;
     let medium = match super::fleet::medium(bus) {
         Ok(m) => m,
         Err(e) => return bad_input(e),
@@ -789,18 +790,13 @@ fn attacks(
             return ExitCode::from(super::output::EXIT_BUS);
         }
     };
-    let forged = [
-        "forged-grant",
-        "replayed-grant",
-        "replayed-state",
-        "spoofed-id",
-        "flood",
-    ];
+    // The intruder's rows: forgeries, replays, spoofs and the flood.
+    let intruder = |name: &str| Attack::ALL.iter().any(|a| a.name() == name);
     let kept_out = !authenticated
         || report
             .results
             .iter()
-            .all(|r| !forged.contains(&r.attack.as_str()) || r.accepted == 0);
+            .all(|r| !intruder(&r.attack) || r.accepted == 0);
     let safe = report.results.iter().all(|r| r.unsafe_events() == 0);
     // A liar's cost in liveness is reported, not required away: the others stop taking
     // its word and plan around the worst case of it.

@@ -262,6 +262,7 @@ fn row(
     clean: Option<&crate::world::summary::Summary>,
 ) -> AttackRow {
     let r = &f.run;
+    let (vehicles_done, done_at_s) = done(r);
     AttackRow {
         attack,
         scenario,
@@ -272,8 +273,8 @@ fn row(
         unpermitted_entries: r.crossing.as_ref().map_or(0, |c| c.unpermitted_entries),
         completed: r.completed,
         vehicles: r.vehicles,
-        done: done(r).0,
-        done_at_s: done(r).1,
+        done: vehicles_done,
+        done_at_s,
         clean_done_at_s: clean.and_then(|c| done(c).1),
         frames_rejected: f.can.rejected_total(),
         wall_seconds: r.wall_seconds,

@@ -188,12 +188,14 @@ fn run_road(s: &ScaleSettings, r: usize, n: usize) -> (Summary, Counters, StepCo
         Kind::Traffic => traffic_road(r, n, s.duration_s, s.seed),
     };
     let mut sim = World::<20>::new(road.world(), SolverChoice::Ours, None);
+    sim.measure_step_costs();
     while !sim.finished() {
         if sim.step(&mut |_| {}).is_err() {
             break;
         }
     }
-    (sim.summary(0.0), *sim.counters(), sim.step_costs().clone())
+    let costs = sim.step_costs().cloned().unwrap_or_default();
+    (sim.summary(0.0), *sim.counters(), costs)
 }
 
 /// Runs the vehicles of `s` on its roads, on its threads.

@@ -677,8 +677,7 @@ impl<const N: usize> Harness<N> {
             .map(|(j, jn)| ManagerNode::new(j, jn.layout.clone(), jn.algorithm))
             .collect();
         for m in &mut managers {
-            m.manager
-                .set_position_resolution(RESOLUTION.0)
+            m.set_position_resolution(RESOLUTION.0)
                 .map_err(|e| FleetError::Harness(format!("bus resolution: {e:?}")))?;
         }
         Ok(managers)
@@ -1341,8 +1340,11 @@ fn manager_task<P: CanPort>(
             break;
         };
         let received = in_order(&mut inbox, ctx.order, t);
-        let granted =
-            outage(&mut mgr, ctx.faults, t).map_or_else(Vec::new, |m| m.manage(&received, t));
+        let granted = if mgr.is_up(&ctx.faults, t) {
+            mgr.manage(&received, t)
+        } else {
+            Vec::new()
+        };
         let published = SystemTime::now();
         for &id in &granted {
             let g = mgr.grant(id, t, ctx.lim.h, ctx.lim.h);
@@ -1363,22 +1365,6 @@ fn manager_task<P: CanPort>(
         }
     }
     Ok(node.stats().clone())
-}
-
-/// `mgr` at `t` under `faults`' outage, if any: `None` while it is down (what it hears is
-/// lost and it grants nothing); at its first period back it restarts, remembering
-/// nothing but the bus's resolution.
-fn outage(mgr: &mut ManagerNode, faults: Faults, t: f64) -> Option<&mut ManagerNode> {
-    let down = faults.manager_down.filter(|d| d.junction == mgr.junction);
-    if down.is_some_and(|d| d.is_down(t)) {
-        return None;
-    }
-    if down.is_some_and(|d| t >= d.until_s) && !mgr.restarted {
-        mgr.restart();
-        // The restarted manager hears the same bus as before.
-        let _ = mgr.manager.set_position_resolution(RESOLUTION.0);
-    }
-    Some(mgr)
 }
 
 /// Reads frames until SYNC(`tick`), keeping every message before it (sent in the period

@@ -2,9 +2,10 @@
 //! reports for its junction, decides by its algorithm, and answers every vehicle holding
 //! a permission with a lease.
 
-use crate::bus::{Message, Received};
+use crate::bus::{Faults, Message, Received};
 use planner_core::crossing::Manager;
 use planner_core::intersection::Layout;
+use planner_core::ConfigError;
 
 /// Vehicles one manager can track.
 pub const MANAGER_CAP: usize = 128;
@@ -28,6 +29,9 @@ pub struct ManagerNode {
     pub manager: Manager<f64, MANAGER_CAP>,
     /// It has been restarted (after an outage).
     pub restarted: bool,
+    /// The bus's position resolution it was given (m): a restart keeps it, the bus being
+    /// the same.
+    resolution: f64,
 }
 
 impl ManagerNode {
@@ -41,7 +45,16 @@ impl ManagerNode {
             junction,
             manager: Manager::new(layout, algorithm),
             restarted: false,
+            resolution: 0.0,
         }
+    }
+
+    /// Reports reach it with positions rounded to `position` (m): see planner-core's
+    /// `Manager::set_position_resolution`.
+    pub fn set_position_resolution(&mut self, position: f64) -> Result<(), ConfigError> {
+        self.manager.set_position_resolution(position)?;
+        self.resolution = position;
+        Ok(())
     }
 
     /// A restart: a new manager of the same junction and algorithm, remembering nothing.
@@ -50,7 +63,23 @@ impl ManagerNode {
     /// would (planner-core's `Manager::observe`), so nothing conflicting is granted over it.
     pub fn restart(&mut self) {
         self.manager = Manager::new(self.manager.layout().clone(), self.manager.algorithm());
+        // The resolution was accepted when it was set: it cannot be refused now.
+        let _ = self.manager.set_position_resolution(self.resolution);
         self.restarted = true;
+    }
+
+    /// Whether it runs at `t` under `faults`' outage (`[faults.manager_down]`): not while
+    /// down (what it hears is lost and it grants nothing); at its first period back it
+    /// restarts, remembering nothing but the bus's resolution.
+    pub fn is_up(&mut self, faults: &Faults, t: f64) -> bool {
+        let down = faults.manager_down.filter(|d| d.junction == self.junction);
+        if down.is_some_and(|d| d.is_down(t)) {
+            return false;
+        }
+        if down.is_some_and(|d| t >= d.until_s) && !self.restarted {
+            self.restart();
+        }
+        true
     }
 
     /// Its bus node.

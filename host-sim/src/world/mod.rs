@@ -269,8 +269,9 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     detector: DeadlockDetector,
     deadlock: Option<Deadlock>,
     counters: Counters,
-    /// Wall-clock time of each planner step (`host-sim scale`).
-    costs: Box<cost::StepCosts>,
+    /// Wall-clock time of each planner step, when asked for (`host-sim scale`): the
+    /// other runs do not read the clock in their steps.
+    costs: Option<Box<cost::StepCosts>>,
     messages_sent: u64,
     solver: SolverChoice,
     seed: u64,
@@ -341,7 +342,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             rng,
             deadlock: None,
             counters: Counters::default(),
-            costs: Box::default(),
+            costs: None,
             messages_sent: 0,
             solver,
             seed,
@@ -360,8 +361,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             step::set_setup(v, self.setup);
         }
         for m in &mut self.managers {
-            m.manager
-                .set_position_resolution(resolution.0)
+            m.set_position_resolution(resolution.0)
                 .map_err(|e| format!("{e:?}"))?;
         }
         Ok(())

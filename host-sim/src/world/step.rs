@@ -283,10 +283,10 @@ impl<const N: usize, B: Bus> World<N, B> {
                 liar: self.spec.faults.liar,
                 returns: sensed.get(i).unwrap_or(&empty),
             };
-            let t0 = std::time::Instant::now();
+            let t0 = self.costs.is_some().then(std::time::Instant::now);
             let (cmd, row) = v.decide(&ctx, &inbox, &mut self.counters);
-            if v.is_planner() {
-                self.costs.add(t0.elapsed().as_nanos() as u64);
+            if let (Some(c), Some(t0), true) = (&mut self.costs, t0, v.is_planner()) {
+                c.add(t0.elapsed().as_nanos() as u64);
             }
             commands.push(cmd);
             trace(&row);
@@ -337,17 +337,8 @@ impl<const N: usize, B: Bus> World<N, B> {
         for m in &mut self.managers {
             inbox.clear();
             self.bus.receive(m.node(), t, &mut inbox)?;
-            let down = self
-                .spec
-                .faults
-                .manager_down
-                .filter(|d| d.junction == m.junction);
-            if down.is_some_and(|d| d.is_down(t)) {
-                // Stopped: what it hears is lost, and it grants nothing.
+            if !m.is_up(&self.spec.faults, t) {
                 continue;
-            }
-            if down.is_some_and(|d| t >= d.until_s) && !m.restarted {
-                m.restart();
             }
             let granted = m.manage(&inbox, t);
             self.monitor.granted(m.junction, &granted);

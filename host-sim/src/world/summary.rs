@@ -300,9 +300,14 @@ impl<const N: usize, B: Bus> World<N, B> {
         &self.counters
     }
 
-    /// What its planner steps cost in wall-clock time.
-    pub fn step_costs(&self) -> &super::cost::StepCosts {
-        &self.costs
+    /// Measures what each planner step costs in wall-clock time from now on.
+    pub fn measure_step_costs(&mut self) {
+        self.costs.get_or_insert_with(Box::default);
+    }
+
+    /// What its planner steps cost in wall-clock time, if measured.
+    pub fn step_costs(&self) -> Option<&super::cost::StepCosts> {
+        self.costs.as_deref()
     }
 
     /// `true` if vehicle `v` should have met its goals by now: always in a world whose

@@ -12,6 +12,24 @@ use std::process::Command;
 use std::time::{Duration, SystemTime};
 
 /// A scenario file shipped in `scenarios/`.
+/// A cooperative vehicle's state in lane 0 of a road's first segment (y = 1.8 m, heading
+/// along the road, not turning, no lane change).
+pub fn lane_state(id: u16, x: f64, v: f64, stamp: f64) -> planner_core::VehicleState<f64> {
+    planner_core::VehicleState {
+        id,
+        x,
+        y: 1.8,
+        theta: 0.0,
+        v,
+        omega: 0.0,
+        lane: 0,
+        alpha: None,
+        beta: None,
+        stamp,
+        cooperative: true,
+    }
+}
+
 pub fn builtin(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../scenarios")
