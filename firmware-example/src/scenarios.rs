@@ -175,6 +175,8 @@ pub fn approach<const N: usize>(
                         out.solved += 1;
                         solved = true;
                     }
+                    // The firmware's planners set no reuse policy: they solve every step.
+                    StepStatus::Reused { .. } => out.solved += 1,
                     StepStatus::Fallback(FallbackReason::NoRoom) => out.standstill += 1,
                     StepStatus::Fallback(_) => out.fallbacks += 1,
                 }

@@ -22,6 +22,7 @@ fn run<F: Real>() {
         let cmd = planner.step(&obs).expect("valid input");
         let s = match cmd.status {
             StepStatus::Solved { .. } => "solved".to_string(),
+            StepStatus::Reused { .. } => "reused".to_string(),
             StepStatus::Fallback(r) => format!("{r:?}"),
         };
         let s: String = s.chars().take(60).collect();

@@ -305,6 +305,64 @@ fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
     }
 }
 
+/// `scale --compare`: the same roads solving every step and with certified plan reuse,
+/// both safe, reuse really skipping solves, at a bounded closed-loop cost; bad reuse
+/// settings are refused before anything runs.
+#[test]
+fn scale_compares_plan_reuse_with_solving_every_step() {
+    let v = json_of(
+        bin().args([
+            "scale",
+            "--vehicles",
+            "40",
+            "--duration",
+            "2",
+            "--compare",
+            "--json",
+        ]),
+        &[
+            "baseline",
+            "reuse",
+            "speedup",
+            "iterations_ratio",
+            "tracking_cost_change",
+        ],
+    );
+    for arm in ["baseline", "reuse"] {
+        let r = &v[arm];
+        assert_eq!(
+            (r["collisions"].clone(), r["invariant_violations"].clone()),
+            (0.into(), 0.into()),
+            "{arm}: {r}"
+        );
+        assert_eq!(r["step"]["steps"], 38 * 200, "{arm}");
+    }
+    assert_eq!(v["baseline"]["reuse"], serde_json::Value::Null);
+    assert_eq!(v["baseline"]["reuses_per_step"], 0.0);
+    assert_eq!(v["reuse"]["reuse"]["tolerance"], 0.01);
+    assert_eq!(v["reuse"]["reuse"]["max_age"], 4);
+    let f = |a: &str, k: &str| v[a][k].as_f64().expect("number");
+    let reuses = f("reuse", "reuses_per_step");
+    assert!(reuses > 0.05, "{v}");
+    // Every planner step either solved or reused (or braked without either).
+    assert!((f("reuse", "solves_per_step") + reuses) <= 1.0 + 1e-12);
+    assert!(f("reuse", "solver_iterations_per_step") < f("baseline", "solver_iterations_per_step"));
+    assert!(v["iterations_ratio"].as_f64().expect("ratio") < 1.0);
+    // What reuse gives up on the road is small: within a percent of the closed-loop cost.
+    let change = v["tracking_cost_change"].as_f64().expect("change");
+    assert!(change.abs() < 0.01, "{change}");
+    assert!(f("reuse", "certified_gap_per_reuse") > 0.0);
+    for bad in [
+        vec!["--reuse-tolerance", "-1"],
+        vec!["--reuse-tolerance", "NaN"],
+        vec!["--compare", "--reuse"],
+        vec!["--compare", "--sweep"],
+    ] {
+        let out = bin().arg("scale").args(&bad).output().expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{bad:?}");
+    }
+}
+
 #[test]
 fn bench_can_carries_every_message_in_each_configuration() {
     let v = json_of(

@@ -172,6 +172,7 @@ fn the_page_parses_into_every_section() {
         "experiment demand",
         "experiment network",
         "scale",
+        "scale --compare",
         "scale --sweep",
         "bench-planner",
     ] {
@@ -309,6 +310,16 @@ fn benchmark_outputs_match_the_page() {
     check(
         "scale",
         &["scale", "--vehicles", "20", "--duration", "1", "--traffic"],
+        &[],
+    );
+    check(
+        "scale",
+        &["scale", "--vehicles", "20", "--duration", "1", "--reuse"],
+        &["reuse"],
+    );
+    check(
+        "scale --compare",
+        &["scale", "--vehicles", "20", "--duration", "1", "--compare"],
         &[],
     );
     check(

@@ -25,6 +25,7 @@ use crate::planner::{
     free_road_gap, in_range, ConfigError, FallbackReason, InputError, Planner, StepStatus,
 };
 use crate::real::Real;
+use crate::reuse::ReusePolicy;
 use crate::safety;
 use crate::sensing::{still_unheard, Sensing};
 use crate::solver::{IpmSolver, MpcSolver};
@@ -310,6 +311,12 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         }
         self.sensing = sensing;
         Ok(())
+    }
+
+    /// Lets the speed planner reuse its previous plan when it is verified and certified
+    /// near-optimal ([`crate::reuse`], [`Planner::set_reuse`]); `None` solves every step.
+    pub fn set_reuse(&mut self, policy: Option<ReusePolicy<F>>) -> Result<(), ConfigError> {
+        self.speed.set_reuse(policy)
     }
 
     /// Sets a bound on the time until every other vehicle has heard what this one
@@ -881,7 +888,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             .step_gap(obs.v_prev, d_h, obs.target, obs.v_ref)
             .map_err(LaneInputError::Speed)?;
         match cmd.status {
-            StepStatus::Solved { .. } => {}
+            StepStatus::Solved { .. } | StepStatus::Reused { .. } => {}
             StepStatus::Fallback(FallbackReason::InvariantViolated) => {
                 // Still safe toward (15) and inside the band: the (21) set made it fail.
                 let d_safe = d_h_hat.map_or(gap_safe, |d| d.min(gap_safe));

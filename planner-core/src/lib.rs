@@ -12,6 +12,8 @@
 //! - [`mpc`]: problem (10) as data with a configurable quadratic cost;
 //! - [`solver`]: our interior-point solver with O(N) pentadiagonal Newton systems;
 //! - [`planner`]: the planner step: obstacle (2)/(22), solve, verify, certified fallback;
+//! - [`reuse`]: certified plan reuse (the previous plan, shifted, when duality proves it
+//!   near-optimal);
 //! - [`world`]: V2V vehicle-state messages and the bounded world view built from them.
 //!
 //! Memory is bounded by the const-generic horizon `N`; no function panics on any input
@@ -47,6 +49,7 @@ pub mod mpc;
 pub mod params;
 pub mod planner;
 pub mod real;
+pub mod reuse;
 pub mod safety;
 pub mod sensing;
 pub mod solver;
@@ -63,6 +66,7 @@ pub use planner::{
     Command, ConfigError, FallbackReason, InputError, Observation, Planner, StepStatus, Vehicle,
 };
 pub use real::Real;
+pub use reuse::ReusePolicy;
 pub use sensing::Sensing;
 pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};
 pub use unicycle::Pose;

@@ -8,6 +8,7 @@
 use crate::mpc::{ConstraintKind, CostWeights, ProblemError, SingleLaneProblem, Violation};
 use crate::params::Params;
 use crate::real::Real;
+use crate::reuse::{self, ReusePolicy};
 use crate::safety;
 use crate::solver::{IpmSolver, MpcSolver, SolveError};
 
@@ -73,6 +74,15 @@ pub enum StepStatus<F> {
         /// Solver iterations.
         iterations: u32,
     },
+    /// No solve: the previous plan, shifted, was verified against this step's exact
+    /// constraints and certified near-optimal by duality ([`crate::reuse`]); its first
+    /// input applied. Only with a [`ReusePolicy`] set.
+    Reused {
+        /// Consecutive steps without a solve, this one included (1 ..= `max_age`).
+        age: u8,
+        /// Certified bound on J(plan) − J*, the cost given up at this step.
+        certified_gap: F,
+    },
     /// The certified max-braking fallback (Lemma 2) was applied.
     Fallback(FallbackReason<F>),
 }
@@ -123,6 +133,8 @@ pub enum ConfigError {
     /// Sensing values that are not finite, ranges below `Sensing::min_range`, or error
     /// bounds outside [0, 1).
     InvalidSensing,
+    /// A [`ReusePolicy`] tolerance that is negative or not finite.
+    InvalidReuse,
 }
 
 /// The position x̄_t of the nearest obstacle ahead, extent-adjusted (SPEC §1):
@@ -174,6 +186,10 @@ pub struct Planner<F, const N: usize, S = IpmSolver<F, N>> {
     solver: S,
     plan: [F; N],
     have_plan: bool,
+    reuse: Option<ReusePolicy<F>>,
+    /// Steps since the last solve whose duals certify reuse; `None` when the plan is not
+    /// a solved one (cold, or a fallback's braking plan).
+    age: Option<u8>,
 }
 
 impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
@@ -206,7 +222,33 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
             solver,
             plan: [F::ZERO; N],
             have_plan: false,
+            reuse: None,
+            age: None,
         })
+    }
+
+    /// Lets the planner apply its previous plan, shifted, instead of solving, when that
+    /// plan is verified and certified within `policy` of the optimum ([`crate::reuse`]);
+    /// `None` (the default) solves every step. Safety is unaffected: every applied
+    /// command is verified against the exact constraints either way.
+    pub fn set_reuse(&mut self, policy: Option<ReusePolicy<F>>) -> Result<(), ConfigError> {
+        if let Some(p) = policy {
+            if !(p.tolerance.is_finite() && p.tolerance >= F::ZERO) {
+                return Err(ConfigError::InvalidReuse);
+            }
+        }
+        self.reuse = policy;
+        Ok(())
+    }
+
+    /// The reuse policy in force, if any.
+    pub fn reuse(&self) -> Option<ReusePolicy<F>> {
+        self.reuse
+    }
+
+    /// The speed solver (its duals certify reuse: [`MpcSolver::duals`]).
+    pub fn solver(&self) -> &S {
+        &self.solver
     }
 
     /// The parameters.
@@ -222,6 +264,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
     /// Forgets the previous plan (next step starts cold).
     pub fn reset(&mut self) {
         self.have_plan = false;
+        self.age = None;
     }
 
     fn check_input(&self, obs: &Observation<'_, F>) -> Result<(), InputError> {
@@ -305,6 +348,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         if room < F::from_f64(MIN_ROOM_M) {
             return self.fallback(v_prev, gap, FallbackReason::NoRoom);
         }
+        if let Some(cmd) = self.try_reuse(&problem, gap) {
+            return cmd;
+        }
         let warm = self.have_plan.then(|| shifted(&self.plan));
         let solution = match self.solver.solve(&problem, warm.as_ref()) {
             Ok(s) => s,
@@ -314,6 +360,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
             Ok(plan) => {
                 self.plan = plan;
                 self.have_plan = true;
+                self.age = Some(0);
                 Command {
                     v: plan.first().copied().unwrap_or(F::ZERO),
                     status: StepStatus::Solved {
@@ -326,16 +373,41 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         }
     }
 
+    /// The previous plan, shifted, if the policy allows it, it passes [`verify`] for
+    /// `problem` and the solver's duals certify it within the policy's tolerance.
+    fn try_reuse(&mut self, problem: &SingleLaneProblem<F, N>, gap: F) -> Option<Command<F>> {
+        let policy = self.reuse?;
+        let age = self.age.filter(|&a| a < policy.max_age && self.have_plan)?;
+        let plan = verify(&self.params, problem, shifted(&self.plan)).ok()?;
+        let duals = self.solver.duals()?.shifted(1);
+        let certified_gap = reuse::certified_gap(problem, &duals, &plan)?;
+        let allowed = policy.tolerance * (F::ONE + problem.objective(&plan).abs());
+        if !(certified_gap <= allowed) {
+            return None;
+        }
+        self.solver.advance();
+        self.plan = plan;
+        let age = age.saturating_add(1);
+        self.age = Some(age);
+        Some(Command {
+            v: plan.first().copied().unwrap_or(F::ZERO),
+            status: StepStatus::Reused { age, certified_gap },
+            gap,
+        })
+    }
+
     /// Replaces the plan by the max-braking sequence from `v_prev` (used when a caller
     /// applies the fallback for reasons of its own, so the next warm start matches).
     pub fn set_braking_plan(&mut self, v_prev: F) {
         self.plan = safety::max_braking(&self.params, v_prev);
         self.have_plan = true;
+        self.age = None;
     }
 
     fn fallback(&mut self, v_prev: F, gap: F, why: FallbackReason<F>) -> Command<F> {
         self.plan = safety::max_braking(&self.params, v_prev);
         self.have_plan = true;
+        self.age = None;
         Command {
             v: safety::max_braking_command(&self.params, v_prev),
             status: StepStatus::Fallback(why),

@@ -22,6 +22,7 @@
 use crate::banded::{get, Penta};
 use crate::mpc::SingleLaneProblem;
 use crate::real::Real;
+use crate::reuse::Duals;
 
 /// Largest fraction to the boundary τ the solver uses (see [`Settings::step_fraction`]).
 pub const TAU_MAX: f64 = 0.9999;
@@ -137,6 +138,18 @@ pub trait MpcSolver<F: Real, const N: usize> {
         problem: &SingleLaneProblem<F, N>,
         warm_start: Option<&[F; N]>,
     ) -> Result<Solution<F, N>, SolveError>;
+
+    /// The multipliers of the last successful solve, aligned with its plan (moved on by
+    /// [`Self::advance`]), if the solver has them: they certify plan reuse
+    /// ([`crate::reuse`]). Solvers without them return `None`, and their planners
+    /// always solve.
+    fn duals(&self) -> Option<Duals<F, N>> {
+        None
+    }
+
+    /// The planner applied the previous plan one step further without solving: move the
+    /// warm-start state one step on so that it stays aligned with the plan.
+    fn advance(&mut self) {}
 }
 
 /// Slacks, duals and work vectors of one constraint family (one entry per step k).
@@ -493,6 +506,24 @@ impl<F: Real, const N: usize> MpcSolver<F, N> for IpmSolver<F, N> {
         warm_start: Option<&[F; N]>,
     ) -> Result<Solution<F, N>, SolveError> {
         self.solve_traced(pr, warm_start, &mut |_| {})
+    }
+
+    fn duals(&self) -> Option<Duals<F, N>> {
+        let [up, lo, ac, de, sa] = &self.fam;
+        self.have_duals.then_some(Duals {
+            upper: up.lam,
+            lower: lo.lam,
+            accel: ac.lam,
+            decel: de.lam,
+            safety: sa.lam,
+        })
+    }
+
+    fn advance(&mut self) {
+        let last = N.saturating_sub(1);
+        for f in self.fam.iter_mut() {
+            f.lam = core::array::from_fn(|k| get(&f.lam, (k + 1).min(last)));
+        }
     }
 }
 

@@ -5,21 +5,22 @@
 //! lane a rectangle overlaps, limits, road departures) must see nothing.
 //!
 //! `THEOREM2_CASES` sets the number of cases (default 100; README gives the 5,000 run,
-//! `host-sim traffic --cases 5000 --json`).
+//! `host-sim traffic --cases 5000 --json`); `THEOREM2_REUSE_CASES` those of the sweep
+//! with certified plan reuse (issue 19 §1; default 50), which must see nothing either.
 
 use host_sim::experiments::multilane::traffic_sweep;
 
-#[test]
-fn theorem_2_random_multilane_traffic() {
-    let env = |k: &str, d: u64| {
-        std::env::var(k)
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(d)
-    };
-    let cases = env("THEOREM2_CASES", 100);
+fn env(key: &str, default: u64) -> u64 {
+    std::env::var(key)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
+}
+
+/// Runs the sweep and requires nothing unsafe and lane changes; returns reused steps.
+fn sweep(cases: u64, reuse: bool) -> u64 {
     let seed = env("THEOREM2_SEED", 1);
-    let r = traffic_sweep(cases, seed, 20.0, 0);
+    let r = traffic_sweep(cases, seed, 20.0, 0, reuse);
     println!("{r:#?}");
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
@@ -31,4 +32,17 @@ fn theorem_2_random_multilane_traffic() {
     assert_eq!(r.cases, cases);
     // Lane changes really happen (most vehicles want another lane).
     assert!(r.lane_changes >= r.cases * 3, "{r:?}");
+    r.reused_steps
+}
+
+#[test]
+fn theorem_2_random_multilane_traffic() {
+    assert_eq!(sweep(env("THEOREM2_CASES", 100), false), 0);
+}
+
+#[test]
+fn theorem_2_random_multilane_traffic_with_plan_reuse() {
+    let cases = env("THEOREM2_REUSE_CASES", 50);
+    // Reuse really happens (about half of the steps), so the sweep tests it.
+    assert!(sweep(cases, true) > cases * 5000);
 }

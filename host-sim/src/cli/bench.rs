@@ -45,6 +45,21 @@ pub struct ScaleArgs {
     /// Seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Certified plan reuse: a planner applies its previous plan, shifted, without
+    /// solving when it verifies and duality proves it within --reuse-tolerance of the
+    /// optimum.
+    #[arg(long)]
+    reuse: bool,
+    /// The same world twice in one run, solving every step and with --reuse, side by
+    /// side with their ratios.
+    #[arg(long, conflicts_with_all = ["reuse", "sweep"])]
+    compare: bool,
+    /// With --reuse or --compare: certified relative sub-optimality allowed per step.
+    #[arg(long, default_value_t = planner_core::ReusePolicy::<f64>::default().tolerance)]
+    reuse_tolerance: f64,
+    /// With --reuse or --compare: most consecutive steps without a solve.
+    #[arg(long, default_value_t = planner_core::ReusePolicy::<f64>::default().max_age)]
+    reuse_max_age: u8,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -131,7 +146,17 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
             a.duration
         ));
     }
-    use host_sim::experiments::scale::{run, sweep, Kind, ScaleSettings};
+    use host_sim::experiments::scale::{compare, run, sweep, Kind, ScaleSettings};
+    if !(a.reuse_tolerance.is_finite() && a.reuse_tolerance >= 0.0) {
+        return bad_input(format!(
+            "--reuse-tolerance must be a finite number ≥ 0, got {}",
+            a.reuse_tolerance
+        ));
+    }
+    let policy = planner_core::ReusePolicy {
+        tolerance: a.reuse_tolerance,
+        max_age: a.reuse_max_age,
+    };
     if let Some(p) = &a.plot {
         if let Err(code) = super::output::check_plot(p) {
             return code;
@@ -153,7 +178,15 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
         per_road: a.platoon as usize,
         threads: a.threads,
         seed: a.seed,
+        reuse: a.reuse.then_some(policy),
     };
+    if a.compare {
+        let r = compare(&settings, policy);
+        let safe = [&r.baseline, &r.reuse]
+            .iter()
+            .all(|x| x.collisions + x.invariant_violations + x.limit_violations == 0);
+        return finish(&r, a.json, safe, true);
+    }
     if a.sweep {
         let vehicles: Vec<usize> = a.sweep_vehicles.iter().map(|&v| v as usize).collect();
         let r = sweep(&settings, &vehicles, &a.sweep_threads);
@@ -223,6 +256,40 @@ pub fn bench(a: BenchArgs) -> ExitCode {
             r.max_rel_objective_gap.max(r.max_rel_objective_gap_persistent),
             r.max_constraint_violation,
             r.planner_median_iterations
+        );
+    }
+    println!(
+        "\ncertified plan reuse on the warm drive (tolerance {}, at most {} steps without a solve), \
+         against solving every step:",
+        report.reuse.first().map_or(0.0, |r| r.tolerance),
+        report.reuse.first().map_or(0, |r| r.max_age)
+    );
+    println!(
+        "{:>3} {:>6} {:>8} {:>12} {:>12} {:>12} {:>12} {:>8} {:>12} {:>12}",
+        "N",
+        "steps",
+        "reused",
+        "iters/step",
+        "with reuse",
+        "step µs",
+        "with reuse",
+        "speedup",
+        "cost change",
+        "max cert."
+    );
+    for r in &report.reuse {
+        println!(
+            "{:>3} {:>6} {:>7.1}% {:>12.2} {:>12.2} {:>12.2} {:>12.2} {:>7.2}x {:>11.4}% {:>12.1e}",
+            r.horizon,
+            r.steps,
+            100.0 * r.reused_share,
+            r.iterations_per_step,
+            r.iterations_per_step_reuse,
+            r.step_mean_us,
+            r.step_mean_us_reuse,
+            r.speedup,
+            100.0 * r.closed_loop_cost_change,
+            r.max_certified_gap
         );
     }
     ExitCode::SUCCESS

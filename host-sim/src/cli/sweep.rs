@@ -16,6 +16,10 @@ pub struct PlatoonsArgs {
     /// Seed of the sweep.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// The followers reuse their certified previous plan instead of solving every step
+    /// (planner-core's `ReusePolicy::default()`).
+    #[arg(long)]
+    reuse: bool,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -36,6 +40,10 @@ pub struct TrafficArgs {
     /// Simulated seconds per case.
     #[arg(long, default_value_t = 20.0)]
     duration: f64,
+    /// The planners reuse their certified previous plan instead of solving every step
+    /// (planner-core's `ReusePolicy::default()`).
+    #[arg(long)]
+    reuse: bool,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -47,12 +55,12 @@ pub struct TrafficArgs {
 /// Theorem 1 sweep.
 pub fn platoons(a: PlatoonsArgs) -> ExitCode {
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
-    let s = host_sim::experiments::platoon::sweep_range(first, end, a.seed);
+    let s = host_sim::experiments::platoon::sweep_range(first, end, a.seed, a.reuse);
     let safe =
         s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == end - first;
     match a.shard {
         Some(sh) => {
-            let settings = json!({"cases": a.cases, "seed": a.seed});
+            let settings = json!({"cases": a.cases, "seed": a.seed, "reuse": a.reuse});
             emit("platoons", settings, sh, (first, end), &s, code(safe, true))
         }
         None => finish(&s, a.json, safe, true),
@@ -66,12 +74,19 @@ pub fn traffic(a: TrafficArgs) -> ExitCode {
     }
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
     // Case i's seed is seed + i: it depends on the index alone.
-    let r =
-        host_sim::experiments::multilane::traffic_sweep(end - first, a.seed + first, a.duration, 0);
+    let r = host_sim::experiments::multilane::traffic_sweep(
+        end - first,
+        a.seed + first,
+        a.duration,
+        0,
+        a.reuse,
+    );
     let safe = r.collisions + r.invariant_violations + r.limit_violations == 0;
     match a.shard {
         Some(sh) => {
-            let settings = json!({"cases": a.cases, "seed": a.seed, "duration": a.duration});
+            let settings = json!({
+                "cases": a.cases, "seed": a.seed, "duration": a.duration, "reuse": a.reuse
+            });
             emit("traffic", settings, sh, (first, end), &r, code(safe, true))
         }
         None => finish(&r, a.json, safe, true),

@@ -141,8 +141,12 @@ pub fn run_one(
     solver: SolverChoice,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Summary {
+    run_world(World::<20>::new(world, solver, None), trace)
+}
+
+/// Runs `w` to its end and returns its summary.
+pub fn run_world(mut w: World<20>, trace: &mut dyn FnMut(&TraceRow)) -> Summary {
     let t0 = std::time::Instant::now();
-    let mut w = World::<20>::new(world, solver, None);
     while !w.finished() {
         // The in-process bus cannot fail.
         if w.step(trace).is_err() {
@@ -289,30 +293,30 @@ pub struct TrafficReport {
     pub yield_steps: u64,
     /// Planner steps.
     pub planner_steps: u64,
+    /// Of those, steps that applied a certified previous plan without a solve.
+    pub reused_steps: u64,
     /// Seeds of cases with a collision or violation (for replay).
     pub failing_seeds: Vec<u64>,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
 }
 
-/// Theorem 2 sweep: `cases` random-traffic cases.
+/// Theorem 2 sweep: `cases` random-traffic cases; with `reuse`, the planners reuse
+/// certified plans ([`planner_core::ReusePolicy::default`]).
 pub fn traffic_sweep(
     cases: u64,
     first_seed: u64,
     duration_s: f64,
     threads: usize,
+    reuse: bool,
 ) -> TrafficReport {
     let t0 = std::time::Instant::now();
     let results = super::par::map_indexed(cases as usize, threads, |i| {
         let seed = first_seed + i as u64;
-        (
-            seed,
-            run_one(
-                random_traffic(seed, 30, duration_s).world(),
-                SolverChoice::Ours,
-                &mut |_| {},
-            ),
-        )
+        let spec = random_traffic(seed, 30, duration_s).world();
+        let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
+        w.set_reuse(reuse.then(planner_core::ReusePolicy::default));
+        (seed, run_world(w, &mut |_| {}))
     });
     let sum = |f: fn(&Summary) -> u64| results.iter().map(|(_, s)| f(s)).sum::<u64>();
     TrafficReport {
@@ -326,6 +330,7 @@ pub fn traffic_sweep(
         fallback_steps: sum(|s| s.fallback_steps),
         yield_steps: sum(|s| s.yield_steps),
         planner_steps: sum(|s| s.planner_steps),
+        reused_steps: sum(|s| s.reused_steps),
         failing_seeds: results
             .iter()
             .filter(|(_, s)| s.collisions + s.invariant_violations > 0)
@@ -371,7 +376,7 @@ impl core::fmt::Display for TrafficReport {
             "Theorem 2: {} random multi-lane cases, {} vehicles in {:.1} s\n  \
              {} collisions, {} invariant violations, {} limit violations\n  \
              {} lane changes; {} of {} vehicles in their target lane at the end\n  \
-             fallback steps {}, yield steps {} of {} planner steps",
+             fallback steps {}, yield steps {}, certified plan reuses {} of {} planner steps",
             self.cases,
             self.vehicles,
             self.wall_seconds,
@@ -383,6 +388,7 @@ impl core::fmt::Display for TrafficReport {
             self.vehicles,
             self.fallback_steps,
             self.yield_steps,
+            self.reused_steps,
             self.planner_steps
         )?;
         if !self.failing_seeds.is_empty() {

@@ -3,7 +3,9 @@
 
 use crate::monitor::{Findings, Limits, Truth};
 use planner_core::planner::Vehicle;
-use planner_core::{CostWeights, FallbackReason, Observation, Params, Planner, Real, StepStatus};
+use planner_core::{
+    CostWeights, FallbackReason, Observation, Params, Planner, Real, ReusePolicy, StepStatus,
+};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -31,6 +33,9 @@ pub struct PlatoonSpec {
     pub seed: u64,
     /// Followers plan in f32 (as on the Cortex-M4F) instead of f64.
     pub f32_planners: bool,
+    /// Followers reuse their certified previous plan ([`ReusePolicy::default`]) instead
+    /// of solving every step.
+    pub reuse: bool,
 }
 
 /// Result of a platoon run.
@@ -50,6 +55,8 @@ pub struct PlatoonOutcome {
     pub fallback_solver: u64,
     /// Of those: the plan failed verification.
     pub fallback_verification: u64,
+    /// Steps that applied the certified previous plan without a solve.
+    pub reused_steps: u64,
 }
 
 /// Horizon of the followers' planners.
@@ -102,7 +109,7 @@ impl Leader {
     }
 }
 
-/// A random platoon spec for case `i` of a Theorem 1 sweep.
+/// A random platoon spec for case `i` of a Theorem 1 sweep (planners solving every step).
 pub fn random_spec(i: u64, seed: u64) -> PlatoonSpec {
     let mut rng = crate::reference::instances::rng(seed.wrapping_mul(1_000_003).wrapping_add(i));
     let profile = match rng.random_range(0..3) {
@@ -116,6 +123,7 @@ pub fn random_spec(i: u64, seed: u64) -> PlatoonSpec {
         profile,
         seed: rng.random(),
         f32_planners: i % 4 == 3,
+        reuse: false,
     }
 }
 
@@ -134,8 +142,17 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     let mut rng = crate::reference::instances::rng(spec.seed);
     let mut cars = initial_platoon(spec, &lim, &mut rng);
     let n = cars.len();
+    let d = ReusePolicy::<f64>::default();
+    let policy = spec.reuse.then(|| ReusePolicy {
+        tolerance: F::from_f64(d.tolerance),
+        max_age: d.max_age,
+    });
     let mut planners: Vec<Planner<F, HORIZON>> = (1..n)
-        .map(|_| Planner::new(params, CostWeights::default()).expect("default weights are valid"))
+        .map(|_| {
+            let mut p = Planner::new(params, CostWeights::default()).expect("valid weights");
+            p.set_reuse(policy).expect("the default policy is valid");
+            p
+        })
         .collect();
     let mut leader = Leader {
         profile: spec.profile,
@@ -152,6 +169,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
         fallback_no_room: 0,
         fallback_solver: 0,
         fallback_verification: 0,
+        reused_steps: 0,
     };
     let steps = (spec.duration_s / lim.h).round() as u64;
     let mut commands = vec![0.0f64; n];
@@ -241,6 +259,9 @@ fn follower_command<F: Real>(
             return (me.v - lim.brake * lim.h).max(0.0);
         }
     };
+    if let StepStatus::Reused { .. } = c.status {
+        out.reused_steps += 1;
+    }
     if let StepStatus::Fallback(why) = c.status {
         out.fallback_steps += 1;
         match why {
@@ -276,6 +297,8 @@ pub struct SweepSummary {
     pub fallback_no_room: u64,
     /// Of those, solver failures or failed verifications.
     pub fallback_solver_or_verification: u64,
+    /// Steps that applied a certified previous plan without a solve (with `--reuse`).
+    pub reused_steps: u64,
     /// Collisions seen by the monitor.
     pub collisions: u64,
     /// Invariant violations seen by the monitor.
@@ -290,38 +313,48 @@ pub struct SweepSummary {
 
 /// Runs `cases` random platoons of a sweep on all cores: (spec, outcome) per case, in
 /// case order.
-pub fn run_cases(cases: u64, seed: u64) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
-    run_range(0, cases, seed)
+/// case order; with `reuse`, the followers reuse certified plans.
+pub fn run_cases(cases: u64, seed: u64, reuse: bool) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
+    run_range(0, cases, seed, reuse)
 }
 
 /// Runs the platoons `first..end` of a sweep on all cores, in case order.
-pub fn run_range(first: u64, end: u64, seed: u64) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
+pub fn run_range(
+    first: u64,
+    end: u64,
+    seed: u64,
+    reuse: bool,
+) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
     super::par::map_indexed(end.saturating_sub(first) as usize, 0, |i| {
-        let spec = random_spec(first + i as u64, seed);
+        let spec = PlatoonSpec {
+            reuse,
+            ..random_spec(first + i as u64, seed)
+        };
         let out = run(&spec);
         (spec, out)
     })
 }
 
 /// Runs `cases` random platoons on all cores and sums up what the monitor saw.
-pub fn sweep(cases: u64, seed: u64) -> SweepSummary {
-    sweep_range(0, cases, seed)
+pub fn sweep(cases: u64, seed: u64, reuse: bool) -> SweepSummary {
+    sweep_range(0, cases, seed, reuse)
 }
 
 /// [`sweep`] over the platoons `first..end` only (a shard).
-pub fn sweep_range(first: u64, end: u64, seed: u64) -> SweepSummary {
+pub fn sweep_range(first: u64, end: u64, seed: u64, reuse: bool) -> SweepSummary {
     let t0 = std::time::Instant::now();
     let mut total = SweepSummary {
         min_gap_m: f64::INFINITY,
         ..Default::default()
     };
-    for (spec, out) in run_range(first, end, seed) {
+    for (spec, out) in run_range(first, end, seed, reuse) {
         total.cases += 1;
         total.vehicles += spec.vehicles as u64;
         total.planner_steps += out.planner_steps;
         total.fallback_steps += out.fallback_steps;
         total.fallback_no_room += out.fallback_no_room;
         total.fallback_solver_or_verification += out.fallback_solver + out.fallback_verification;
+        total.reused_steps += out.reused_steps;
         total.collisions += out.findings.collisions;
         total.invariant_violations += out.findings.invariant_violations;
         total.limit_violations += out.findings.limit_violations;
@@ -337,7 +370,8 @@ impl core::fmt::Display for SweepSummary {
             f,
             "Theorem 1: {} random platoons, {} vehicles, {} planner steps in {:.1} s\n  \
              {} collisions, {} invariant violations, {} limit violations; smallest gap {:.3} m\n  \
-             fallback steps: {} ({} standstills with no room, {} solver or verification)",
+             fallback steps: {} ({} standstills with no room, {} solver or verification); \
+             certified plan reuses: {}",
             self.cases,
             self.vehicles,
             self.planner_steps,
@@ -348,7 +382,8 @@ impl core::fmt::Display for SweepSummary {
             self.min_gap_m,
             self.fallback_steps,
             self.fallback_no_room,
-            self.fallback_solver_or_verification
+            self.fallback_solver_or_verification,
+            self.reused_steps
         )
     }
 }

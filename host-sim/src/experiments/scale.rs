@@ -18,6 +18,7 @@ use crate::world::cost::{StepCosts, StepPercentiles};
 use crate::world::summary::Summary;
 use crate::world::vehicle::Counters;
 use crate::world::{SolverChoice, World, LENGTH_M, START_MARGIN_M};
+use planner_core::ReusePolicy;
 use rand::Rng;
 use serde::Serialize;
 
@@ -75,6 +76,33 @@ pub struct ScaleReport {
     pub yield_steps: u64,
     /// Steps standing with no room (no solve).
     pub waiting_steps: u64,
+    /// The plan-reuse policy of the run (`null`: every step solved).
+    pub reuse: Option<ReuseSettings>,
+    /// Steps that applied the previous plan, certified, without a solve, per planner step.
+    pub reuses_per_step: f64,
+    /// Mean certified bound on the cost given up at a reused step (J(plan) − J* ≤ this).
+    pub certified_gap_per_reuse: f64,
+    /// The planners' closed-loop cost w_v (v − v_ref)² + w_Δ (v − v_prev)², per planner
+    /// step: what reuse gives up, compared across runs.
+    pub tracking_cost_per_step: f64,
+}
+
+/// A [`ReusePolicy`] as reported.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ReuseSettings {
+    /// Certified relative sub-optimality allowed per reused step.
+    pub tolerance: f64,
+    /// Most consecutive steps without a solve.
+    pub max_age: u8,
+}
+
+impl From<ReusePolicy<f64>> for ReuseSettings {
+    fn from(p: ReusePolicy<f64>) -> Self {
+        Self {
+            tolerance: p.tolerance,
+            max_age: p.max_age,
+        }
+    }
 }
 
 /// One road of the scale run: `n` vehicles, a random leader, planner followers.
@@ -179,6 +207,8 @@ pub struct ScaleSettings {
     pub threads: usize,
     /// Seed.
     pub seed: u64,
+    /// Certified plan reuse in every planner (`None`: solve every step, as before).
+    pub reuse: Option<ReusePolicy<f64>>,
 }
 
 /// One road's world run to its end: its summary, counters and step costs.
@@ -188,6 +218,7 @@ fn run_road(s: &ScaleSettings, r: usize, n: usize) -> (Summary, Counters, StepCo
         Kind::Traffic => traffic_road(r, n, s.duration_s, s.seed),
     };
     let mut sim = World::<20>::new(road.world(), SolverChoice::Ours, None);
+    sim.set_reuse(s.reuse);
     sim.measure_step_costs();
     while !sim.finished() {
         if sim.step(&mut |_| {}).is_err() {
@@ -239,6 +270,10 @@ pub fn run(s: &ScaleSettings) -> ScaleReport {
         lane_changes: sum(|s| s.lane_changes.changes as u64),
         yield_steps: counters.yield_steps,
         waiting_steps: counters.waiting_steps,
+        reuse: s.reuse.map(ReuseSettings::from),
+        reuses_per_step: per_step(counters.reused_steps),
+        certified_gap_per_reuse: counters.certified_gap / counters.reused_steps.max(1) as f64,
+        tracking_cost_per_step: counters.tracking_cost / steps.max(1) as f64,
     }
 }
 
@@ -248,7 +283,8 @@ impl core::fmt::Display for ScaleReport {
             f,
             "{} vehicles on {} roads ({:?}), {} threads: {:.1} s simulated in {:.2} s = {:.2}x real time, \
              {:.0} planner steps/s\n  step p50 {:.1} µs, p90 {:.1} µs, p99 {:.1} µs, max {:.0} µs; \
-             {:.2} solves, {:.1} solver iterations, {:.1} lateral iterations per step; {} lane changes\n  \
+             {:.2} solves, {:.2} reuses, {:.1} solver iterations, {:.1} lateral iterations per step; {} lane changes\n  \
+             closed-loop cost {:.4} per step; certified gap {:.2e} per reuse\n  \
              {} collisions, {} invariant violations, {} limit violations, {} fallback steps",
             self.vehicles,
             self.roads,
@@ -263,13 +299,77 @@ impl core::fmt::Display for ScaleReport {
             self.step.p99_us,
             self.step.max_us,
             self.solves_per_step,
+            self.reuses_per_step,
             self.solver_iterations_per_step,
             self.lateral_iterations_per_step,
             self.lane_changes,
+            self.tracking_cost_per_step,
+            self.certified_gap_per_reuse,
             self.collisions,
             self.invariant_violations,
             self.limit_violations,
             self.fallback_steps
+        )
+    }
+}
+
+/// `scale --compare`: one world run twice in one process — solving every step (today's
+/// planner) and with certified plan reuse — and the ratios of the second to the first.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScaleComparison {
+    /// Every step solved.
+    pub baseline: ScaleReport,
+    /// With the reuse policy.
+    pub reuse: ScaleReport,
+    /// reuse.planner_steps_per_second / baseline.planner_steps_per_second.
+    pub speedup: f64,
+    /// reuse.solver_iterations_per_step / baseline.solver_iterations_per_step.
+    pub iterations_ratio: f64,
+    /// (reuse.tracking_cost_per_step − baseline's) / baseline's: the closed-loop cost
+    /// given up (negative: none).
+    pub tracking_cost_change: f64,
+}
+
+/// Runs `base` without and then with `policy`, on the same roads and seed.
+pub fn compare(base: &ScaleSettings, policy: ReusePolicy<f64>) -> ScaleComparison {
+    let baseline = run(&ScaleSettings {
+        reuse: None,
+        ..*base
+    });
+    let reuse = run(&ScaleSettings {
+        reuse: Some(policy),
+        ..*base
+    });
+    let ratio = |a: f64, b: f64| a / b.max(f64::MIN_POSITIVE);
+    ScaleComparison {
+        speedup: ratio(
+            reuse.planner_steps_per_second,
+            baseline.planner_steps_per_second,
+        ),
+        iterations_ratio: ratio(
+            reuse.solver_iterations_per_step,
+            baseline.solver_iterations_per_step,
+        ),
+        tracking_cost_change: ratio(
+            reuse.tracking_cost_per_step - baseline.tracking_cost_per_step,
+            baseline.tracking_cost_per_step,
+        ),
+        baseline,
+        reuse,
+    }
+}
+
+impl core::fmt::Display for ScaleComparison {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        writeln!(f, "solving every step:\n  {}", self.baseline)?;
+        writeln!(f, "certified plan reuse:\n  {}", self.reuse)?;
+        write!(
+            f,
+            "reuse / every step: {:.2}x planner steps/s, {:.2}x solver iterations per step, \
+             closed-loop cost {:+.3} %",
+            self.speedup,
+            self.iterations_ratio,
+            100.0 * self.tracking_cost_change
         )
     }
 }

@@ -571,6 +571,7 @@ impl<const N: usize> Harness<N> {
             notify: self.lim.h,
             resolution: RESOLUTION,
             sensing: self.spec.sensing,
+            reuse: None,
         }
     }
 

@@ -3,7 +3,9 @@
 use super::clarabel::{conic_data, ClarabelSolver, PersistentClarabel};
 use super::instances::{random_instances, rng};
 use planner_core::planner::free_road_gap;
-use planner_core::{CostWeights, IpmSolver, MpcSolver, Params, Real, SingleLaneProblem};
+use planner_core::{
+    CostWeights, IpmSolver, MpcSolver, Params, Real, ReusePolicy, SingleLaneProblem,
+};
 use rand::Rng;
 use serde::Serialize;
 use std::time::Instant;
@@ -52,6 +54,8 @@ pub struct BenchResult {
 pub struct BenchReport {
     /// Rows: N = 20 and 50, cold and warm.
     pub results: Vec<BenchResult>,
+    /// The warm drive solving every step against certified plan reuse, N = 20 and 50.
+    pub reuse: Vec<super::reuse::ReuseRow>,
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -283,5 +287,7 @@ pub fn run(problems: usize, seed: u64, reps: usize) -> BenchReport {
             cold::<50>(problems, seed, reps),
             warm::<50>(problems, seed, reps),
         ],
+        // A longer drive than the solver rows': reuse pays off over many steps.
+        reuse: super::reuse::run(problems.max(1) * 10, seed, ReusePolicy::default()),
     }
 }

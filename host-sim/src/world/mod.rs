@@ -35,7 +35,10 @@ use crate::monitor::Limits;
 use crate::reference::ClarabelSolver;
 use junction::ManagerNode;
 use network::{Network, Place};
-use planner_core::{IpmSolver, MpcSolver, Sensing, SingleLaneProblem, Solution, SolveError};
+use planner_core::reuse::Duals;
+use planner_core::{
+    IpmSolver, MpcSolver, ReusePolicy, Sensing, SingleLaneProblem, Solution, SolveError,
+};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use spawn::Stream;
@@ -96,6 +99,15 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// Driving on a verified plan: changing lanes or not.
+    pub fn moving(changing: bool) -> Self {
+        if changing {
+            Self::LaneChange
+        } else {
+            Self::Cruise
+        }
+    }
+
     /// The name used in traces.
     pub fn as_str(self) -> &'static str {
         match self {
@@ -138,6 +150,20 @@ impl<const N: usize> MpcSolver<f64, N> for AnySolver<N> {
         match self {
             Self::Ours(s) => s.solve(problem, warm),
             Self::Clarabel(s) => MpcSolver::<f64, N>::solve(s, problem, warm),
+        }
+    }
+
+    fn duals(&self) -> Option<Duals<f64, N>> {
+        match self {
+            Self::Ours(s) => s.duals(),
+            // Clarabel's duals are not kept: its planners solve every step.
+            Self::Clarabel(_) => None,
+        }
+    }
+
+    fn advance(&mut self) {
+        if let Self::Ours(s) = self {
+            s.advance();
         }
     }
 }
@@ -299,6 +325,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             notify: spec.faults.notify_bound(lim.h),
             resolution: (0.0, 0.0),
             sensing: spec.sensing,
+            reuse: None,
         };
         let net = spec.network.clone();
         let vehicles = spec
@@ -346,6 +373,15 @@ impl<const N: usize, B: Bus> World<N, B> {
             messages_sent: 0,
             solver,
             seed,
+        }
+    }
+
+    /// Lets every multi-lane planner built from now on reuse its certified previous plan
+    /// instead of solving (`None`: solve every step, the default).
+    pub fn set_reuse(&mut self, policy: Option<ReusePolicy<f64>>) {
+        self.setup.reuse = policy;
+        for v in &mut self.vehicles {
+            step::set_setup(v, self.setup);
         }
     }
 

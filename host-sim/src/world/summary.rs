@@ -85,6 +85,9 @@ pub struct Summary {
     pub planner_steps: u64,
     /// Mean interior-point iterations of the planner steps that solved.
     pub solver_iterations_mean: f64,
+    /// Planner steps that applied a certified previous plan without a solve (only with
+    /// plan reuse on).
+    pub reused_steps: u64,
     /// Every goal met: every goal x reached by the deadline, every planner-driven vehicle
     /// in its target lane, every vehicle through its junctions (when the world has any
     /// and no arrivals), and no deadlock.
@@ -256,6 +259,7 @@ pub fn summarize<'v, const N: usize>(
         lateral_iterations_total: c.lateral_iterations,
         planner_steps: c.planner_steps,
         solver_iterations_mean: c.solver_iterations as f64 / c.solved_steps.max(1) as f64,
+        reused_steps: c.reused_steps,
         // An open world is never empty of vehicles under way: there, every vehicle that
         // is due (see `World::due`) must have met its goals.
         completed: reached.len() == with_goal.len()

@@ -23,7 +23,7 @@ use planner_core::intersection::Movement;
 use planner_core::lane_change::LaneEvent;
 use planner_core::{
     CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, Other, Params,
-    ParamsSpec, Planner, Pose, Road, Sensing, StepStatus, VehicleState,
+    ParamsSpec, Planner, Pose, ReusePolicy, Road, Sensing, StepStatus, VehicleState,
 };
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -68,6 +68,8 @@ pub struct PlannerSetup {
     pub resolution: (f64, f64),
     /// Onboard sensors, if any.
     pub sensing: Option<Sensing<f64>>,
+    /// Certified plan reuse in the multi-lane planners, if any (`None`: solve every step).
+    pub reuse: Option<ReusePolicy<f64>>,
 }
 
 /// The planners of a planner-driven vehicle and what it heard.
@@ -290,7 +292,7 @@ pub struct StepCtx<'a> {
 }
 
 /// Per-step counters, summed over vehicles (and over tasks, in a fleet).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Counters {
     /// Certified-fallback steps (not standstill, not yield).
     pub fallback_steps: u64,
@@ -306,6 +308,15 @@ pub struct Counters {
     pub solved_steps: u64,
     /// Solver iterations of those.
     pub solver_iterations: u64,
+    /// Planner steps that applied the previous plan, certified, without solving
+    /// ([`planner_core::reuse`]; only with a reuse policy).
+    pub reused_steps: u64,
+    /// Sum of those steps' certified bounds on J(plan) − J*: the cost given up, at most.
+    pub certified_gap: f64,
+    /// The multi-lane planners' closed-loop cost: Σ over their steps of
+    /// w_v (v − v_ref)² + w_Δ (v − v_prev)² with the default weights, for comparing runs
+    /// with and without plan reuse.
+    pub tracking_cost: f64,
     /// Messages a view rejected.
     pub rejected: u64,
     /// Of those, states and reports refused as physically implausible.
@@ -326,6 +337,9 @@ impl Counters {
         self.planner_steps += o.planner_steps;
         self.solved_steps += o.solved_steps;
         self.solver_iterations += o.solver_iterations;
+        self.reused_steps += o.reused_steps;
+        self.certified_gap += o.certified_gap;
+        self.tracking_cost += o.tracking_cost;
         self.rejected += o.rejected;
         self.implausible += o.implausible;
         self.lies_heard += o.lies_heard;
@@ -366,6 +380,7 @@ impl<const N: usize> Brain<N> {
         let (pos, speed) = self.setup.resolution;
         let _ = p.set_bus_resolution(pos, speed);
         let _ = p.set_sensing(self.setup.sensing);
+        let _ = p.set_reuse(self.setup.reuse);
         Box::new(p)
     }
 
@@ -719,6 +734,7 @@ impl<const N: usize> Vehicle<N> {
                     self.log.in_target_at.get_or_insert(ctx.t);
                 }
                 counters.lateral_iterations += u64::from(c.lateral_iterations);
+                counters.tracking_cost += tracking_cost(c.v, obs.v_prev, obs.v_ref);
                 self.mode = mode_of(c.status, c.alpha.is_some(), counters, ctx.t, self.id);
                 self.last_status = Some(c.status);
                 (c.v, c.omega)
@@ -801,6 +817,8 @@ impl<const N: usize> Vehicle<N> {
                         counters.solver_iterations += u64::from(iterations);
                         (cmd.v, None)
                     }
+                    // The crossing planners solve every step (no reuse policy is set).
+                    StepStatus::Reused { .. } => (cmd.v, None),
                     StepStatus::Fallback(FallbackReason::NoRoom) => {
                         counters.waiting_steps += 1;
                         (cmd.v, Some(FallbackReason::NoRoom))
@@ -962,6 +980,13 @@ impl<const N: usize> Vehicle<N> {
     }
 }
 
+/// One step's share of the closed-loop cost with the default weights (see
+/// [`Counters::tracking_cost`]).
+fn tracking_cost(v: f64, v_prev: f64, v_ref: f64) -> f64 {
+    let w = CostWeights::<f64>::default();
+    w.reference_speed * (v - v_ref).powi(2) + w.smoothness * (v - v_prev).powi(2)
+}
+
 /// The mode of a multi-lane step, counting it.
 fn mode_of(
     status: StepStatus<f64>,
@@ -974,11 +999,12 @@ fn mode_of(
         StepStatus::Solved { iterations } => {
             counters.solved_steps += 1;
             counters.solver_iterations += u64::from(iterations);
-            if changing {
-                Mode::LaneChange
-            } else {
-                Mode::Cruise
-            }
+            Mode::moving(changing)
+        }
+        StepStatus::Reused { certified_gap, .. } => {
+            counters.reused_steps += 1;
+            counters.certified_gap += certified_gap;
+            Mode::moving(changing)
         }
         StepStatus::Fallback(FallbackReason::NoRoom) => {
             counters.waiting_steps += 1;
