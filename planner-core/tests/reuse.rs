@@ -19,13 +19,6 @@ fn p() -> Params<f64> {
     Params::table_i()
 }
 
-fn weights(w_x: f64) -> CostWeights<f64> {
-    CostWeights {
-        target_position: w_x,
-        ..CostWeights::default()
-    }
-}
-
 fn problem(
     v: f64,
     gap: f64,
@@ -33,17 +26,38 @@ fn problem(
     w_x: f64,
     target: f64,
 ) -> Option<SingleLaneProblem<f64, N>> {
+    let w = CostWeights {
+        target_position: w_x,
+        ..CostWeights::default()
+    };
+    weighted(v, gap, v_ref, w, target)
+}
+
+fn weighted(
+    v: f64,
+    gap: f64,
+    v_ref: f64,
+    w: CostWeights<f64>,
+    target: f64,
+) -> Option<SingleLaneProblem<f64, N>> {
     let gap = gap.min(free_road_gap(&p(), N));
-    SingleLaneProblem::new(
-        &p(),
-        v,
-        gap,
-        f64::SAFETY_MARGIN_M,
-        weights(w_x),
-        target,
-        v_ref,
+    SingleLaneProblem::new(&p(), v, gap, f64::SAFETY_MARGIN_M, w, target, v_ref).ok()
+}
+
+/// Cost weights with each term's weight apart from 1, so that a term's factor shows.
+fn weight_choices() -> impl Strategy<Value = CostWeights<f64>> {
+    (
+        prop::sample::select(vec![0.0, 1e-3, 0.3]),
+        prop::sample::select(vec![0.4, 1.0, 2.5]),
+        prop::sample::select(vec![0.0, 3.0, 10.0]),
     )
-    .ok()
+        .prop_map(
+            |(target_position, reference_speed, smoothness)| CostWeights {
+                target_position,
+                reference_speed,
+                smoothness,
+            },
+        )
 }
 
 fn duals(a: [[f64; N]; 5]) -> Duals<f64, N> {
@@ -69,12 +83,12 @@ proptest! {
     #[test]
     fn the_dual_bound_is_a_lower_bound_from_anywhere(
         v in 0.0f64..27.8, extra in 0.0f64..150.0, v_ref in 0.0f64..27.8,
-        w_x in prop::sample::select(vec![0.0, 1e-3, 0.3]), target in 0.0f64..80.0,
+        w in weight_choices(), target in 0.0f64..80.0,
         lam in prop::array::uniform5(prop::array::uniform20(0.0f64..5.0)),
         a in prop::array::uniform20(0.0f64..27.8), b in prop::array::uniform20(0.0f64..27.8),
     ) {
         let gap = planner_core::safety::d_s(&p(), v) + 0.05 + extra;
-        let Some(pr) = problem(v, gap, v_ref, w_x, target) else { return Ok(()) };
+        let Some(pr) = weighted(v, gap, v_ref, w, target) else { return Ok(()) };
         let Ok(sol) = IpmSolver::<f64, N>::default().solve(&pr, None) else { return Ok(()) };
         let d = duals(lam);
         let qa = dual_bound(&pr, &d, &a).unwrap();
@@ -92,10 +106,10 @@ proptest! {
     #[test]
     fn the_dual_bound_is_tight_at_the_optimum(
         v in 0.0f64..27.8, extra in 0.0f64..150.0, v_ref in 0.0f64..27.8,
-        w_x in prop::sample::select(vec![0.0, 1e-3, 0.3]), target in 0.0f64..80.0,
+        w in weight_choices(), target in 0.0f64..80.0,
     ) {
         let gap = planner_core::safety::d_s(&p(), v) + 0.05 + extra;
-        let Some(pr) = problem(v, gap, v_ref, w_x, target) else { return Ok(()) };
+        let Some(pr) = weighted(v, gap, v_ref, w, target) else { return Ok(()) };
         let mut s = IpmSolver::<f64, N>::default();
         let Ok(sol) = s.solve(&pr, None) else { return Ok(()) };
         let d = s.duals().expect("a successful solve leaves its duals");
