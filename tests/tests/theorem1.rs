@@ -8,14 +8,10 @@
 //! `THEOREM1_CASES` sets the number of cases (default 200; README gives the 10,000 run),
 //! `THEOREM1_REUSE_CASES` those of the reuse sweep (default 60).
 
-use host_sim::experiments::platoon::run_cases;
+mod common;
 
-fn env(key: &str, default: u64) -> u64 {
-    std::env::var(key)
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(default)
-}
+use common::env;
+use host_sim::experiments::platoon::run_cases;
 
 /// Runs the sweep and requires nothing unsafe; returns the steps that reused a plan.
 fn sweep(cases: u64, reuse: bool) -> u64 {

@@ -8,14 +8,10 @@
 //! `host-sim traffic --cases 5000 --json`); `THEOREM2_REUSE_CASES` those of the sweep
 //! with certified plan reuse (issue 19 §1; default 30), which must see nothing either.
 
-use host_sim::experiments::multilane::traffic_sweep;
+mod common;
 
-fn env(key: &str, default: u64) -> u64 {
-    std::env::var(key)
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(default)
-}
+use common::env;
+use host_sim::experiments::multilane::traffic_sweep;
 
 /// Runs the sweep and requires nothing unsafe and lane changes; returns reused steps.
 fn sweep(cases: u64, reuse: bool) -> u64 {
