@@ -35,6 +35,15 @@ pub struct CostWeights<F> {
     pub smoothness: F,
 }
 
+impl<F: Real> CostWeights<F> {
+    /// One step's term of J without the target term: w_v (v − v_ref)² + w_Δ (v − v_prev)²
+    /// (also what a closed loop pays per applied speed).
+    #[inline]
+    pub fn stage_cost(&self, v: F, v_prev: F, v_ref: F) -> F {
+        self.reference_speed * (v - v_ref).sq() + self.smoothness * (v - v_prev).sq()
+    }
+}
+
 impl<F: Real> Default for CostWeights<F> {
     /// Track the reference speed, with gentle smoothing; no target position.
     fn default() -> Self {
@@ -196,7 +205,7 @@ impl<F: Real, const N: usize> SingleLaneProblem<F, N> {
         let mut j = F::ZERO;
         for &vk in v.iter() {
             pos += vk * self.h;
-            j += w.reference_speed * (vk - self.v_ref).sq() + w.smoothness * (vk - prev).sq();
+            j += w.stage_cost(vk, prev, self.v_ref);
             prev = vk;
         }
         j + w.target_position * (self.target - pos).sq()

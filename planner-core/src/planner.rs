@@ -380,8 +380,10 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         let age = self.age.filter(|&a| a < policy.max_age && self.have_plan)?;
         let plan = verify(&self.params, problem, shifted(&self.plan)).ok()?;
         let duals = self.solver.duals()?.shifted(1);
-        let certified_gap = reuse::certified_gap(problem, &duals, &plan)?;
-        let allowed = policy.tolerance * (F::ONE + problem.objective(&plan).abs());
+        // J once: the certificate J − q(λ) and the tolerance's scale both need it.
+        let j = problem.objective(&plan);
+        let certified_gap = j - reuse::dual_bound(problem, &duals, &plan)?;
+        let allowed = policy.tolerance * (F::ONE + j.abs());
         if !(certified_gap <= allowed) {
             return None;
         }

@@ -142,11 +142,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     let mut rng = crate::reference::instances::rng(spec.seed);
     let mut cars = initial_platoon(spec, &lim, &mut rng);
     let n = cars.len();
-    let d = ReusePolicy::<f64>::default();
-    let policy = spec.reuse.then(|| ReusePolicy {
-        tolerance: F::from_f64(d.tolerance),
-        max_age: d.max_age,
-    });
+    let policy = spec.reuse.then(ReusePolicy::<F>::default);
     let mut planners: Vec<Planner<F, HORIZON>> = (1..n)
         .map(|_| {
             let mut p = Planner::new(params, CostWeights::default()).expect("valid weights");

@@ -5,7 +5,9 @@
 
 use super::instances::rng;
 use planner_core::planner::free_road_gap;
-use planner_core::{CostWeights, Params, Planner, ReusePolicy, StepStatus};
+use planner_core::{
+    CostWeights, Params, Planner, Real, ReusePolicy, SingleLaneProblem, StepStatus,
+};
 use rand::Rng;
 use serde::Serialize;
 use std::time::Instant;
@@ -80,31 +82,31 @@ fn drive<const N: usize>(steps: usize, seed: u64, policy: Option<ReusePolicy<f64
             StepStatus::Solved { iterations } => d.iterations += u64::from(iterations),
             StepStatus::Reused { certified_gap, .. } => {
                 d.reused += 1;
-                let j = planner
-                    .plan()
-                    .map_or(0.0, |plan| objective(w, v, plan, p.v_max()));
+                // J of the applied plan on the step's own problem, as the planner scored it.
+                let pr = SingleLaneProblem::<f64, N>::new(
+                    &p,
+                    v,
+                    gap,
+                    f64::SAFETY_MARGIN_M,
+                    w,
+                    0.0,
+                    p.v_max(),
+                );
+                let j = match (pr, planner.plan()) {
+                    (Ok(pr), Some(plan)) => pr.objective(plan),
+                    _ => 0.0,
+                };
                 d.max_gap = d.max_gap.max(certified_gap / (1.0 + j.abs()));
             }
             StepStatus::Fallback(_) => {}
         }
-        d.cost += w.reference_speed * (c.v - p.v_max()).powi(2) + w.smoothness * (c.v - v).powi(2);
+        d.cost += w.stage_cost(c.v, v, p.v_max());
         v = c.v;
         x += v * p.h();
         vl = (vl + accel * p.h()).clamp(0.0, p.v_max());
         xl += vl * p.h();
     }
     d
-}
-
-/// J of `plan` from speed `v` (the problem's own objective, without building it).
-fn objective<const N: usize>(w: CostWeights<f64>, v: f64, plan: &[f64; N], v_ref: f64) -> f64 {
-    let mut prev = v;
-    let mut j = 0.0;
-    for &vk in plan {
-        j += w.reference_speed * (vk - v_ref).powi(2) + w.smoothness * (vk - prev).powi(2);
-        prev = vk;
-    }
-    j
 }
 
 /// The drive of `steps` steps at horizon N, solving every step and with `policy`.

@@ -380,6 +380,12 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// instead of solving (`None`: solve every step, the default).
     pub fn set_reuse(&mut self, policy: Option<ReusePolicy<f64>>) {
         self.setup.reuse = policy;
+        self.give_setup();
+    }
+
+    /// Gives every vehicle's brain the world's planner setup (for planners built from
+    /// now on).
+    fn give_setup(&mut self) {
         for v in &mut self.vehicles {
             step::set_setup(v, self.setup);
         }
@@ -393,9 +399,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             return Err(format!("bus resolution {resolution:?}"));
         }
         self.setup.resolution = resolution;
-        for v in &mut self.vehicles {
-            step::set_setup(v, self.setup);
-        }
+        self.give_setup();
         for m in &mut self.managers {
             m.set_position_resolution(resolution.0)
                 .map_err(|e| format!("{e:?}"))?;

@@ -734,7 +734,8 @@ impl<const N: usize> Vehicle<N> {
                     self.log.in_target_at.get_or_insert(ctx.t);
                 }
                 counters.lateral_iterations += u64::from(c.lateral_iterations);
-                counters.tracking_cost += tracking_cost(c.v, obs.v_prev, obs.v_ref);
+                counters.tracking_cost +=
+                    CostWeights::default().stage_cost(c.v, obs.v_prev, obs.v_ref);
                 self.mode = mode_of(c.status, c.alpha.is_some(), counters, ctx.t, self.id);
                 self.last_status = Some(c.status);
                 (c.v, c.omega)
@@ -978,13 +979,6 @@ impl<const N: usize> Vehicle<N> {
             }
         }
     }
-}
-
-/// One step's share of the closed-loop cost with the default weights (see
-/// [`Counters::tracking_cost`]).
-fn tracking_cost(v: f64, v_prev: f64, v_ref: f64) -> f64 {
-    let w = CostWeights::<f64>::default();
-    w.reference_speed * (v - v_ref).powi(2) + w.smoothness * (v - v_prev).powi(2)
 }
 
 /// The mode of a multi-lane step, counting it.
