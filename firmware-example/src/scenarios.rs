@@ -11,8 +11,8 @@
 use can_gateway::{encode, Frames, Message, PlainFrame, Reassembler};
 use embedded_can::{nb::Can, ErrorKind};
 use planner_core::{
-    CostWeights, FallbackReason, LaneEvent, LaneObservation, LanePlanner, Observation, Params,
-    Planner, Pose, Road, StepStatus, VehicleState, WorldView,
+    FallbackReason, LaneEvent, LaneObservation, LanePlanner, Observation, Planner, Pose, Road,
+    StepStatus, VehicleState, WorldView,
 };
 
 /// Steps of the approach.
@@ -100,12 +100,13 @@ impl Can for LoopbackCan {
 
 /// (1) A stopped car (id 1) 60 m ahead broadcasts its state every period over CAN; the
 /// ego (id 2) starts at 15 m/s and knows it only from the frames it receives.
+#[inline(never)]
 pub fn approach<const N: usize>(
+    planner: &mut Planner<f32, N>,
     now: &mut impl FnMut() -> u32,
     emit: &mut impl FnMut(&StepRecord),
 ) -> Option<Approach> {
-    let params = Params::<f32>::table_i();
-    let mut planner = Planner::<f32, N>::new(params, CostWeights::default()).ok()?;
+    let params = *planner.params();
     let mut can = LoopbackCan {
         fifo: heapless::Deque::new(),
     };
@@ -201,12 +202,13 @@ pub fn approach<const N: usize>(
 }
 
 /// (2) A lane change from lane 0 to lane 1 at 15 m/s on an empty two-lane road.
+#[inline(never)]
 pub fn lane_change<const N: usize>(
+    lp: &mut LanePlanner<f32, N>,
     now: &mut impl FnMut() -> u32,
     emit: &mut impl FnMut(&StepRecord),
 ) -> Option<LaneChange> {
-    let params = Params::<f32>::table_i();
-    let mut lp = LanePlanner::<f32, N>::new(params, CostWeights::default(), 0).ok()?;
+    let params = *lp.params();
     let road = Road {
         lanes: 2,
         lane_width: 3.6,

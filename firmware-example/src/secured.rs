@@ -111,6 +111,7 @@ fn timed<Fr: Frame>(
 
 /// Signs, sends and verifies [`MESSAGES`] states as classic CAN (`fd` false) or CAN FD,
 /// timing each verification with `now` (ticks) into `record(i, ticks)`.
+#[inline(never)]
 pub fn run(fd: bool, now: &mut dyn FnMut() -> u32, record: &mut dyn FnMut(usize, u32)) -> Verified {
     let key = Key(KEY);
     let mut r = Receiver::new();

@@ -21,14 +21,21 @@ pub struct Penta<F, const N: usize> {
     pub dinv: [F; N],
 }
 
-impl<F: Real, const N: usize> Default for Penta<F, N> {
-    fn default() -> Self {
+impl<F: Real, const N: usize> Penta<F, N> {
+    /// All zeros (a `const`, so that a solver holding it can be built at compile time).
+    pub const fn zeros() -> Self {
         Self {
             d: [F::ZERO; N],
             e1: [F::ZERO; N],
             e2: [F::ZERO; N],
             dinv: [F::ZERO; N],
         }
+    }
+}
+
+impl<F: Real, const N: usize> Default for Penta<F, N> {
+    fn default() -> Self {
+        Self::zeros()
     }
 }
 

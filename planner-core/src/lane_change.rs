@@ -18,7 +18,7 @@
 
 use crate::free_space::{FreeSpace, D_TURN_M};
 use crate::lanes::{in_front_set, in_yield_set, may_occupy, Band, Key, Other, Road};
-use crate::lateral::{solve_lateral, LateralInput, LateralWeights};
+use crate::lateral::{solve_lateral_in, LateralInput, LateralWeights, LateralWork};
 use crate::mpc::CostWeights;
 use crate::params::Params;
 use crate::planner::{
@@ -267,12 +267,62 @@ pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     steps: u32,
     omega_plan: [F; N],
     reference: Option<Reference<F>>,
+    /// The lateral QP's storage, here rather than on the stack (issue 19 §4).
+    lateral: LateralWork<F>,
 }
 
 impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
     /// A planner in `lane` using our interior-point solver.
     pub fn new(params: Params<F>, weights: CostWeights<F>, lane: u8) -> Result<Self, ConfigError> {
         Self::with_solver(params, weights, IpmSolver::default(), lane)
+    }
+
+    /// The placeholder a [`crate::slot::LanePlannerSlot`] holds before its `init` (all
+    /// zeros, parameters not valid, never stepped).
+    pub(crate) const fn unset() -> Self {
+        Self {
+            speed: Planner::unset(),
+            lateral_weights: LateralWeights {
+                position: F::ZERO,
+                heading: F::ZERO,
+                rate: F::ZERO,
+                rate_change: F::ZERO,
+            },
+            lane: 0,
+            alpha: None,
+            beta: None,
+            beta_steps: 0,
+            notify: F::ZERO,
+            resolution: Resolution::EXACT,
+            sensing: None,
+            steps: 0,
+            omega_plan: [F::ZERO; N],
+            reference: None,
+            lateral: LateralWork::new(),
+        }
+    }
+
+    /// Makes this planner what [`LanePlanner::new`] would build, in place (no temporary
+    /// of the planner's size). Invalid weights are refused and change nothing.
+    pub(crate) fn rebuild(
+        &mut self,
+        params: Params<F>,
+        weights: CostWeights<F>,
+        lane: u8,
+    ) -> Result<(), ConfigError> {
+        self.speed.rebuild(params, weights)?;
+        self.lateral_weights = LateralWeights::default();
+        self.lane = lane;
+        self.alpha = None;
+        self.beta = None;
+        self.beta_steps = 0;
+        self.notify = params.h();
+        self.resolution = Resolution::EXACT;
+        self.sensing = None;
+        self.steps = 0;
+        self.omega_plan.fill(F::ZERO);
+        self.reference = None;
+        Ok(())
     }
 }
 
@@ -297,6 +347,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             steps: 0,
             omega_plan: [F::ZERO; N],
             reference: None,
+            lateral: LateralWork::new(),
         })
     }
 
@@ -905,61 +956,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             Some(v) => *v,
             None => return Ok(self.fallback(obs, FallbackReason::Lateral, d_h, event)),
         };
-        let mut lateral_iterations = 0;
-        let omega = match fs {
-            None => [F::ZERO; N],
-            Some(fs) => {
-                let mut y_ref = [F::ZERO; N];
-                let mut th_ref = [F::ZERO; N];
-                let mut lo = [F::ZERO; N];
-                let mut hi = [F::ZERO; N];
-                let mut x = obs.pose.x;
-                for (k, &vk) in v_plan.iter().enumerate() {
-                    x += vk * p.h();
-                    let (y, th) = match self.reference {
-                        Some(r) => r.at(x),
-                        None => (centre, F::ZERO),
-                    };
-                    let (l, u) = fs.omega_bounds(vk);
-                    if let (Some(a), Some(b), Some(c), Some(d)) = (
-                        y_ref.get_mut(k),
-                        th_ref.get_mut(k),
-                        lo.get_mut(k),
-                        hi.get_mut(k),
-                    ) {
-                        *a = y;
-                        *b = th;
-                        *c = l;
-                        *d = u;
-                    }
-                }
-                let nominal = crate::planner::shifted(&self.omega_plan);
-                let tm = F::from_f64(HEADING_MARGIN_RAD);
-                let input = LateralInput {
-                    h: p.h(),
-                    y: obs.pose.y,
-                    theta: obs.pose.theta,
-                    omega_prev: obs.omega_prev,
-                    v: &v_plan,
-                    omega_nominal: &nominal,
-                    y_ref: &y_ref,
-                    theta_ref: &th_ref,
-                    omega_lo: &lo,
-                    omega_hi: &hi,
-                    theta_bounds: (p.theta_min() + tm, p.theta_max() - tm),
-                    band: qp_band(&p, obs.pose, lanes),
-                    half_length: F::HALF * p.length(),
-                    half_width: F::HALF * p.width(),
-                    weights: self.lateral_weights,
-                };
-                match solve_lateral(&input) {
-                    Ok((w, it)) => {
-                        lateral_iterations = it;
-                        clamp_to_omega(&fs, &v_plan, w)
-                    }
-                    Err(_) => straightening_plan(&p, obs.pose.theta, &v_plan),
-                }
-            }
+        let (omega, lateral_iterations) = match fs {
+            None => ([F::ZERO; N], 0),
+            Some(fs) => self.plan_lateral(obs, &fs, &v_plan, lanes),
         };
         let accept = |w: &[F; N]| {
             verify_lateral(&p, obs.pose, &v_plan, w, lanes) && self.entering_ok(obs, &v_plan, w)
@@ -990,6 +989,70 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             gap: d_h,
             lateral_iterations,
         })
+    }
+
+    /// The yaw rates for the speed plan `v_plan`: the lateral QP about the previous plan,
+    /// clamped into Ω^k_t (31), or the straightening plan if the QP has no answer; and the
+    /// QP's iterations. Not inlined into [`LanePlanner::step`]: its references and the
+    /// QP then take stack only while the lateral part runs, not beside the speed solve
+    /// (issue 19 §4).
+    #[inline(never)]
+    fn plan_lateral(
+        &mut self,
+        obs: &LaneObservation<'_, F>,
+        fs: &FreeSpace<F>,
+        v_plan: &[F; N],
+        lanes: Band<F>,
+    ) -> ([F; N], u32) {
+        let p = *self.params();
+        let centre = obs.road.lane_centre(self.lane);
+        let mut y_ref = [F::ZERO; N];
+        let mut th_ref = [F::ZERO; N];
+        let mut lo = [F::ZERO; N];
+        let mut hi = [F::ZERO; N];
+        let mut x = obs.pose.x;
+        for (k, &vk) in v_plan.iter().enumerate() {
+            x += vk * p.h();
+            let (y, th) = match self.reference {
+                Some(r) => r.at(x),
+                None => (centre, F::ZERO),
+            };
+            let (l, u) = fs.omega_bounds(vk);
+            if let (Some(a), Some(b), Some(c), Some(d)) = (
+                y_ref.get_mut(k),
+                th_ref.get_mut(k),
+                lo.get_mut(k),
+                hi.get_mut(k),
+            ) {
+                *a = y;
+                *b = th;
+                *c = l;
+                *d = u;
+            }
+        }
+        let nominal = crate::planner::shifted(&self.omega_plan);
+        let tm = F::from_f64(HEADING_MARGIN_RAD);
+        let input = LateralInput {
+            h: p.h(),
+            y: obs.pose.y,
+            theta: obs.pose.theta,
+            omega_prev: obs.omega_prev,
+            v: v_plan,
+            omega_nominal: &nominal,
+            y_ref: &y_ref,
+            theta_ref: &th_ref,
+            omega_lo: &lo,
+            omega_hi: &hi,
+            theta_bounds: (p.theta_min() + tm, p.theta_max() - tm),
+            band: qp_band(&p, obs.pose, lanes),
+            half_length: F::HALF * p.length(),
+            half_width: F::HALF * p.width(),
+            weights: self.lateral_weights,
+        };
+        match solve_lateral_in(&mut self.lateral, &input) {
+            Ok((w, it)) => (clamp_to_omega(fs, v_plan, w), it),
+            Err(_) => (straightening_plan(&p, obs.pose.theta, v_plan), 0),
+        }
     }
 
     /// The entry check ([`LanePlanner::entry_ok`]) for a plan: while a change into m has
@@ -1111,11 +1174,38 @@ fn first_overlap<F: Real>(p: &Params<F>, pose: Pose<F>, v_prev: F, lane: Band<F>
         if !(v > F::ZERO) {
             return None;
         }
+        if q.theta == F::ZERO {
+            // Straight: y and θ stay as they are (see [`stops_within`]), so it never
+            // overlaps; what is left is whether it stops within the cap.
+            return if stops_within(p, v, MAX_TAIL_STEPS - j) {
+                None
+            } else {
+                Some(MAX_TAIL_STEPS)
+            };
+        }
         v = safety::max_braking_command(p, v);
         q = step(q, v, straighten(p, q.theta, v), p.h());
     }
     // Not stopped within the cap: assume it enters at the end of it.
     Some(MAX_TAIL_STEPS)
+}
+
+/// Whether max braking from v_{t−h} = `v` reaches standstill within `steps` steps: what
+/// the braking tail's loops decide once the heading is exactly 0. From θ = 0 the
+/// straightening yaw rate is (−0/h) clamped = ±0, so the unicycle step adds d·sin(±0) = ±0
+/// to y and ±0·h to θ: y and θ never change again, and neither do the pose checks. The
+/// loops below skip the transcendental functions of those steps (they were ~95 % of the
+/// certificate's cost during a lane change) and still return exactly what the full
+/// simulation returns, cap included.
+fn stops_within<F: Real>(p: &Params<F>, mut v: F, steps: usize) -> bool {
+    for _ in 0..steps {
+        if !(v > F::ZERO) {
+            return true;
+        }
+        v = safety::max_braking_command(p, v);
+    }
+    // As the loops do when their cap runs out (even on the step that reached 0).
+    false
 }
 
 /// The certificate of the fallback: from `pose` with v_{t−h} = `v_prev`, max braking
@@ -1131,7 +1221,7 @@ pub fn braking_tail_ok<F: Real>(p: &Params<F>, pose: Pose<F>, v_prev: F, band: B
     }
     let mut q = pose;
     let mut v = v_prev;
-    for _ in 0..MAX_TAIL_STEPS {
+    for i in 0..MAX_TAIL_STEPS {
         if !(v > F::ZERO) {
             return true;
         }
@@ -1140,6 +1230,10 @@ pub fn braking_tail_ok<F: Real>(p: &Params<F>, pose: Pose<F>, v_prev: F, band: B
         q = step(q, v, w, p.h());
         if !pose_ok(p, q, band) {
             return false;
+        }
+        if q.theta == F::ZERO {
+            // Straight from here on: the pose checks cannot change ([`stops_within`]).
+            return stops_within(p, v, MAX_TAIL_STEPS - 1 - i);
         }
     }
     false
@@ -1410,6 +1504,134 @@ mod tests {
             }
         }
         panic!("no plan whose last state's tail leaves while its first state's does not");
+    }
+
+    /// The braking-tail checks as they were before the straight-line shortcut: every
+    /// step simulated on the unicycle until standstill or the cap.
+    fn full_tail<F: Real>(p: &Params<F>, pose: Pose<F>, v_prev: F, band: Band<F>) -> bool {
+        if !pose_ok(p, pose, band) {
+            return false;
+        }
+        if pose.theta == F::ZERO {
+            return true;
+        }
+        let (mut q, mut v) = (pose, v_prev);
+        for _ in 0..MAX_TAIL_STEPS {
+            if !(v > F::ZERO) {
+                return true;
+            }
+            v = safety::max_braking_command(p, v);
+            q = step(q, v, straighten(p, q.theta, v), p.h());
+            if !pose_ok(p, q, band) {
+                return false;
+            }
+        }
+        false
+    }
+
+    fn full_overlap<F: Real>(
+        p: &Params<F>,
+        pose: Pose<F>,
+        v_prev: F,
+        lane: Band<F>,
+    ) -> Option<usize> {
+        let (mut q, mut v) = (pose, v_prev);
+        for j in 0..MAX_TAIL_STEPS {
+            if overlaps(p, q, lane) {
+                return Some(j);
+            }
+            if !(v > F::ZERO) {
+                return None;
+            }
+            v = safety::max_braking_command(p, v);
+            q = step(q, v, straighten(p, q.theta, v), p.h());
+        }
+        Some(MAX_TAIL_STEPS)
+    }
+
+    /// Random poses near a lane edge, headings, speeds and bands, in `F`, for Table I and
+    /// for a period so short that the tail outlasts [`MAX_TAIL_STEPS`]: the shortcut
+    /// returns exactly what the full simulation returns, and it is really taken.
+    fn shortcut_agrees<F: Real>(p: &Params<F>) -> usize {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut r = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            F::from_f64(((seed >> 11) as f64) / ((1u64 << 53) as f64))
+        };
+        let mut straightened = 0;
+        for _ in 0..3000 {
+            let theta = (r() - F::HALF) * F::from_f64(1.0);
+            let v = r() * F::from_f64(28.0);
+            let lo = F::from_f64(-0.5) * r();
+            let band = Band {
+                lo,
+                hi: lo + F::from_f64(3.6) + F::from_f64(3.6) * r(),
+            };
+            let y = band.lo + (band.hi - band.lo) * r();
+            let pose = Pose {
+                x: F::ZERO,
+                y,
+                theta,
+            };
+            assert_eq!(
+                braking_tail_ok(p, pose, v, band),
+                full_tail(p, pose, v, band),
+                "{pose:?} v={v:?} {band:?}"
+            );
+            let lane = Band {
+                lo: band.hi,
+                hi: band.hi + F::from_f64(3.6),
+            };
+            assert_eq!(
+                first_overlap(p, pose, v, lane),
+                full_overlap(p, pose, v, lane)
+            );
+            // Did the tail reach θ = 0 exactly while still moving (the shortcut's case)?
+            let (mut q, mut w) = (pose, v);
+            for _ in 0..MAX_TAIL_STEPS {
+                if !(w > F::ZERO) {
+                    break;
+                }
+                w = safety::max_braking_command(p, w);
+                q = step(q, w, straighten(p, q.theta, w), p.h());
+                if q.theta == F::ZERO && w > F::ZERO {
+                    straightened += 1;
+                    break;
+                }
+            }
+        }
+        straightened
+    }
+
+    #[test]
+    fn the_straight_tail_shortcut_answers_what_the_full_simulation_does() {
+        let short = |p: Params<f64>| {
+            Params::new(crate::params::ParamsSpec {
+                h: 1e-4,
+                ..*p.spec()
+            })
+            .expect("valid")
+        };
+        for (name, n) in [
+            ("f64", shortcut_agrees(&Params::<f64>::table_i())),
+            ("f32", shortcut_agrees(&Params::<f32>::table_i())),
+            (
+                "f64, h = 0.1 ms",
+                shortcut_agrees(&short(Params::table_i())),
+            ),
+        ] {
+            assert!(
+                n > 1000,
+                "{name}: the tail reached θ = 0 in only {n} of 3000 cases"
+            );
+        }
+        let p32 = Params::<f32>::table_i();
+        let short32 = Params::new(crate::params::ParamsSpec {
+            h: 1e-4,
+            ..*p32.spec()
+        })
+        .expect("valid");
+        assert!(shortcut_agrees(&short32) > 1000);
     }
 }
 

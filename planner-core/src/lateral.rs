@@ -137,13 +137,75 @@ fn cholesky_solve<F: Real>(
     Ok(())
 }
 
+/// The working vectors of [`DenseQp::solve_with`] (~1.9 KB in `f32`), apart from the
+/// QP so that a planner can keep both in its own storage rather than on the stack.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IpmWork<F> {
+    s: [F; ROWS],
+    lam: [F; ROWS],
+    rp: [F; ROWS],
+    d: [F; ROWS],
+    rc: [F; ROWS],
+    ds: [F; ROWS],
+    dl: [F; ROWS],
+}
+
+impl<F: Real> IpmWork<F> {
+    /// Zeroed vectors (every solve overwrites them before reading).
+    pub const fn new() -> Self {
+        let z = [F::ZERO; ROWS];
+        Self {
+            s: z,
+            lam: z,
+            rp: z,
+            d: z,
+            rc: z,
+            ds: z,
+            dl: z,
+        }
+    }
+}
+
+impl<F: Real> Default for IpmWork<F> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl<F: Real> DenseQp<F> {
-    /// Mehrotra predictor–corrector interior-point method; at most [`MAX_ITER`]
-    /// iterations. Returns the minimiser and the iterations used.
+    /// A QP of zeros (its builder fills every entry).
+    pub const fn zeros() -> Self {
+        Self {
+            p: [[F::ZERO; BLOCKS]; BLOCKS],
+            q: [F::ZERO; BLOCKS],
+            g_mat: [[F::ZERO; BLOCKS]; ROWS],
+            g: [F::ZERO; ROWS],
+        }
+    }
+
+    /// [`DenseQp::solve_with`] with its working vectors on the stack.
     pub fn solve(&self) -> Result<([F; BLOCKS], u32), LateralError> {
+        self.solve_with(&mut IpmWork::new())
+    }
+
+    /// Mehrotra predictor–corrector interior-point method; at most [`MAX_ITER`]
+    /// iterations, in the working vectors `w` (their contents on entry do not matter).
+    /// Returns the minimiser and the iterations used.
+    ///
+    /// The predictor's directions are overwritten by the corrector's once they have gone
+    /// into its right-hand side, so one set of them is kept.
+    pub fn solve_with(&self, w: &mut IpmWork<F>) -> Result<([F; BLOCKS], u32), LateralError> {
+        let IpmWork {
+            s,
+            lam,
+            rp,
+            d,
+            rc,
+            ds,
+            dl,
+        } = w;
         let mut u = [F::ZERO; BLOCKS];
-        let mut s = [F::ONE; ROWS];
-        let mut lam = [F::ONE; ROWS];
+        lam.fill(F::ONE);
         for i in 0..ROWS {
             let r = self.g[i] - dot(&self.g_mat[i], &u);
             s[i] = r.max(F::ONE);
@@ -162,7 +224,6 @@ impl<F: Real> DenseQp<F> {
                     rd[i] += self.g_mat[r][i] * lam[r];
                 }
             }
-            let mut rp = [F::ZERO; ROWS];
             let mut mu = F::ZERO;
             for r in 0..ROWS {
                 rp[r] = dot(&self.g_mat[r], &u) + s[r] - self.g[r];
@@ -180,7 +241,6 @@ impl<F: Real> DenseQp<F> {
             }
             // Reduced matrix K = P + Gᵀ D G, D = λ/s.
             let mut k = self.p;
-            let mut d = [F::ZERO; ROWS];
             for r in 0..ROWS {
                 d[r] = lam[r] / s[r];
                 let row = &self.g_mat[r];
@@ -190,60 +250,35 @@ impl<F: Real> DenseQp<F> {
                     }
                 }
             }
-            let direction = |rc: &[F; ROWS]| -> Result<_, LateralError> {
-                // (P + GᵀDG) du = −r_d − Gᵀ(r_c/s + D r_p)
-                let mut rhs = rd.map(|x| -x);
-                for r in 0..ROWS {
-                    let w = rc[r] / s[r] + d[r] * rp[r];
-                    for i in 0..BLOCKS {
-                        rhs[i] -= self.g_mat[r][i] * w;
-                    }
-                }
-                let mut m = k;
-                cholesky_solve(&mut m, &mut rhs)?;
-                let du = rhs;
-                let mut ds = [F::ZERO; ROWS];
-                let mut dl = [F::ZERO; ROWS];
-                for r in 0..ROWS {
-                    ds[r] = -rp[r] - dot(&self.g_mat[r], &du);
-                    dl[r] = rc[r] / s[r] - d[r] * ds[r];
-                }
-                Ok((du, ds, dl))
-            };
-            let step_to_boundary = |ds: &[F; ROWS], dl: &[F; ROWS]| {
-                let mut a = F::ONE;
-                for r in 0..ROWS {
-                    if ds[r] < F::ZERO {
-                        a = a.min(-s[r] / ds[r]);
-                    }
-                    if dl[r] < F::ZERO {
-                        a = a.min(-lam[r] / dl[r]);
-                    }
-                }
-                a
+            let newton = Newton {
+                qp: self,
+                k: &k,
+                rd: &rd,
+                rp,
+                s,
+                d,
             };
             // Predictor (affine scaling).
-            let mut rc = [F::ZERO; ROWS];
             for r in 0..ROWS {
                 rc[r] = -s[r] * lam[r];
             }
-            let (_, ds_a, dl_a) = direction(&rc)?;
-            let a_aff = step_to_boundary(&ds_a, &dl_a);
+            newton.direction(rc, ds, dl)?;
+            let a_aff = step_to_boundary(s, lam, ds, dl);
             let mut mu_aff = F::ZERO;
             for r in 0..ROWS {
-                mu_aff += (s[r] + a_aff * ds_a[r]) * (lam[r] + a_aff * dl_a[r]);
+                mu_aff += (s[r] + a_aff * ds[r]) * (lam[r] + a_aff * dl[r]);
             }
             mu_aff = mu_aff / n;
             let sigma = {
                 let ratio = mu_aff / mu;
                 ratio * ratio * ratio
             };
-            // Corrector.
+            // Corrector (its directions replace the predictor's).
             for r in 0..ROWS {
-                rc[r] = -s[r] * lam[r] + sigma * mu - ds_a[r] * dl_a[r];
+                rc[r] = -s[r] * lam[r] + sigma * mu - ds[r] * dl[r];
             }
-            let (du, ds, dl) = direction(&rc)?;
-            let a = (step_to_boundary(&ds, &dl) * F::from_f64(0.99)).min(F::ONE);
+            let du = newton.direction(rc, ds, dl)?;
+            let a = (step_to_boundary(s, lam, ds, dl) * F::from_f64(0.99)).min(F::ONE);
             for i in 0..BLOCKS {
                 u[i] += a * du[i];
             }
@@ -254,6 +289,58 @@ impl<F: Real> DenseQp<F> {
         }
         Err(LateralError::NotConverged)
     }
+}
+
+/// One iteration's Newton system of [`DenseQp::solve`], borrowed.
+struct Newton<'a, F> {
+    qp: &'a DenseQp<F>,
+    /// The reduced matrix P + Gᵀ D G.
+    k: &'a [[F; BLOCKS]; BLOCKS],
+    rd: &'a [F; BLOCKS],
+    rp: &'a [F; ROWS],
+    s: &'a [F; ROWS],
+    d: &'a [F; ROWS],
+}
+
+impl<F: Real> Newton<'_, F> {
+    /// (P + GᵀDG) du = −r_d − Gᵀ(r_c/s + D r_p); ds, dλ into `ds`, `dl`; returns du.
+    fn direction(
+        &self,
+        rc: &[F; ROWS],
+        ds: &mut [F; ROWS],
+        dl: &mut [F; ROWS],
+    ) -> Result<[F; BLOCKS], LateralError> {
+        let (g_mat, s, d, rp) = (&self.qp.g_mat, self.s, self.d, self.rp);
+        let mut rhs = self.rd.map(|x| -x);
+        for r in 0..ROWS {
+            let w = rc[r] / s[r] + d[r] * rp[r];
+            for i in 0..BLOCKS {
+                rhs[i] -= g_mat[r][i] * w;
+            }
+        }
+        let mut m = *self.k;
+        cholesky_solve(&mut m, &mut rhs)?;
+        let du = rhs;
+        for r in 0..ROWS {
+            ds[r] = -rp[r] - dot(&g_mat[r], &du);
+            dl[r] = rc[r] / s[r] - d[r] * ds[r];
+        }
+        Ok(du)
+    }
+}
+
+/// The largest step α ≤ 1 keeping s + α ds ≥ 0 and λ + α dλ ≥ 0.
+fn step_to_boundary<F: Real>(s: &[F; ROWS], lam: &[F; ROWS], ds: &[F; ROWS], dl: &[F; ROWS]) -> F {
+    let mut a = F::ONE;
+    for r in 0..ROWS {
+        if ds[r] < F::ZERO {
+            a = a.min(-s[r] / ds[r]);
+        }
+        if dl[r] < F::ZERO {
+            a = a.min(-lam[r] / dl[r]);
+        }
+    }
+    a
 }
 
 /// Which block step k of an N-step horizon belongs to.
@@ -304,8 +391,42 @@ pub struct LateralInput<'a, F, const N: usize> {
     pub weights: LateralWeights<F>,
 }
 
+/// The lateral QP and its solver's working vectors: ~3.3 KB in `f32`, which a
+/// [`crate::LanePlanner`] keeps in its own storage so that a lane-change step does not
+/// need them on the stack (on the Cortex-M4F, issue 19 §4).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LateralWork<F> {
+    qp: DenseQp<F>,
+    ipm: IpmWork<F>,
+}
+
+impl<F: Real> LateralWork<F> {
+    /// Zeroed storage (every solve rebuilds the QP and overwrites the vectors).
+    pub const fn new() -> Self {
+        Self {
+            qp: DenseQp::zeros(),
+            ipm: IpmWork::new(),
+        }
+    }
+}
+
+impl<F: Real> Default for LateralWork<F> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// Builds the lateral QP and solves it; returns ω_0..ω_{N−1} and the iterations used.
+/// Its working storage is on the stack: [`solve_lateral_in`] takes a caller's.
 pub fn solve_lateral<F: Real, const N: usize>(
+    inp: &LateralInput<'_, F, N>,
+) -> Result<([F; N], u32), LateralError> {
+    solve_lateral_in(&mut LateralWork::new(), inp)
+}
+
+/// [`solve_lateral`] in the working storage `work` (its contents on entry do not matter).
+pub fn solve_lateral_in<F: Real, const N: usize>(
+    work: &mut LateralWork<F>,
     inp: &LateralInput<'_, F, N>,
 ) -> Result<([F; N], u32), LateralError> {
     if N == 0 {
@@ -314,12 +435,14 @@ pub fn solve_lateral<F: Real, const N: usize>(
     let h = inp.h;
     let w = inp.weights;
     let per_step = F::ONE / F::from_usize(N);
-    let mut qp = DenseQp {
-        p: [[F::ZERO; BLOCKS]; BLOCKS],
-        q: [F::ZERO; BLOCKS],
-        g_mat: [[F::ZERO; BLOCKS]; ROWS],
-        g: [F::ZERO; ROWS],
-    };
+    let LateralWork { qp, ipm } = work;
+    // Cleared in place, field by field (no QP-sized temporary).
+    qp.p = [[F::ZERO; BLOCKS]; BLOCKS];
+    qp.q = [F::ZERO; BLOCKS];
+    for row in qp.g_mat.iter_mut() {
+        *row = [F::ZERO; BLOCKS];
+    }
+    qp.g.fill(F::ZERO);
     // Affine maps θ_{k+1} = cθ·u + θ0, y_{k+1} = cy·u + y_c, built step by step.
     let mut c_theta = [F::ZERO; BLOCKS];
     let mut c_y = [F::ZERO; BLOCKS];
@@ -359,9 +482,9 @@ pub fn solve_lateral<F: Real, const N: usize>(
         lo_b[b] = lo_b[b].max(inp.omega_lo[k]);
         hi_b[b] = hi_b[b].min(inp.omega_hi[k]);
         count[b] += F::ONE;
-        add_square(&mut qp, &c_y, y_c - inp.y_ref[k], w.position * per_step);
+        add_square(qp, &c_y, y_c - inp.y_ref[k], w.position * per_step);
         add_square(
-            &mut qp,
+            qp,
             &c_theta,
             inp.theta - inp.theta_ref[k],
             w.heading * per_step,
@@ -377,12 +500,7 @@ pub fn solve_lateral<F: Real, const N: usize>(
         let mut e = [F::ZERO; BLOCKS];
         e[b] = F::ONE;
         // Σ_k ω_k² over the block.
-        add_square(
-            &mut qp,
-            &e,
-            F::ZERO,
-            w.rate * per_step * count[b].max(F::ONE),
-        );
+        add_square(qp, &e, F::ZERO, w.rate * per_step * count[b].max(F::ONE));
         let mut d = e;
         let c = if b == 0 {
             -inp.omega_prev
@@ -390,7 +508,7 @@ pub fn solve_lateral<F: Real, const N: usize>(
             d[b - 1] = -F::ONE;
             F::ZERO
         };
-        add_square(&mut qp, &d, c, w.rate_change);
+        add_square(qp, &d, c, w.rate_change);
         // Empty Ω (rounding) or unused block: pin to the middle, with a sliver of room.
         let (lo, hi) = if hi_b[b] >= lo_b[b] {
             (lo_b[b], hi_b[b])
@@ -437,7 +555,7 @@ pub fn solve_lateral<F: Real, const N: usize>(
         qp.g_mat[base + 5] = neg(comb(-F::ONE));
         qp.g[base + 5] = -(ylo + hw) + cy - hl * th0;
     }
-    let (u, iters) = qp.solve()?;
+    let (u, iters) = qp.solve_with(ipm)?;
     let mut omega = [F::ZERO; N];
     for (k, o) in omega.iter_mut().enumerate() {
         *o = u[block_of(k, N)];

@@ -52,6 +52,7 @@ pub mod real;
 pub mod reuse;
 pub mod safety;
 pub mod sensing;
+pub mod slot;
 pub mod solver;
 pub mod unicycle;
 pub mod world;
@@ -68,6 +69,7 @@ pub use planner::{
 pub use real::Real;
 pub use reuse::ReusePolicy;
 pub use sensing::Sensing;
+pub use slot::{LanePlannerSlot, PlannerSlot};
 pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};
 pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};

