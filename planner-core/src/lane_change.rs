@@ -1625,6 +1625,34 @@ mod tests {
                 "{name}: the tail reached θ = 0 in only {n} of 3000 cases"
             );
         }
+        // At the cap's edge: speeds around the one from which max braking takes exactly
+        // MAX_TAIL_STEPS steps, with a slight heading (straight after a few steps), on
+        // both sides of the edge and in agreement with the full simulation.
+        let p = short(Params::table_i());
+        let band = Band { lo: 0.0, hi: 7.2 };
+        let lane = Band { lo: 7.2, hi: 10.8 };
+        let pose = Pose {
+            x: 0.0,
+            y: 3.6,
+            theta: 0.01,
+        };
+        let edge = MAX_TAIL_STEPS as f64 * p.h() * p.brake();
+        let (mut certified, mut refused) = (0, 0);
+        for i in 0..400 {
+            let v = edge - 2.0 * p.h() * p.brake() + 1e-5 * f64::from(i);
+            let full = full_tail(&p, pose, v, band);
+            assert_eq!(braking_tail_ok(&p, pose, v, band), full, "v = {v}");
+            assert_eq!(
+                first_overlap(&p, pose, v, lane),
+                full_overlap(&p, pose, v, lane)
+            );
+            if full {
+                certified += 1;
+            } else {
+                refused += 1;
+            }
+        }
+        assert!(certified > 0 && refused > 0, "{certified} / {refused}");
         let p32 = Params::<f32>::table_i();
         let short32 = Params::new(crate::params::ParamsSpec {
             h: 1e-4,
