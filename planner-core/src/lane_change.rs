@@ -322,6 +322,7 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
         self.steps = 0;
         self.omega_plan.fill(F::ZERO);
         self.reference = None;
+        self.lateral.clear();
         Ok(())
     }
 }

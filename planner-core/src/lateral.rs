@@ -183,6 +183,16 @@ impl<F: Real> DenseQp<F> {
         }
     }
 
+    /// Zeroes every entry in place (the builder then adds into them).
+    fn clear(&mut self) {
+        self.p = [[F::ZERO; BLOCKS]; BLOCKS];
+        self.q = [F::ZERO; BLOCKS];
+        for row in self.g_mat.iter_mut() {
+            *row = [F::ZERO; BLOCKS];
+        }
+        self.g.fill(F::ZERO);
+    }
+
     /// [`DenseQp::solve_with`] with its working vectors on the stack.
     pub fn solve(&self) -> Result<([F; BLOCKS], u32), LateralError> {
         self.solve_with(&mut IpmWork::new())
@@ -410,6 +420,25 @@ impl<F: Real> LateralWork<F> {
     }
 }
 
+impl<F: Real> LateralWork<F> {
+    /// Zeroes the storage in place (what [`LateralWork::new`] builds; no temporary).
+    pub fn clear(&mut self) {
+        let LateralWork { qp, ipm } = self;
+        qp.clear();
+        for a in [
+            &mut ipm.s,
+            &mut ipm.lam,
+            &mut ipm.rp,
+            &mut ipm.d,
+            &mut ipm.rc,
+            &mut ipm.ds,
+            &mut ipm.dl,
+        ] {
+            a.fill(F::ZERO);
+        }
+    }
+}
+
 impl<F: Real> Default for LateralWork<F> {
     fn default() -> Self {
         Self::new()
@@ -436,13 +465,8 @@ pub fn solve_lateral_in<F: Real, const N: usize>(
     let w = inp.weights;
     let per_step = F::ONE / F::from_usize(N);
     let LateralWork { qp, ipm } = work;
-    // Cleared in place, field by field (no QP-sized temporary).
-    qp.p = [[F::ZERO; BLOCKS]; BLOCKS];
-    qp.q = [F::ZERO; BLOCKS];
-    for row in qp.g_mat.iter_mut() {
-        *row = [F::ZERO; BLOCKS];
-    }
-    qp.g.fill(F::ZERO);
+    // Cleared in place, field by field (no QP-sized temporary); `ipm` is overwritten.
+    qp.clear();
     // Affine maps θ_{k+1} = cθ·u + θ0, y_{k+1} = cy·u + y_c, built step by step.
     let mut c_theta = [F::ZERO; BLOCKS];
     let mut c_y = [F::ZERO; BLOCKS];

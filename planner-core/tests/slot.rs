@@ -91,8 +91,12 @@ fn slot_plans_as_new<F: Real>() {
     );
     let pl = slot.init(params, w).expect("valid");
     assert_eq!(approach(pl, 400), expected);
-    // Re-initialised over a used planner (plan, solver duals): as new again.
+    assert!(slot.is_ready() && slot.get().is_some());
+    // Re-initialised over a used planner (plan, solver duals): as new again, to the last
+    // bit of its state (Debug prints every field, floats exactly).
     let pl = slot.init(params, w).expect("valid");
+    let fresh = Planner::<F, N>::new(params, w).expect("valid");
+    assert_eq!(format!("{pl:?}"), format!("{fresh:?}"));
     assert_eq!(approach(pl, 400), expected);
 
     let expected = lane_change(&mut LanePlanner::new(params, w, 0).expect("valid"), 300);
@@ -103,7 +107,15 @@ fn slot_plans_as_new<F: Real>() {
     assert!(slot.get().is_none());
     let lp = slot.init(params, w, 0).expect("valid");
     assert_eq!(lane_change(lp, 300), expected);
+    assert!(slot.is_ready());
+    assert_eq!(
+        slot.get().map(|lp| lp.lane()),
+        Some(1),
+        "the same planner, changed lanes"
+    );
     let lp = slot.init(params, w, 0).expect("valid");
+    let fresh = LanePlanner::<F, N>::new(params, w, 0).expect("valid");
+    assert_eq!(format!("{lp:?}"), format!("{fresh:?}"));
     assert_eq!(lane_change(lp, 300), expected);
 }
 
@@ -168,6 +180,8 @@ fn a_reset_solver_solves_as_a_new_one() {
     used.reset(Default::default());
     assert!(used.duals().is_none(), "no duals after a reset");
     let mut fresh = IpmSolver::<f64, N>::default();
+    // Every field as `new` builds it (Debug prints floats exactly).
+    assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
     for (gap, v) in [(33.0, 14.0), (60.0, 9.0)] {
         let (a, b) = (
             used.solve(&problem(gap, v), None).expect("solves"),
