@@ -310,19 +310,36 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
         weights: CostWeights<F>,
         lane: u8,
     ) -> Result<(), ConfigError> {
-        self.speed.rebuild(params, weights)?;
-        self.lateral_weights = LateralWeights::default();
-        self.lane = lane;
-        self.alpha = None;
-        self.beta = None;
-        self.beta_steps = 0;
-        self.notify = params.h();
-        self.resolution = Resolution::EXACT;
-        self.sensing = None;
-        self.steps = 0;
-        self.omega_plan.fill(F::ZERO);
-        self.reference = None;
-        self.lateral.clear();
+        // Every field named: a field added to the planner must be reset here too (the
+        // compiler says so), as `with_solver` must build it.
+        let Self {
+            speed,
+            lateral_weights,
+            lane: own_lane,
+            alpha,
+            beta,
+            beta_steps,
+            notify,
+            resolution,
+            sensing,
+            steps,
+            omega_plan,
+            reference,
+            lateral,
+        } = self;
+        speed.rebuild(params, weights)?;
+        *lateral_weights = LateralWeights::default();
+        *own_lane = lane;
+        *alpha = None;
+        *beta = None;
+        *beta_steps = 0;
+        *notify = params.h();
+        *resolution = Resolution::EXACT;
+        *sensing = None;
+        *steps = 0;
+        omega_plan.fill(F::ZERO);
+        *reference = None;
+        lateral.clear();
         Ok(())
     }
 }

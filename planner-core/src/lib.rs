@@ -69,7 +69,7 @@ pub use planner::{
 pub use real::Real;
 pub use reuse::ReusePolicy;
 pub use sensing::Sensing;
-pub use slot::{LanePlannerSlot, PlannerSlot};
+pub use slot::{LanePlannerSlot, PlannerSlot, Slot};
 pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};
 pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};

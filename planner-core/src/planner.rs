@@ -225,13 +225,24 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
         weights: CostWeights<F>,
     ) -> Result<(), ConfigError> {
         check_weights(&weights)?;
-        self.params = params;
-        self.weights = weights;
-        self.solver.reset(crate::solver::Settings::default());
-        self.plan.fill(F::ZERO);
-        self.have_plan = false;
-        self.reuse = None;
-        self.age = None;
+        // Every field named: a field added to the planner must be reset here too (the
+        // compiler says so), as `with_solver` must build it.
+        let Self {
+            params: p,
+            weights: w,
+            solver,
+            plan,
+            have_plan,
+            reuse,
+            age,
+        } = self;
+        *p = params;
+        *w = weights;
+        solver.reset(crate::solver::Settings::default());
+        plan.fill(F::ZERO);
+        *have_plan = false;
+        *reuse = None;
+        *age = None;
         Ok(())
     }
 }

@@ -6,15 +6,15 @@
 //! the caller's variable) the compiler places one or more temporaries of that size on
 //! the stack, and a planner kept in a task's frame stays there. A slot avoids both:
 //!
-//! - [`PlannerSlot::new`] is a `const fn` whose value is all zeros, so
+//! - `PlannerSlot::new` is a `const fn` whose value is all zeros, so
 //!   `static mut P: PlannerSlot<f32, 20> = PlannerSlot::new();` (or
 //!   `cortex_m::singleton!`) puts the storage in `.bss`: RAM, no flash image, no stack;
-//! - [`PlannerSlot::init`] validates the configuration and then writes the planner's
+//! - `PlannerSlot::init` validates the configuration and then writes the planner's
 //!   state field by field into the slot ([`crate::solver::IpmSolver::reset`]), never
 //!   materialising a whole planner anywhere else, and hands out `&mut Planner`.
 //!
 //! Until `init` succeeds the slot holds a placeholder with invalid (zero) parameters
-//! that no one can reach: [`PlannerSlot::get`] returns `None`. A failed `init` changes
+//! that no one can reach: [`Slot::get`] returns `None`. A failed `init` changes
 //! nothing. `init` again re-initialises the planner in place (as `new` would build it).
 //!
 //! On the Cortex-M4F firmware the slots took the painted peak stack from 14.8 KB
@@ -26,14 +26,40 @@ use crate::planner::{ConfigError, Planner};
 use crate::real::Real;
 use crate::LanePlanner;
 
-/// A place for one single-lane [`Planner`] (with our interior-point solver).
+/// A place for one planner `T` that a `static` can hold: [`PlannerSlot`] for a
+/// single-lane [`Planner`], [`LanePlannerSlot`] for a multi-lane [`LanePlanner`] (both with
+/// our interior-point solver).
 #[derive(Debug)]
-pub struct PlannerSlot<F, const N: usize> {
-    planner: Planner<F, N>,
+pub struct Slot<T> {
+    planner: T,
     ready: bool,
 }
 
-impl<F: Real, const N: usize> PlannerSlot<F, N> {
+/// A place for one single-lane [`Planner`].
+pub type PlannerSlot<F, const N: usize> = Slot<Planner<F, N>>;
+
+/// A place for one multi-lane [`LanePlanner`].
+pub type LanePlannerSlot<F, const N: usize> = Slot<LanePlanner<F, N>>;
+
+impl<T> Slot<T> {
+    /// The planner, once `init` has put one in.
+    pub fn get(&mut self) -> Option<&mut T> {
+        self.ready.then_some(&mut self.planner)
+    }
+
+    /// Whether `init` has put a planner in.
+    pub const fn is_ready(&self) -> bool {
+        self.ready
+    }
+
+    /// Marks the slot ready after a successful in-place rebuild, and hands out the planner.
+    fn ready(&mut self) -> &mut T {
+        self.ready = true;
+        &mut self.planner
+    }
+}
+
+impl<F: Real, const N: usize> Slot<Planner<F, N>> {
     /// An empty slot (all zeros: a `static` of it is placed in `.bss`).
     pub const fn new() -> Self {
         Self {
@@ -51,35 +77,17 @@ impl<F: Real, const N: usize> PlannerSlot<F, N> {
         weights: CostWeights<F>,
     ) -> Result<&mut Planner<F, N>, ConfigError> {
         self.planner.rebuild(params, weights)?;
-        self.ready = true;
-        Ok(&mut self.planner)
-    }
-
-    /// The planner, once [`PlannerSlot::init`] has put one in.
-    pub fn get(&mut self) -> Option<&mut Planner<F, N>> {
-        self.ready.then_some(&mut self.planner)
-    }
-
-    /// Whether [`PlannerSlot::init`] has put a planner in.
-    pub const fn is_ready(&self) -> bool {
-        self.ready
+        Ok(self.ready())
     }
 }
 
-impl<F: Real, const N: usize> Default for PlannerSlot<F, N> {
+impl<F: Real, const N: usize> Default for Slot<Planner<F, N>> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-/// A place for one multi-lane [`LanePlanner`] (with our interior-point solver).
-#[derive(Debug)]
-pub struct LanePlannerSlot<F, const N: usize> {
-    planner: LanePlanner<F, N>,
-    ready: bool,
-}
-
-impl<F: Real, const N: usize> LanePlannerSlot<F, N> {
+impl<F: Real, const N: usize> Slot<LanePlanner<F, N>> {
     /// An empty slot (all zeros: a `static` of it is placed in `.bss`).
     pub const fn new() -> Self {
         Self {
@@ -98,22 +106,11 @@ impl<F: Real, const N: usize> LanePlannerSlot<F, N> {
         lane: u8,
     ) -> Result<&mut LanePlanner<F, N>, ConfigError> {
         self.planner.rebuild(params, weights, lane)?;
-        self.ready = true;
-        Ok(&mut self.planner)
-    }
-
-    /// The planner, once [`LanePlannerSlot::init`] has put one in.
-    pub fn get(&mut self) -> Option<&mut LanePlanner<F, N>> {
-        self.ready.then_some(&mut self.planner)
-    }
-
-    /// Whether [`LanePlannerSlot::init`] has put a planner in.
-    pub const fn is_ready(&self) -> bool {
-        self.ready
+        Ok(self.ready())
     }
 }
 
-impl<F: Real, const N: usize> Default for LanePlannerSlot<F, N> {
+impl<F: Real, const N: usize> Default for Slot<LanePlanner<F, N>> {
     fn default() -> Self {
         Self::new()
     }

@@ -309,29 +309,36 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// microcontroller whose planner lives in a `static` ([`crate::slot`]) that
     /// temporary would be the largest thing on the stack.
     pub fn reset(&mut self, settings: Settings<F>) {
-        self.settings = settings;
-        for a in [
-            &mut self.v,
-            &mut self.c0,
-            &mut self.c1,
-            &mut self.dz,
-            &mut self.rhs,
-            &mut self.rd,
-            &mut self.w1,
-            &mut self.w2,
-            &mut self.w3,
-        ] {
+        // Every field named: one added to the solver must be reset here too.
+        let Self {
+            settings: s,
+            v,
+            fam,
+            c0,
+            c1,
+            dz,
+            rhs,
+            rd,
+            w1,
+            w2,
+            w3,
+            kkt,
+            kkt_raw,
+            have_duals,
+        } = self;
+        *s = settings;
+        for a in [v, c0, c1, dz, rhs, rd, w1, w2, w3] {
             a.fill(F::ZERO);
         }
-        for f in self.fam.iter_mut() {
+        for f in fam.iter_mut() {
             f.clear();
         }
-        for m in [&mut self.kkt, &mut self.kkt_raw] {
+        for m in [kkt, kkt_raw] {
             for a in [&mut m.d, &mut m.e1, &mut m.e2, &mut m.dinv] {
                 a.fill(F::ZERO);
             }
         }
-        self.have_duals = false;
+        *have_duals = false;
     }
 
     /// The settings in use.
