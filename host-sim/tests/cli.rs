@@ -305,30 +305,31 @@ fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
     }
 }
 
-/// `scale --compare`: the same roads solving every step and with certified plan reuse,
-/// both safe, reuse really skipping solves, at a bounded closed-loop cost; bad reuse
-/// settings are refused before anything runs.
+/// `scale --compare`: the same roads with the solver as before issue 19 (the
+/// interior-point method alone) and with the default solver, both safe, the active-set
+/// step answering most solves in fewer Newton steps at the same closed-loop cost (both
+/// find the optima); with `--reuse` the current arm also skips solves. Bad settings are
+/// refused before anything runs.
 #[test]
-fn scale_compares_plan_reuse_with_solving_every_step() {
-    let v = json_of(
-        bin().args([
-            "scale",
-            "--vehicles",
-            "40",
-            "--duration",
-            "2",
-            "--compare",
-            "--json",
-        ]),
-        &[
-            "baseline",
-            "reuse",
-            "speedup",
-            "iterations_ratio",
-            "tracking_cost_change",
-        ],
-    );
-    for arm in ["baseline", "reuse"] {
+fn scale_compares_the_solver_with_the_interior_point_method_alone() {
+    let keys = [
+        "baseline",
+        "current",
+        "speedup",
+        "iterations_ratio",
+        "tracking_cost_change",
+    ];
+    let args = [
+        "scale",
+        "--vehicles",
+        "40",
+        "--duration",
+        "2",
+        "--compare",
+        "--json",
+    ];
+    let v = json_of(bin().args(args), &keys);
+    for arm in ["baseline", "current"] {
         let r = &v[arm];
         assert_eq!(
             (r["collisions"].clone(), r["invariant_violations"].clone()),
@@ -336,27 +337,41 @@ fn scale_compares_plan_reuse_with_solving_every_step() {
             "{arm}: {r}"
         );
         assert_eq!(r["step"]["steps"], 38 * 200, "{arm}");
+        assert_eq!(r["reuse"], serde_json::Value::Null, "{arm}");
     }
-    assert_eq!(v["baseline"]["reuse"], serde_json::Value::Null);
-    assert_eq!(v["baseline"]["reuses_per_step"], 0.0);
-    assert_eq!(v["reuse"]["reuse"]["tolerance"], 0.01);
-    assert_eq!(v["reuse"]["reuse"]["max_age"], 4);
+    assert_eq!(v["baseline"]["solver"], "ours_interior_point");
+    assert_eq!(v["current"]["solver"], "ours");
     let f = |a: &str, k: &str| v[a][k].as_f64().expect("number");
-    let reuses = f("reuse", "reuses_per_step");
-    assert!(reuses > 0.05, "{v}");
+    assert_eq!(f("baseline", "active_set_share"), 0.0);
+    assert!(f("current", "active_set_share") > 0.5, "{v}");
+    assert_eq!(
+        f("baseline", "solves_per_step"),
+        f("current", "solves_per_step")
+    );
+    assert!(v["iterations_ratio"].as_f64().expect("ratio") < 0.75, "{v}");
+    // Both solve to the same tolerance: the closed loops cost the same to 1e-6.
+    let change = v["tracking_cost_change"].as_f64().expect("change");
+    assert!(change.abs() < 1e-6, "{change}");
+
+    // With --reuse the current arm also applies certified plans without solving.
+    let v = json_of(bin().args(args).arg("--reuse"), &keys);
+    let f = |a: &str, k: &str| v[a][k].as_f64().expect("number");
+    assert_eq!(v["baseline"]["reuse"], serde_json::Value::Null);
+    assert_eq!(v["current"]["reuse"]["tolerance"], 0.01);
+    assert_eq!(v["current"]["reuse"]["max_age"], 4);
+    let reuses = f("current", "reuses_per_step");
+    assert!(reuses > 0.0, "{v}");
     // Every planner step either solved or reused (or braked without either).
-    assert!((f("reuse", "solves_per_step") + reuses) <= 1.0 + 1e-12);
-    assert!(f("reuse", "solver_iterations_per_step") < f("baseline", "solver_iterations_per_step"));
-    assert!(v["iterations_ratio"].as_f64().expect("ratio") < 1.0);
+    assert!((f("current", "solves_per_step") + reuses) <= 1.0 + 1e-12);
+    assert!(f("current", "certified_gap_per_reuse") > 0.0);
     // What reuse gives up on the road is small: within a percent of the closed-loop cost.
     let change = v["tracking_cost_change"].as_f64().expect("change");
     assert!(change.abs() < 0.01, "{change}");
-    assert!(f("reuse", "certified_gap_per_reuse") > 0.0);
     for bad in [
         vec!["--reuse-tolerance", "-1"],
         vec!["--reuse-tolerance", "NaN"],
-        vec!["--compare", "--reuse"],
         vec!["--compare", "--sweep"],
+        vec!["--solver", "fastest"],
     ] {
         let out = bin().arg("scale").args(&bad).output().expect("runs");
         assert_eq!(out.status.code(), Some(2), "{bad:?}");

@@ -10,7 +10,8 @@
 //! - [`safety`]: dMB, tL, dh, dS, the speed bounds (3)(4), tH (5)(6), V^k_t (7), the
 //!   invariant of Lemma 3 and the max-braking sequence of Lemma 2;
 //! - [`mpc`]: problem (10) as data with a configurable quadratic cost;
-//! - [`solver`]: our interior-point solver with O(N) pentadiagonal Newton systems;
+//! - [`solver`]: our solver with O(N) pentadiagonal Newton systems: an active-set
+//!   step on warm starts, an interior-point method behind it;
 //! - [`planner`]: the planner step: obstacle (2)/(22), solve, verify, certified fallback;
 //! - [`reuse`]: certified plan reuse (the previous plan, shifted, when duality proves it
 //!   near-optimal);
@@ -70,6 +71,6 @@ pub use real::Real;
 pub use reuse::ReusePolicy;
 pub use sensing::Sensing;
 pub use slot::{LanePlannerSlot, PlannerSlot, Slot};
-pub use solver::{IpmSolver, MpcSolver, Settings, Solution, SolveError};
+pub use solver::{IpmSolver, Method, MpcSolver, Settings, Solution, SolveError};
 pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};

@@ -10,7 +10,7 @@ use crate::params::Params;
 use crate::real::Real;
 use crate::reuse::{self, ReusePolicy};
 use crate::safety;
-use crate::solver::{IpmSolver, MpcSolver, SolveError};
+use crate::solver::{IpmSolver, Method, MpcSolver, SolveError};
 
 /// Another vehicle in the ego's lane, as the ego knows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,8 +71,10 @@ pub enum FallbackReason<F> {
 pub enum StepStatus<F> {
     /// The optimal plan was verified and its first input applied.
     Solved {
-        /// Solver iterations.
+        /// Solver iterations (Newton steps of the method that answered).
         iterations: u32,
+        /// Which method of the solver answered.
+        method: Method,
     },
     /// No solve: the previous plan, shifted, was verified against this step's exact
     /// constraints and certified near-optimal by duality ([`crate::reuse`]); its first
@@ -420,6 +422,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
                     v: plan.first().copied().unwrap_or(F::ZERO),
                     status: StepStatus::Solved {
                         iterations: solution.iterations,
+                        method: solution.method,
                     },
                     gap,
                 }

@@ -55,6 +55,16 @@ pub trait Real:
     /// f32) while J has long converged. The objective accuracy this buys is measured, not
     /// assumed: the Clarabel cross-check asserts ≤ 1e-6 relative (f64).
     const SOLVER_DUAL_TOL: Self;
+    /// Default penalty ρ of the solver's active-set step (`Settings::active_set_penalty`):
+    /// the multipliers of the held constraints converge by about 1/(1 + ρσ) per Newton
+    /// step (σ the smallest eigenvalue of the held constraints' Schur complement, ~1e-3
+    /// here), while ρ times the constraint gradients must stay factorisable against the
+    /// cost's own curvature in this precision. Measured on the firmware's scenarios and
+    /// bench-planner's drives (Newton steps per solve, worst and mean): f32 1e4 (2,900
+    /// converged linearly at 0.4 a step on the approach; 3e4 and up cost the N = 50 lane
+    /// change 7 % more steps), f64 1e9 (6.7e7: 17 % more steps on the N = 50 drive; 1e10
+    /// and 1e11 the same as 1e9).
+    const ACTIVE_SET_PENALTY: Self;
     /// Largest coordinate magnitude (m) the planner accepts: positions, road ends and
     /// targets beyond it are refused (`InputError::OutOfRange`). The margins above hold
     /// only while one ulp of a coordinate is far below them: f32 10 km (ulp 1 mm, half
@@ -125,6 +135,7 @@ impl Real for f32 {
     const VERIFY_SLACK_M: Self = 0.005;
     const SOLVER_TOL: Self = 2e-4;
     const SOLVER_DUAL_TOL: Self = 2e-2;
+    const ACTIVE_SET_PENALTY: Self = 1e4;
     const MAX_COORD_M: Self = 1e4;
     #[inline]
     fn from_f64(x: f64) -> Self {
@@ -211,6 +222,7 @@ impl Real for f64 {
     const VERIFY_SLACK_M: Self = 1e-7;
     const SOLVER_TOL: Self = 1e-10;
     const SOLVER_DUAL_TOL: Self = 1e-6;
+    const ACTIVE_SET_PENALTY: Self = 1e9;
     const MAX_COORD_M: Self = 1e6;
     #[inline]
     fn from_f64(x: f64) -> Self {

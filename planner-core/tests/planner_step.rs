@@ -4,8 +4,8 @@ use planner_core::mpc::SingleLaneProblem;
 use planner_core::planner::{obstacle_position, Vehicle};
 use planner_core::safety::{d_s, max_braking_command};
 use planner_core::{
-    CostWeights, FallbackReason, InputError, MpcSolver, Observation, Params, Planner, Solution,
-    SolveError, StepStatus,
+    CostWeights, FallbackReason, InputError, Method, MpcSolver, Observation, Params, Planner,
+    Solution, SolveError, StepStatus,
 };
 
 const N: usize = 20;
@@ -171,6 +171,7 @@ impl MpcSolver<f64, N> for Scripted {
             v,
             objective: problem.objective(&v),
             iterations: 1,
+            method: Method::InteriorPoint,
         })
     }
 }

@@ -8,7 +8,7 @@
 use planner_core::mpc::{ConstraintKind, SingleLaneProblem};
 use planner_core::planner::{speed_slack, verify, Vehicle};
 use planner_core::{
-    CostWeights, FallbackReason, MpcSolver, Observation, Params, Planner, Real, Solution,
+    CostWeights, FallbackReason, Method, MpcSolver, Observation, Params, Planner, Real, Solution,
     SolveError, StepStatus,
 };
 
@@ -184,6 +184,7 @@ impl<F: Real> MpcSolver<F, N> for EdgeSolver<F> {
             v,
             objective: problem.objective(&v),
             iterations: 1,
+            method: Method::InteriorPoint,
         })
     }
 }

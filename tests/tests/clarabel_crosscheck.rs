@@ -165,3 +165,93 @@ fn degenerate_instances_n20() {
 fn degenerate_instances_n50() {
     degenerate::<50>(150);
 }
+
+/// Warm starts, where the active-set step answers (`planner_core::solver::active_set`):
+/// stop-and-go drives behind a leader whose acceleration is redrawn every 150 steps, each
+/// problem solved by ours from its previous plan, shifted, and by Clarabel cold. Every
+/// answer Clarabel certifies must match within 1e-6 (relative objective) and every plan
+/// of ours be feasible to 1e-9, whichever method answered; both methods must occur.
+fn warm_drives<const N: usize>(seeds: std::ops::Range<u64>, steps: usize) {
+    use planner_core::planner::{free_road_gap, shifted, MIN_ROOM_M};
+    use planner_core::safety::{max_braking, max_braking_command};
+    use planner_core::{CostWeights, Method, Params, SingleLaneProblem};
+    use rand::Rng;
+    let p = Params::<f64>::table_i();
+    let mut reference = ClarabelSolver::default();
+    let (mut by_active_set, mut by_ipm, mut certified) = (0, 0, 0);
+    let mut max_gap = 0.0f64;
+    for seed in seeds {
+        let mut rng = host_sim::reference::instances::rng(seed);
+        let mut ours = IpmSolver::<f64, N>::default();
+        let (mut x, mut v, mut xl, mut vl, mut accel) = (0.0, 15.0, 60.0, 15.0, 0.0);
+        let mut plan: Option<[f64; N]> = None;
+        for step in 1..=steps {
+            if step % 150 == 0 {
+                accel = rng.random_range(p.a_min()..p.a_max());
+            }
+            let gap = (xl - x - p.length() - p.d0()).min(free_road_gap(&p, N));
+            let pr = SingleLaneProblem::<f64, N>::new(
+                &p,
+                v,
+                gap,
+                <f64 as planner_core::Real>::SAFETY_MARGIN_M,
+                CostWeights::default(),
+                0.0,
+                p.v_max(),
+            )
+            .expect("the drive keeps the invariant");
+            let vb = max_braking_command(&p, v);
+            if -pr.safety_value(p.h() * vb, vb) < MIN_ROOM_M {
+                plan = Some(max_braking(&p, v));
+                v = vb;
+            } else {
+                let warm = plan.as_ref().map(shifted);
+                let o = ours
+                    .solve(&pr, warm.as_ref())
+                    .unwrap_or_else(|e| panic!("seed {seed} step {step}: {e:?}"));
+                let viol = pr.max_violation(&o.v);
+                assert!(viol.amount <= 1e-9, "seed {seed} step {step}: {viol:?}");
+                match o.method {
+                    Method::ActiveSet => by_active_set += 1,
+                    Method::InteriorPoint => by_ipm += 1,
+                }
+                if let Ok(r) = MpcSolver::<f64, N>::solve(&mut reference, &pr, None) {
+                    certified += 1;
+                    let gap = (o.objective - r.objective).abs() / (1.0 + r.objective.abs());
+                    assert!(
+                        gap <= 1e-6,
+                        "seed {seed} step {step} ({:?}): {} vs clarabel {} ({gap:e})",
+                        o.method,
+                        o.objective,
+                        r.objective
+                    );
+                    max_gap = max_gap.max(gap);
+                }
+                plan = Some(o.v);
+                v = o.v[0].clamp(pr.lo[0], pr.hi_exact[0]);
+            }
+            x += v * p.h();
+            vl = (vl + accel * p.h()).clamp(0.0, p.v_max());
+            xl += vl * p.h();
+        }
+    }
+    eprintln!(
+        "N={N} warm drives: {by_active_set} active-set and {by_ipm} interior-point answers, \
+         {certified} certified by clarabel, max rel objective gap {max_gap:.2e}"
+    );
+    assert!(
+        by_active_set > 500 && by_ipm > 10,
+        "{by_active_set} / {by_ipm}"
+    );
+    assert!(certified * 10 >= (by_active_set + by_ipm) * 9);
+}
+
+#[test]
+fn warm_drives_match_clarabel_n20() {
+    warm_drives::<20>(1..4, 1500);
+}
+
+#[test]
+fn warm_drives_match_clarabel_n50() {
+    warm_drives::<50>(1..3, 1500);
+}

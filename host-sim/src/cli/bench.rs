@@ -50,14 +50,18 @@ pub struct ScaleArgs {
     /// optimum.
     #[arg(long)]
     reuse: bool,
-    /// The same world twice in one run, solving every step and with --reuse, side by
-    /// side with their ratios.
-    #[arg(long, conflicts_with_all = ["reuse", "sweep"])]
+    /// The planners' speed solver.
+    #[arg(long, value_enum, default_value = "ours")]
+    solver: super::SolverArg,
+    /// The same world twice in one run: with the planner as before issue 19 (the
+    /// interior-point solver alone, every step solved) and as set here (--solver,
+    /// --reuse), side by side with their ratios.
+    #[arg(long, conflicts_with = "sweep")]
     compare: bool,
-    /// With --reuse or --compare: certified relative sub-optimality allowed per step.
+    /// With --reuse: certified relative sub-optimality allowed per step.
     #[arg(long, default_value_t = planner_core::ReusePolicy::<f64>::default().tolerance)]
     reuse_tolerance: f64,
-    /// With --reuse or --compare: most consecutive steps without a solve.
+    /// With --reuse: most consecutive steps without a solve.
     #[arg(long, default_value_t = planner_core::ReusePolicy::<f64>::default().max_age)]
     reuse_max_age: u8,
     /// Print one JSON object.
@@ -179,10 +183,11 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
         threads: a.threads,
         seed: a.seed,
         reuse: a.reuse.then_some(policy),
+        solver: a.solver.choice(),
     };
     if a.compare {
-        let r = compare(&settings, policy);
-        let safe = [&r.baseline, &r.reuse]
+        let r = compare(&settings);
+        let safe = [&r.baseline, &r.current]
             .iter()
             .all(|x| x.collisions + x.invariant_violations + x.limit_violations == 0);
         return finish(&r, a.json, safe, true);
@@ -256,6 +261,41 @@ pub fn bench(a: BenchArgs) -> ExitCode {
             r.max_rel_objective_gap.max(r.max_rel_objective_gap_persistent),
             r.max_constraint_violation,
             r.planner_median_iterations
+        );
+    }
+    println!(
+        "\nours against the interior-point method alone (the solver before issue 19), same problems:"
+    );
+    println!(
+        "{:>3} {:>5} {:>11} {:>10} {:>8} {:>10} {:>10} {:>8} {:>8} {:>10} {:>6} {:>9}",
+        "N",
+        "mode",
+        "ours med µs",
+        "ours p99",
+        "p99/med",
+        "ipm med µs",
+        "ipm p99",
+        "p99/med",
+        "speedup",
+        "act. set",
+        "iters",
+        "ipm iters"
+    );
+    for r in &report.results {
+        println!(
+            "{:>3} {:>5} {:>11.2} {:>10.2} {:>7.2}x {:>10.2} {:>10.2} {:>7.2}x {:>7.2}x {:>9.0}% {:>6} {:>9}",
+            r.horizon,
+            r.mode,
+            r.planner_median_us,
+            r.planner_p99_us,
+            r.planner_p99_us / r.planner_median_us,
+            r.interior_point_median_us,
+            r.interior_point_p99_us,
+            r.interior_point_p99_us / r.interior_point_median_us,
+            r.speedup_vs_interior_point,
+            100.0 * r.active_set_share,
+            r.planner_median_iterations,
+            r.interior_point_median_iterations
         );
     }
     println!(

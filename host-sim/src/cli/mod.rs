@@ -31,16 +31,20 @@ pub struct Cli {
 /// The planners' solver.
 #[derive(Clone, Copy, ValueEnum)]
 pub enum SolverArg {
-    /// planner-core's interior-point solver.
+    /// planner-core's solver: the active-set step on warm starts, the interior-point
+    /// method behind it.
     Ours,
+    /// planner-core's solver as before issue 19: the interior-point method alone.
+    OursInteriorPoint,
     /// Clarabel, the reference solver.
     Clarabel,
 }
 
 impl SolverArg {
-    fn choice(self) -> SolverChoice {
+    pub(crate) fn choice(self) -> SolverChoice {
         match self {
             SolverArg::Ours => SolverChoice::Ours,
+            SolverArg::OursInteriorPoint => SolverChoice::OursInteriorPoint,
             SolverArg::Clarabel => SolverChoice::Clarabel,
         }
     }

@@ -46,6 +46,8 @@ pub struct ScaleReport {
     pub roads: usize,
     /// Worker threads.
     pub threads: usize,
+    /// The planners' speed solver.
+    pub solver: SolverChoice,
     /// Simulated time (s).
     pub sim_seconds: f64,
     /// Wall-clock time (s).
@@ -66,8 +68,11 @@ pub struct ScaleReport {
     pub step: StepPercentiles,
     /// Steps whose MPC was solved (the rest: standstill, fallback), per planner step.
     pub solves_per_step: f64,
-    /// Interior-point iterations per planner step.
+    /// Solver iterations (Newton steps) per planner step.
     pub solver_iterations_per_step: f64,
+    /// Of the solved steps, the share the active-set step answered (0 with the
+    /// interior-point solver alone).
+    pub active_set_share: f64,
     /// Lateral-QP iterations per planner step (lane changes; 0 on platoons).
     pub lateral_iterations_per_step: f64,
     /// Lane changes completed.
@@ -209,6 +214,8 @@ pub struct ScaleSettings {
     pub seed: u64,
     /// Certified plan reuse in every planner (`None`: solve every step, as before).
     pub reuse: Option<ReusePolicy<f64>>,
+    /// The planners' speed solver.
+    pub solver: SolverChoice,
 }
 
 /// One road's world run to its end: its summary, counters and step costs.
@@ -217,7 +224,7 @@ fn run_road(s: &ScaleSettings, r: usize, n: usize) -> (Summary, Counters, StepCo
         Kind::Platoons => road(r, n, s.duration_s, s.seed),
         Kind::Traffic => traffic_road(r, n, s.duration_s, s.seed),
     };
-    let mut sim = World::<20>::new(road.world(), SolverChoice::Ours, None);
+    let mut sim = World::<20>::new(road.world(), s.solver, None);
     sim.set_reuse(s.reuse);
     sim.measure_step_costs();
     while !sim.finished() {
@@ -255,6 +262,7 @@ pub fn run(s: &ScaleSettings) -> ScaleReport {
         vehicles,
         roads: roads.len(),
         threads,
+        solver: s.solver,
         sim_seconds: s.duration_s,
         wall_seconds: wall,
         realtime_factor: s.duration_s / wall,
@@ -266,6 +274,7 @@ pub fn run(s: &ScaleSettings) -> ScaleReport {
         step: costs.percentiles(),
         solves_per_step: per_step(counters.solved_steps),
         solver_iterations_per_step: per_step(counters.solver_iterations),
+        active_set_share: counters.active_set_solves as f64 / counters.solved_steps.max(1) as f64,
         lateral_iterations_per_step: per_step(counters.lateral_iterations),
         lane_changes: sum(|s| s.lane_changes.changes as u64),
         yield_steps: counters.yield_steps,
@@ -283,7 +292,7 @@ impl core::fmt::Display for ScaleReport {
             f,
             "{} vehicles on {} roads ({:?}), {} threads: {:.1} s simulated in {:.2} s = {:.2}x real time, \
              {:.0} planner steps/s\n  step p50 {:.1} µs, p90 {:.1} µs, p99 {:.1} µs, max {:.0} µs; \
-             {:.2} solves, {:.2} reuses, {:.1} solver iterations, {:.1} lateral iterations per step; {} lane changes\n  \
+             {:.2} solves ({:.0} % by the active-set step), {:.2} reuses, {:.1} solver iterations, {:.1} lateral iterations per step; {} lane changes\n  \
              closed-loop cost {:.4} per step; certified gap {:.2e} per reuse\n  \
              {} collisions, {} invariant violations, {} limit violations, {} fallback steps",
             self.vehicles,
@@ -299,6 +308,7 @@ impl core::fmt::Display for ScaleReport {
             self.step.p99_us,
             self.step.max_us,
             self.solves_per_step,
+            100.0 * self.active_set_share,
             self.reuses_per_step,
             self.solver_iterations_per_step,
             self.lateral_iterations_per_step,
@@ -313,59 +323,66 @@ impl core::fmt::Display for ScaleReport {
     }
 }
 
-/// `scale --compare`: one world run twice in one process — solving every step (today's
-/// planner) and with certified plan reuse — and the ratios of the second to the first.
+/// `scale --compare`: one world run twice in one process — with the planner as it was
+/// before issue 19 (the interior-point method alone, solving every step) and as set up
+/// here (its solver, its reuse policy) — and the ratios of the second to the first.
 #[derive(Debug, Clone, Serialize)]
 pub struct ScaleComparison {
-    /// Every step solved.
+    /// The interior-point solver alone, every step solved.
     pub baseline: ScaleReport,
-    /// With the reuse policy.
-    pub reuse: ScaleReport,
-    /// reuse.planner_steps_per_second / baseline.planner_steps_per_second.
+    /// The run as set up.
+    pub current: ScaleReport,
+    /// current.planner_steps_per_second / baseline.planner_steps_per_second.
     pub speedup: f64,
-    /// reuse.solver_iterations_per_step / baseline.solver_iterations_per_step.
+    /// current.solver_iterations_per_step / baseline.solver_iterations_per_step.
     pub iterations_ratio: f64,
-    /// (reuse.tracking_cost_per_step − baseline's) / baseline's: the closed-loop cost
+    /// (current.tracking_cost_per_step − baseline's) / baseline's: the closed-loop cost
     /// given up (negative: none).
     pub tracking_cost_change: f64,
 }
 
-/// Runs `base` without and then with `policy`, on the same roads and seed.
-pub fn compare(base: &ScaleSettings, policy: ReusePolicy<f64>) -> ScaleComparison {
+/// Runs the baseline and then `base`, on the same roads and seed.
+pub fn compare(base: &ScaleSettings) -> ScaleComparison {
     let baseline = run(&ScaleSettings {
         reuse: None,
+        solver: SolverChoice::OursInteriorPoint,
         ..*base
     });
-    let reuse = run(&ScaleSettings {
-        reuse: Some(policy),
-        ..*base
-    });
+    let current = run(base);
     let ratio = |a: f64, b: f64| a / b.max(f64::MIN_POSITIVE);
     ScaleComparison {
         speedup: ratio(
-            reuse.planner_steps_per_second,
+            current.planner_steps_per_second,
             baseline.planner_steps_per_second,
         ),
         iterations_ratio: ratio(
-            reuse.solver_iterations_per_step,
+            current.solver_iterations_per_step,
             baseline.solver_iterations_per_step,
         ),
         tracking_cost_change: ratio(
-            reuse.tracking_cost_per_step - baseline.tracking_cost_per_step,
+            current.tracking_cost_per_step - baseline.tracking_cost_per_step,
             baseline.tracking_cost_per_step,
         ),
         baseline,
-        reuse,
+        current,
     }
 }
 
 impl core::fmt::Display for ScaleComparison {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        writeln!(f, "solving every step:\n  {}", self.baseline)?;
-        writeln!(f, "certified plan reuse:\n  {}", self.reuse)?;
+        writeln!(
+            f,
+            "baseline (interior point alone, every step solved):\n  {}",
+            self.baseline
+        )?;
+        writeln!(
+            f,
+            "current ({:?}):\n  {}",
+            self.current.solver, self.current
+        )?;
         write!(
             f,
-            "reuse / every step: {:.2}x planner steps/s, {:.2}x solver iterations per step, \
+            "current / baseline: {:.2}x planner steps/s, {:.2}x solver iterations per step, \
              closed-loop cost {:+.3} %",
             self.speedup,
             self.iterations_ratio,

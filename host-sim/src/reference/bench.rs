@@ -2,9 +2,10 @@
 
 use super::clarabel::{conic_data, ClarabelSolver, PersistentClarabel};
 use super::instances::{random_instances, rng};
-use planner_core::planner::free_road_gap;
+use planner_core::planner::{free_road_gap, shifted};
 use planner_core::{
-    CostWeights, IpmSolver, MpcSolver, Params, Real, ReusePolicy, SingleLaneProblem,
+    CostWeights, IpmSolver, Method, MpcSolver, Params, Real, ReusePolicy, Settings,
+    SingleLaneProblem, Solution, SolveError,
 };
 use rand::Rng;
 use serde::Serialize;
@@ -45,8 +46,23 @@ pub struct BenchResult {
     pub max_rel_objective_gap: f64,
     /// Largest constraint violation of our plans (m or m/s).
     pub max_constraint_violation: f64,
-    /// Median interior-point iterations of ours.
+    /// Median Newton steps of ours per solve.
     pub planner_median_iterations: f64,
+    /// Of our solves, the share the active-set step answered.
+    pub active_set_share: f64,
+    /// Median wall time of our solver with the interior-point method alone, as it was
+    /// before issue 19 ([`planner_core::Settings::interior_point_only`]), on the same
+    /// problems, warm-started from its own previous plans (µs).
+    pub interior_point_median_us: f64,
+    /// Its 99th percentile (µs).
+    pub interior_point_p99_us: f64,
+    /// Its median iterations.
+    pub interior_point_median_iterations: f64,
+    /// interior_point_median_us / planner_median_us.
+    pub speedup_vs_interior_point: f64,
+    /// Largest |J_ours − J_interior_point| / (1 + |J_interior_point|): both find the
+    /// same optima.
+    pub max_rel_objective_gap_interior_point: f64,
 }
 
 /// The whole benchmark output.
@@ -83,6 +99,10 @@ fn time_us<T>(reps: usize, mut setup: impl FnMut(), mut f: impl FnMut() -> T) ->
 
 struct Sample {
     ours_us: f64,
+    ipm_us: f64,
+    ipm_iterations: u32,
+    active_set: bool,
+    gap_ipm: f64,
     clarabel_us: f64,
     persistent_us: f64,
     solve_only_us: f64,
@@ -142,37 +162,71 @@ fn clarabel_times<const N: usize>(
     ])
 }
 
-fn compare<const N: usize>(
+/// Our two solvers in one: the default one (the active-set step first) and the
+/// interior-point method alone, each with its own warm-start chain.
+struct Ours<const N: usize> {
+    solver: IpmSolver<f64, N>,
+    ipm: IpmSolver<f64, N>,
+}
+
+impl<const N: usize> Ours<N> {
+    fn new() -> Self {
+        Self {
+            solver: IpmSolver::default(),
+            ipm: IpmSolver::new(Settings::interior_point_only()),
+        }
+    }
+}
+
+/// Times `solver` on `pr` from `warm`, every repetition from the same solver state
+/// (warm duals included).
+fn time_solver<const N: usize>(
+    solver: &mut IpmSolver<f64, N>,
     pr: &SingleLaneProblem<f64, N>,
     warm: Option<&[f64; N]>,
-    ours: &mut IpmSolver<f64, N>,
+    reps: usize,
+) -> (f64, Result<Solution<f64, N>, SolveError>) {
+    let snapshot = solver.clone();
+    let cell = std::cell::RefCell::new(solver);
+    time_us(
+        reps,
+        || cell.borrow_mut().clone_from(&snapshot),
+        || cell.borrow_mut().solve(pr, warm),
+    )
+}
+
+/// Both of ours and Clarabel on `pr`; our plans (default, interior point alone) for the
+/// next warm starts.
+fn compare<const N: usize>(
+    pr: &SingleLaneProblem<f64, N>,
+    warm: [Option<&[f64; N]>; 2],
+    ours: &mut Ours<N>,
     resident: &mut PersistentClarabel,
     reps: usize,
-) -> Option<(Sample, [f64; N])> {
-    // Each repetition starts from the same solver state (warm duals included).
-    let snapshot = ours.clone();
-    let ours_cell = std::cell::RefCell::new(ours);
-    let (ours_us, sol) = time_us(
-        reps,
-        || ours_cell.borrow_mut().clone_from(&snapshot),
-        || ours_cell.borrow_mut().solve(pr, warm),
-    );
-    let sol = sol.ok()?;
+) -> Option<(Sample, [[f64; N]; 2])> {
+    let [warm, ipm_warm] = warm;
+    let (ours_us, sol) = time_solver(&mut ours.solver, pr, warm, reps);
+    let (ipm_us, ipm) = time_solver(&mut ours.ipm, pr, ipm_warm, reps);
+    let (sol, ipm) = (sol.ok()?, ipm.ok()?);
     let [clarabel_us, solve_only_us, persistent_us, j_ref, j_res] =
         clarabel_times(pr, resident, reps)?;
     let gap = |j: f64| (sol.objective - j).abs() / (1.0 + j.abs());
     Some((
         Sample {
             ours_us,
+            ipm_us,
+            ipm_iterations: ipm.iterations,
+            active_set: sol.method == Method::ActiveSet,
             clarabel_us,
             persistent_us,
             solve_only_us,
             gap: gap(j_ref),
+            gap_ipm: gap(ipm.objective),
             gap_persistent: gap(j_res),
             viol: pr.max_violation(&sol.v).amount.max(0.0),
             iterations: sol.iterations,
         },
-        sol.v,
+        [sol.v, ipm.v],
     ))
 }
 
@@ -191,6 +245,9 @@ fn summarize(horizon: usize, mode: &'static str, samples: &[Sample]) -> BenchRes
     let pm = percentile(&ours, 0.5);
     let cm = percentile(&cl, 0.5);
     let persistent = median_of(|s| s.persistent_us);
+    let mut ipm: Vec<f64> = samples.iter().map(|s| s.ipm_us).collect();
+    ipm.sort_by(f64::total_cmp);
+    let ipm_median = percentile(&ipm, 0.5);
     let solve_only = median_of(|s| s.solve_only_us);
     BenchResult {
         horizon,
@@ -211,40 +268,41 @@ fn summarize(horizon: usize, mode: &'static str, samples: &[Sample]) -> BenchRes
         max_rel_objective_gap: samples.iter().map(|s| s.gap).fold(0.0, f64::max),
         max_constraint_violation: samples.iter().map(|s| s.viol).fold(0.0, f64::max),
         planner_median_iterations: percentile(&it, 0.5),
+        active_set_share: samples.iter().filter(|s| s.active_set).count() as f64
+            / samples.len().max(1) as f64,
+        interior_point_median_us: ipm_median,
+        interior_point_p99_us: percentile(&ipm, 0.99),
+        interior_point_median_iterations: median_of(|s| f64::from(s.ipm_iterations)),
+        speedup_vs_interior_point: ipm_median / pm,
+        max_rel_objective_gap_interior_point: samples.iter().map(|s| s.gap_ipm).fold(0.0, f64::max),
     }
 }
 
 /// Cold: `problems` random instances, each solved from scratch by both.
 pub fn cold<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchResult {
-    let mut ours = IpmSolver::<f64, N>::default();
+    let mut ours = Ours::<N>::new();
     let mut resident = PersistentClarabel::new(1e-8);
     let samples: Vec<Sample> = random_instances(seed, problems, N)
         .iter()
         .filter_map(|spec| spec.build::<f64, N>())
-        .filter_map(|pr| compare(&pr, None, &mut ours, &mut resident, reps).map(|(s, _)| s))
+        .filter_map(|pr| compare(&pr, [None, None], &mut ours, &mut resident, reps).map(|(s, _)| s))
         .collect();
     summarize(N, "cold", &samples)
 }
 
 /// Warm: the receding-horizon sequence of a simulated drive — one follower behind a
 /// stop-and-go leader, tracking vmax — each problem warm-started from our previous plan,
-/// shifted; Clarabel solves the same problems cold.
+/// shifted (the interior-point method alone from its own); Clarabel solves the same
+/// problems cold.
 pub fn warm<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchResult {
     let p = Params::<f64>::table_i();
     let mut r = rng(seed);
-    let mut settings = planner_core::Settings::<f64>::default();
-    if let Some(wb) = std::env::var("WARM_BARRIER")
-        .ok()
-        .and_then(|s| s.parse().ok())
-    {
-        settings.warm_barrier = wb;
-    }
-    let mut ours = IpmSolver::<f64, N>::new(settings);
+    let mut ours = Ours::<N>::new();
     let mut resident = PersistentClarabel::new(1e-8);
     let (mut x, mut v) = (0.0f64, 15.0f64);
     let (mut xl, mut vl) = (60.0f64, 15.0f64);
     let mut accel = 0.0;
-    let mut plan: Option<[f64; N]> = None;
+    let mut plans: Option<[[f64; N]; 2]> = None;
     let mut samples = Vec::with_capacity(problems);
     let mut step = 0u64;
     while samples.len() < problems && step < 100 * problems as u64 {
@@ -263,14 +321,16 @@ pub fn warm<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchRes
             p.v_max(),
         );
         let Ok(pr) = pr else { break };
-        let warm_start = plan.as_ref().map(planner_core::planner::shifted);
-        let Some((sample, sol)) = compare(&pr, warm_start.as_ref(), &mut ours, &mut resident, reps)
-        else {
+        let warm = plans.map(|[a, b]| [shifted(&a), shifted(&b)]);
+        let starts = warm
+            .as_ref()
+            .map_or([None, None], |[a, b]| [Some(a), Some(b)]);
+        let Some((sample, sols)) = compare(&pr, starts, &mut ours, &mut resident, reps) else {
             break;
         };
         samples.push(sample);
-        plan = Some(sol);
-        v = sol[0].clamp(pr.lo[0], pr.hi_exact[0]);
+        plans = Some(sols);
+        v = sols[0][0].clamp(pr.lo[0], pr.hi_exact[0]);
         x += v * p.h();
         vl = (vl + accel * p.h()).clamp(0.0, p.v_max());
         xl += vl * p.h();

@@ -13,7 +13,7 @@
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
-use planner_core::{MpcSolver, SingleLaneProblem, Solution, SolveError};
+use planner_core::{Method, MpcSolver, SingleLaneProblem, Solution, SolveError};
 
 /// Clarabel, cold-started every time (Clarabel has no warm start), tolerances 1e-10.
 #[derive(Debug, Clone)]
@@ -270,6 +270,8 @@ impl ClarabelSolver {
             v,
             objective: pr.objective(&v),
             iterations,
+            // Clarabel is an interior-point solver too.
+            method: Method::InteriorPoint,
         }
     }
 }

@@ -79,7 +79,7 @@ fn drive<const N: usize>(steps: usize, seed: u64, policy: Option<ReusePolicy<f64
         d.seconds += t0.elapsed().as_secs_f64();
         let Ok(c) = c else { break };
         match c.status {
-            StepStatus::Solved { iterations } => d.iterations += u64::from(iterations),
+            StepStatus::Solved { iterations, .. } => d.iterations += u64::from(iterations),
             StepStatus::Reused { certified_gap, .. } => {
                 d.reused += 1;
                 // J of the applied plan on the step's own problem, as the planner scored it.

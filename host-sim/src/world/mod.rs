@@ -126,8 +126,12 @@ impl Mode {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SolverChoice {
-    /// planner-core's interior-point solver.
+    /// planner-core's solver with its defaults: the active-set step on warm starts, the
+    /// interior-point method behind it.
     Ours,
+    /// planner-core's solver as it was before issue 19: the interior-point method alone
+    /// ([`planner_core::Settings::interior_point_only`]), for side-by-side benchmarks.
+    OursInteriorPoint,
     /// Clarabel (the reference), for comparing plans.
     Clarabel,
 }

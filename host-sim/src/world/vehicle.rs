@@ -22,8 +22,8 @@ use planner_core::crossing::{CrossingPlanner, CrossingReport};
 use planner_core::intersection::Movement;
 use planner_core::lane_change::LaneEvent;
 use planner_core::{
-    CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, Other, Params,
-    ParamsSpec, Planner, Pose, ReusePolicy, Road, Sensing, StepStatus, VehicleState,
+    CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, Method, Other, Params,
+    ParamsSpec, Planner, Pose, ReusePolicy, Road, Sensing, Settings, StepStatus, VehicleState,
 };
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -306,8 +306,11 @@ pub struct Counters {
     pub planner_steps: u64,
     /// Planner steps that solved.
     pub solved_steps: u64,
-    /// Solver iterations of those.
+    /// Solver iterations of those (Newton steps, every one).
     pub solver_iterations: u64,
+    /// Of the solved steps, those the active-set step answered
+    /// ([`planner_core::solver::active_set`]).
+    pub active_set_solves: u64,
     /// Planner steps that applied the previous plan, certified, without solving
     /// ([`planner_core::reuse`]; only with a reuse policy).
     pub reused_steps: u64,
@@ -328,6 +331,15 @@ pub struct Counters {
 }
 
 impl Counters {
+    /// Counts a solved planner step.
+    fn count_solve(&mut self, iterations: u32, method: Method) {
+        self.solved_steps += 1;
+        self.solver_iterations += u64::from(iterations);
+        if method == Method::ActiveSet {
+            self.active_set_solves += 1;
+        }
+    }
+
     /// Adds `o`.
     pub fn add(&mut self, o: &Counters) {
         self.fallback_steps += o.fallback_steps;
@@ -337,6 +349,7 @@ impl Counters {
         self.planner_steps += o.planner_steps;
         self.solved_steps += o.solved_steps;
         self.solver_iterations += o.solver_iterations;
+        self.active_set_solves += o.active_set_solves;
         self.reused_steps += o.reused_steps;
         self.certified_gap += o.certified_gap;
         self.tracking_cost += o.tracking_cost;
@@ -368,6 +381,9 @@ impl<const N: usize> Brain<N> {
     fn lane_planner(&self, lane: u8, v_max: f64) -> Box<LanePlanner<f64, N, AnySolver<N>>> {
         let s = match self.setup.solver {
             SolverChoice::Ours => AnySolver::Ours(IpmSolver::default()),
+            SolverChoice::OursInteriorPoint => {
+                AnySolver::Ours(IpmSolver::new(Settings::interior_point_only()))
+            }
             SolverChoice::Clarabel => AnySolver::Clarabel(ClarabelSolver {
                 accept_almost_solved: true,
                 ..ClarabelSolver::default()
@@ -813,9 +829,8 @@ impl<const N: usize> Vehicle<N> {
             Ok(cmd) => {
                 self.last_status = Some(cmd.status);
                 match cmd.status {
-                    StepStatus::Solved { iterations } => {
-                        counters.solved_steps += 1;
-                        counters.solver_iterations += u64::from(iterations);
+                    StepStatus::Solved { iterations, method } => {
+                        counters.count_solve(iterations, method);
                         (cmd.v, None)
                     }
                     // The crossing planners solve every step (no reuse policy is set).
@@ -990,9 +1005,8 @@ fn mode_of(
     id: u16,
 ) -> Mode {
     match status {
-        StepStatus::Solved { iterations } => {
-            counters.solved_steps += 1;
-            counters.solver_iterations += u64::from(iterations);
+        StepStatus::Solved { iterations, method } => {
+            counters.count_solve(iterations, method);
             Mode::moving(changing)
         }
         StepStatus::Reused { certified_gap, .. } => {
