@@ -93,26 +93,35 @@ impl<F: Real, const N: usize> Penta<F, N> {
     /// its original diagonal entry is raised to that value (as QDLDL and Clarabel do); the
     /// step is then slightly inexact, which the interior-point iteration absorbs.
     pub fn factor(&mut self, pivot_floor: F) -> Result<(), NotPositiveDefinite> {
-        for j in 0..N {
+        // One pass over the rows, the two previous rows' D, 1/D and L[j−1][j−2] carried
+        // along (no indexing: the hot loop of every Newton step).
+        let (mut d1, mut dinv1, mut lprev) = (F::ZERO, F::ZERO, F::ZERO);
+        let (mut d2, mut dinv2) = (F::ZERO, F::ZERO);
+        let rows = self
+            .d
+            .iter_mut()
+            .zip(self.dinv.iter_mut())
+            .zip(self.e1.iter_mut().zip(self.e2.iter_mut()));
+        for (j, ((d, dinv), (e1, e2))) in rows.enumerate() {
             let (mut l1, mut l2) = (F::ZERO, F::ZERO);
             if j >= 2 {
-                l2 = get(&self.e2, j) * get(&self.dinv, j - 2);
+                l2 = *e2 * dinv2;
             }
             if j >= 1 {
-                let mut m = get(&self.e1, j);
+                let mut m = *e1;
                 if j >= 2 {
-                    m -= l2 * get(&self.d, j - 2) * get(&self.e1, j - 1);
+                    m -= l2 * d2 * lprev;
                 }
-                l1 = m * get(&self.dinv, j - 1);
+                l1 = m * dinv1;
             }
-            let mut dj = get(&self.d, j);
+            let mut dj = *d;
             if j >= 1 {
-                dj -= l1 * l1 * get(&self.d, j - 1);
+                dj -= l1 * l1 * d1;
             }
             if j >= 2 {
-                dj -= l2 * l2 * get(&self.d, j - 2);
+                dj -= l2 * l2 * d2;
             }
-            let floor = pivot_floor * get(&self.d, j).abs();
+            let floor = pivot_floor * d.abs();
             // `!(x > floor)` also catches NaN, which then fails the check below.
             if !(dj > floor) {
                 dj = floor;
@@ -120,34 +129,50 @@ impl<F: Real, const N: usize> Penta<F, N> {
             if !(dj > F::ZERO) {
                 return Err(NotPositiveDefinite);
             }
-            set(&mut self.d, j, dj);
-            set(&mut self.dinv, j, F::ONE / dj);
-            set(&mut self.e1, j, l1);
-            set(&mut self.e2, j, l2);
+            let inv = F::ONE / dj;
+            (*d, *dinv, *e1, *e2) = (dj, inv, l1, l2);
+            (d2, dinv2) = (d1, dinv1);
+            (d1, dinv1, lprev) = (dj, inv, l1);
         }
         Ok(())
     }
 
     /// Solves L D Lᵀ x = b in place (after [`Penta::factor`]).
     pub fn solve(&self, b: &mut [F; N]) {
-        for j in 0..N {
-            let mut x = get(b, j);
+        // Forward: x_j = b_j − L[j][j−1] x_{j−1} − L[j][j−2] x_{j−2}.
+        let (mut x1, mut x2) = (F::ZERO, F::ZERO);
+        for (j, (bj, (&e1, &e2))) in b
+            .iter_mut()
+            .zip(self.e1.iter().zip(self.e2.iter()))
+            .enumerate()
+        {
+            let mut x = *bj;
             if j >= 1 {
-                x -= get(&self.e1, j) * get(b, j - 1);
+                x -= e1 * x1;
             }
             if j >= 2 {
-                x -= get(&self.e2, j) * get(b, j - 2);
+                x -= e2 * x2;
             }
-            set(b, j, x);
+            *bj = x;
+            (x2, x1) = (x1, x);
         }
         for (bj, dj) in b.iter_mut().zip(self.dinv.iter()) {
             *bj *= *dj;
         }
-        for j in (0..N).rev() {
-            let x = get(b, j)
-                - get(&self.e1, j + 1) * get(b, j + 1)
-                - get(&self.e2, j + 2) * get(b, j + 2);
-            set(b, j, x);
+        // Backward: x_j −= L[j+1][j] x_{j+1} + L[j+2][j] x_{j+2}.
+        let (mut x1, mut x2) = (F::ZERO, F::ZERO);
+        let (mut l1, mut l2) = (F::ZERO, F::ZERO);
+        let (mut l2next, mut j) = (F::ZERO, N);
+        for (bj, (&e1, &e2)) in b.iter_mut().zip(self.e1.iter().zip(self.e2.iter())).rev() {
+            j -= 1;
+            // L[j+1][j] = e1[j+1], L[j+2][j] = e2[j+2]: the rows after this one.
+            let x = *bj - l1 * x1 - l2 * x2;
+            *bj = x;
+            (x2, x1) = (x1, x);
+            // For row j−1: L[j][j−1] = e1[j], L[j+1][j−1] = e2[j+1].
+            l2 = l2next;
+            l1 = if j >= 1 { e1 } else { F::ZERO };
+            l2next = if j >= 2 { e2 } else { F::ZERO };
         }
     }
 }
@@ -156,13 +181,6 @@ impl<F: Real, const N: usize> Penta<F, N> {
 #[inline(always)]
 pub(crate) fn get<F: Real>(a: &[F], i: usize) -> F {
     a.get(i).copied().unwrap_or(F::ZERO)
-}
-
-#[inline(always)]
-pub(crate) fn set<F: Real>(a: &mut [F], i: usize, x: F) {
-    if let Some(slot) = a.get_mut(i) {
-        *slot = x;
-    }
 }
 
 #[inline(always)]

@@ -214,7 +214,12 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 self.evaluate(pr);
             }
             let changes = self.update_active_set(pr, tol_p);
-            let sum = self.held_checksum();
+            // An unchanged set keeps its checksum.
+            let sum = if it == 0 || changes > 0 {
+                self.held_checksum()
+            } else {
+                one_back
+            };
             let cycling = it >= 2 && changes > 0 && sum == two_back;
             if (it > 0 && changes > MAX_CHANGES) || cycling {
                 return Err(it);
@@ -275,6 +280,16 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// violated when it exceeds `threshold` (the primal tolerance, so that round-off does
     /// not toggle it). Returns the number of constraints that changed sides.
     fn update_active_set(&mut self, pr: &SingleLaneProblem<F, N>, threshold: F) -> u32 {
+        // Most steps change nothing: one pass finds that without the per-step scan.
+        let quiet = self.fam.iter().all(|f| {
+            f.act
+                .iter()
+                .zip(f.lam.iter().zip(f.g.iter()))
+                .all(|(&a, (&l, &g))| if a { !(l < F::ZERO) } else { !(g > threshold) })
+        });
+        if quiet {
+            return 0;
+        }
         let mut changes = 0;
         for k in 0..N {
             for f in self.fam.iter_mut() {
