@@ -60,3 +60,28 @@ fn theorem_1_random_platoons_with_plan_reuse() {
     // Reuse really happens (about a fifth of the steps), so the sweep tests it.
     assert!(sweep(cases, true) > cases * 1000);
 }
+
+/// The cases of the 10,000-platoon sweep (seed 1) where an f32 follower cruising near
+/// vmax once fell back to braking because the warm-started interior-point method,
+/// its barrier raised to the start's violation, failed (issue 19's solver, before its
+/// retry at the fixed barrier): each must now be solved every step.
+#[test]
+fn f32_followers_near_vmax_are_solved_every_step() {
+    use host_sim::experiments::platoon::{random_spec, run};
+    for i in [
+        523, 1439, 2551, 3439, 3883, 4387, 4931, 6067, 6807, 8039, 8159, 8883,
+    ] {
+        let spec = random_spec(i, 1);
+        assert!(spec.f32_planners, "case {i}");
+        let out = run(&spec);
+        assert_eq!(
+            (out.fallback_solver, out.fallback_verification),
+            (0, 0),
+            "case {i} {spec:?}: {out:?}"
+        );
+        assert_eq!(
+            out.findings.collisions + out.findings.invariant_violations,
+            0
+        );
+    }
+}

@@ -22,10 +22,12 @@
 //! pentadiagonal systems — two or three solves instead of the interior-point method's
 //! 3–10 iterations of two, returned only when it passes the same stopping test. Where it
 //! gives up (degenerate vertices), the interior-point method answers from its last
-//! iterate.
+//! iterate. A warm start whose barrier was raised to its violation
+//! ([`Settings::adaptive_warm_barrier`]) and that then fails is retried once at the
+//! fixed barrier from the warm start and the previous multipliers.
 //!
-//! Every loop is bounded: the iteration caps are [`Settings::max_iter`] and
-//! [`Settings::active_set_iter`].
+//! Every loop is bounded: the iteration caps are [`Settings::max_iter`] (twice at most,
+//! with the retry) and [`Settings::active_set_iter`].
 
 pub mod active_set;
 
@@ -245,6 +247,10 @@ struct Family<F, const N: usize> {
     dl: [F; N],
     /// In the active set of [`active_set`] (held as an equality).
     act: [bool; N],
+    /// The multipliers a warm-started interior-point method began from (the previous
+    /// solve's, unshifted), kept for its one retry at the fixed barrier
+    /// (`IpmSolver::solve_traced`).
+    prev: [F; N],
 }
 
 impl<F: Real, const N: usize> Family<F, N> {
@@ -260,6 +266,7 @@ impl<F: Real, const N: usize> Family<F, N> {
             rc: z,
             ds: z,
             dl: z,
+            prev: z,
         }
     }
 
@@ -275,6 +282,7 @@ impl<F: Real, const N: usize> Family<F, N> {
             &mut self.rc,
             &mut self.ds,
             &mut self.dl,
+            &mut self.prev,
         ] {
             a.fill(F::ZERO);
         }
@@ -283,7 +291,7 @@ impl<F: Real, const N: usize> Family<F, N> {
 }
 
 /// Our interior-point solver, with all working storage inline (no allocation):
-/// about 45 N scalars.
+/// about 62 N scalars and 5 N flags.
 ///
 /// The five constraint families share three gradient stencils in z:
 /// D1_k = e_k − e_{k−1} (v_k; upper bound +, lower bound −), D2_k = e_k − 2e_{k−1} + e_{k−2}
@@ -627,6 +635,8 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         (max_rd, scale)
     }
 
+    /// Starts the interior-point method from `warm` (or cold); whether the barrier was
+    /// raised above the fixed warm one ([`IpmSolver::start`]).
     fn initialize(&mut self, pr: &SingleLaneProblem<F, N>, warm: Option<&[F; N]>) -> bool {
         let warm_ok = match warm {
             Some(w) if w.iter().all(|x| x.is_finite()) => {
@@ -641,14 +651,14 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 *vk = pr.v_prev.min(hi).max(lo);
             }
         }
-        self.start(pr, warm_ok);
-        warm_ok
+        self.start(pr, warm_ok, self.settings.adaptive_warm_barrier)
     }
 
     /// The interior-point method's starting slacks and duals at the plan in `v` (a warm
     /// start's if `warm_ok`, else the cold one). With `warm_ok` the duals are the
-    /// previous solve's, shifted, when it left any.
-    fn start(&mut self, pr: &SingleLaneProblem<F, N>, warm_ok: bool) {
+    /// previous solve's, shifted, when it left any (kept unshifted in `prev` for a
+    /// retry). Returns whether `adaptive` raised the barrier above the fixed warm one.
+    fn start(&mut self, pr: &SingleLaneProblem<F, N>, warm_ok: bool, adaptive: bool) -> bool {
         self.evaluate(pr);
         let use_duals = warm_ok && self.have_duals;
         // Starting centrality: a warm start sits close to the central path, so it starts
@@ -660,7 +670,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         // and 4.67 → 3.53 on bench-planner's N = 50 drive).
         let floor = if !warm_ok {
             F::ONE
-        } else if self.settings.adaptive_warm_barrier {
+        } else if adaptive {
             let worst = self
                 .fam
                 .iter()
@@ -671,6 +681,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             self.settings.warm_barrier
         };
         for f in self.fam.iter_mut() {
+            f.prev = f.lam;
             // Previous duals, shifted one step (the last one repeated).
             let shifted: [F; N] =
                 core::array::from_fn(|k| get(&f.lam, (k + 1).min(N.saturating_sub(1))));
@@ -687,6 +698,16 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 };
             }
         }
+        warm_ok && floor > self.settings.warm_barrier
+    }
+
+    /// Back to the multipliers the last start began from, for a retry from `warm`.
+    fn restore_start(&mut self, warm: &[F; N], had_duals: bool) {
+        for f in self.fam.iter_mut() {
+            f.lam = f.prev;
+        }
+        self.have_duals = had_duals;
+        self.v = *warm;
     }
 }
 
@@ -730,25 +751,53 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         trace: &mut dyn FnMut(IterationInfo<F>),
     ) -> Result<Solution<F, N>, SolveError> {
         let st = self.settings;
-        let two = F::TWO;
         // Rounding floor of the primal residual: a few ulp of the largest quantity.
         let floor_p = F::from_f64(16.0) * F::EPSILON * (pr.gap.abs() + F::from_f64(100.0));
         let tol_p = st.tol + floor_p;
         // Newton steps a failed active-set attempt spent, counted in the answer.
         let mut spent = 0;
-        match warm_start.filter(|w| w.iter().all(|x| x.is_finite())) {
+        let warm = warm_start.filter(|w| w.iter().all(|x| x.is_finite()));
+        let had_duals = self.have_duals;
+        let raised = match warm {
             Some(w) if self.active_set_enabled() => {
                 match self.active_set_solve(pr, w, tol_p, trace) {
                     Ok(sol) => return Ok(sol),
                     Err(n) => spent = n,
                 }
                 // `v` holds the restart point the failed attempt chose.
-                self.start(pr, true);
+                self.start(pr, true, st.adaptive_warm_barrier)
             }
-            _ => {
-                self.initialize(pr, warm_start);
-            }
+            _ => self.initialize(pr, warm),
+        };
+        let mut result = self.interior_point(pr, tol_p, spent, trace);
+        // One retry, from the warm start at the fixed barrier, when the first attempt's
+        // barrier was raised to the start's violation: in f32 near vmax that start has
+        // been seen to collapse the complementarity before the dual residual converges
+        // (12 failures in the 247.5 M steps of the 10,000-platoon sweep, every one
+        // solved in 2–5 steps by the fixed barrier). The retry is bounded like the
+        // first attempt (`max_iter`) and runs only when an answer would otherwise be
+        // the fallback.
+        if let (Err((_, steps)), Some(w), true) = (&result, warm, raised) {
+            let spent = spent + *steps;
+            self.restore_start(w, had_duals);
+            self.start(pr, true, false);
+            result = self.interior_point(pr, tol_p, spent, trace);
         }
+        result.map_err(|(e, _)| e)
+    }
+
+    /// The interior-point iteration from the start [`IpmSolver::start`] left, `spent`
+    /// Newton steps already taken by this solve; on failure, the error and the steps it
+    /// took.
+    fn interior_point(
+        &mut self,
+        pr: &SingleLaneProblem<F, N>,
+        tol_p: F,
+        spent: u32,
+        trace: &mut dyn FnMut(IterationInfo<F>),
+    ) -> Result<Solution<F, N>, (SolveError, u32)> {
+        let st = self.settings;
+        let two = F::TWO;
         self.have_duals = false;
         let m = F::from_usize(FAMILIES * N);
         let w = pr.weights;
@@ -765,7 +814,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 }
             }
             if !(gap_sum.is_finite() && max_rd.is_finite() && max_rp.is_finite()) {
-                return Err(SolveError::NonFinite);
+                return Err((SolveError::NonFinite, it));
             }
             let v = self.v;
             // J is needed only for the gap test (and the trace): skip it while the
@@ -837,7 +886,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 *d += st.regularization;
             }
             if self.kkt.factor(st.pivot_floor).is_err() {
-                return Err(SolveError::Numerical { iteration: it });
+                return Err((SolveError::Numerical { iteration: it }, it));
             }
 
             // Predictor (affine scaling): rc = s∘λ.
@@ -888,7 +937,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             info.step = alpha;
             trace(info);
             if !(alpha > F::ZERO) {
-                return Err(SolveError::Numerical { iteration: it });
+                return Err((SolveError::Numerical { iteration: it }, it));
             }
             // v_k += α (dz_k − dz_{k−1}).
             let mut dz_prev = F::ZERO;
@@ -908,9 +957,12 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 }
             }
         }
-        Err(SolveError::IterationLimit {
-            iterations: st.max_iter + spent,
-        })
+        Err((
+            SolveError::IterationLimit {
+                iterations: st.max_iter + spent,
+            },
+            st.max_iter,
+        ))
     }
 }
 
