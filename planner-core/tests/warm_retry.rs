@@ -244,3 +244,16 @@ fn a_start_that_raised_the_barrier_is_retried_once() {
     let r = one_step(true).solve(&pr, None);
     assert_eq!(r.unwrap_err(), SolveError::IterationLimit { iterations: 1 });
 }
+
+/// A non-finite dual residual alone (an infinite weight put into a built problem) stops the
+/// interior-point method at its first check, before any step: the guard must test each
+/// of the gap, the dual residual and the primal residual.
+#[test]
+fn a_non_finite_residual_stops_before_any_step() {
+    let mut pr = problem();
+    pr.weights.reference_speed = f64::INFINITY;
+    let mut steps = 0;
+    let r = IpmSolver::<f64, 20>::default().solve_traced(&pr, None, &mut |_| steps += 1);
+    assert_eq!(r.unwrap_err(), SolveError::NonFinite);
+    assert_eq!(steps, 0);
+}
