@@ -386,23 +386,8 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         }
         self.newton_solve(0);
         // Δz projected on the three stencils, then the multiplier and plan updates.
-        let mut d1 = [F::ZERO; N];
-        let mut d2 = [F::ZERO; N];
-        let mut sd = [F::ZERO; N];
-        let (mut dz_prev, mut dv_prev) = (F::ZERO, F::ZERO);
-        for k in 0..N {
-            let dz = get(&self.dz, k);
-            let dv = dz - dz_prev;
-            put(&mut d1, k, dv);
-            put(&mut d2, k, dv - dv_prev);
-            put(
-                &mut sd,
-                k,
-                get(&self.c0, k) * dz + get(&self.c1, k) * dz_prev,
-            );
-            dz_prev = dz;
-            dv_prev = dv;
-        }
+        let (mut d1, mut d2, mut sd) = ([F::ZERO; N], [F::ZERO; N], [F::ZERO; N]);
+        self.stencil_directions(&mut d1, &mut d2, &mut sd);
         for ((f, dir), &plus) in self
             .fam
             .iter_mut()
