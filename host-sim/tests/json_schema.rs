@@ -163,6 +163,7 @@ fn the_page_parses_into_every_section() {
         "run",
         "platoons",
         "traffic",
+        "traffic --compare",
         "deadends",
         "crossings",
         "experiment multilane",
@@ -215,6 +216,11 @@ fn sweep_outputs_match_the_page() {
     check(
         "traffic",
         &["traffic", "--cases", "2", "--duration", "2"],
+        &[],
+    );
+    check(
+        "traffic --compare",
+        &["traffic", "--cases", "2", "--duration", "2", "--compare"],
         &[],
     );
     check("deadends", &["deadends", "--cases", "2"], &[]);

@@ -120,6 +120,24 @@ fn four_traffic_shards_merge_into_the_unsharded_sweep() {
 }
 
 #[test]
+fn four_traffic_comparison_shards_merge_into_the_unsharded_comparison() {
+    // Its cost given up and iterations ratio are ratios of sums: the merge recomputes them.
+    check(
+        "traffic",
+        &[
+            "--cases",
+            "5",
+            "--duration",
+            "2",
+            "--seed",
+            "3",
+            "--compare",
+            "--reuse",
+        ],
+    );
+}
+
+#[test]
 fn four_experiment_shards_merge_into_the_unsharded_experiments() {
     // Means, standard deviations and ratios are not sums of parts: these merge the runs
     // and aggregate them once. Three multi-lane runs in four shards leave one empty.

@@ -44,6 +44,10 @@ pub struct TrafficArgs {
     /// (planner-core's `ReusePolicy::default()`).
     #[arg(long)]
     reuse: bool,
+    /// Also run every case with the interior-point method alone, solving every step (the
+    /// planner before issue 19), and report the closed-loop cost given up against it.
+    #[arg(long)]
+    compare: bool,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -67,29 +71,66 @@ pub fn platoons(a: PlatoonsArgs) -> ExitCode {
     }
 }
 
-/// Theorem 2 sweep.
+/// Theorem 2 sweep (with `--compare`, beside the every-step baseline).
 pub fn traffic(a: TrafficArgs) -> ExitCode {
+    use host_sim::experiments::traffic::{traffic_compare, traffic_sweep_with, Planning};
     if let Err(code) = check_duration(a.duration, 3600.0) {
         return code;
     }
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    let planning = Planning {
+        reuse: a.reuse,
+        ..Planning::DEFAULT
+    };
+    let mut settings = json!({
+        "cases": a.cases, "seed": a.seed, "duration": a.duration, "reuse": a.reuse
+    });
+    if a.compare {
+        // Only then: shards of a plain sweep keep their settings as before.
+        settings["compare"] = json!(true);
+    }
     // Case i's seed is seed + i: it depends on the index alone.
-    let r = host_sim::experiments::multilane::traffic_sweep(
-        end - first,
-        a.seed + first,
-        a.duration,
-        0,
-        a.reuse,
-    );
-    let safe = r.collisions + r.invariant_violations + r.limit_violations == 0;
-    match a.shard {
-        Some(sh) => {
-            let settings = json!({
-                "cases": a.cases, "seed": a.seed, "duration": a.duration, "reuse": a.reuse
-            });
-            emit("traffic", settings, sh, (first, end), &r, code(safe, true))
+    let (cases, seed) = (end - first, a.seed + first);
+    let out = Out {
+        sweep: "traffic",
+        settings,
+        shard: a.shard,
+        range: (first, end),
+        json: a.json,
+    };
+    if a.compare {
+        let r = traffic_compare(cases, seed, a.duration, 0, planning);
+        out.print(&r, r.safe())
+    } else {
+        let r = traffic_sweep_with(cases, seed, a.duration, 0, planning);
+        out.print(&r, r.safe())
+    }
+}
+
+/// Where a sweep's result goes: a shard's envelope for `host-sim merge`, or the result
+/// itself (JSON or text).
+struct Out {
+    sweep: &'static str,
+    settings: Value,
+    shard: Option<Shard>,
+    range: (u64, u64),
+    json: bool,
+}
+
+impl Out {
+    /// Prints `r` and picks the exit code (a sweep's cases are not judged on liveness).
+    fn print<T: serde::Serialize + std::fmt::Display>(self, r: &T, safe: bool) -> ExitCode {
+        match self.shard {
+            Some(sh) => emit(
+                self.sweep,
+                self.settings,
+                sh,
+                self.range,
+                r,
+                code(safe, true),
+            ),
+            None => finish(r, self.json, safe, true),
         }
-        None => finish(&r, a.json, safe, true),
     }
 }
 

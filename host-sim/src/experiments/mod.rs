@@ -15,3 +15,4 @@ pub mod scale;
 pub mod shard;
 pub mod sweep;
 pub mod throughput;
+pub mod traffic;

@@ -1,5 +1,6 @@
 //! Multi-lane traffic (Sec. IV–V): the paper's experiment of Fig. 6/7 (SPEC §8), random
-//! traffic for Theorem 2, and the dead-end layout of Theorem 3.
+//! traffic for Theorem 2 (its sweep: [`super::traffic`]), and the dead-end layout of
+//! Theorem 3.
 
 use crate::bus::Faults;
 use crate::monitor::Limits;
@@ -270,76 +271,6 @@ pub fn experiment(
     multilane_report(&cases, solver, faults, t0.elapsed().as_secs_f64())
 }
 
-/// The Theorem 2 sweep's result.
-#[derive(Debug, Clone, Serialize)]
-pub struct TrafficReport {
-    /// Cases.
-    pub cases: u64,
-    /// Vehicles over all cases.
-    pub vehicles: u64,
-    /// Collisions.
-    pub collisions: u64,
-    /// Invariant violations.
-    pub invariant_violations: u64,
-    /// Limit violations and road departures.
-    pub limit_violations: u64,
-    /// Lane changes completed.
-    pub lane_changes: u64,
-    /// Vehicles in their target lane at the end.
-    pub in_target_lane: u64,
-    /// Certified-fallback steps (not yield, not standstill).
-    pub fallback_steps: u64,
-    /// Yield steps.
-    pub yield_steps: u64,
-    /// Planner steps.
-    pub planner_steps: u64,
-    /// Of those, steps that applied a certified previous plan without a solve.
-    pub reused_steps: u64,
-    /// Seeds of cases with a collision or violation (for replay).
-    pub failing_seeds: Vec<u64>,
-    /// Wall-clock time (s).
-    pub wall_seconds: f64,
-}
-
-/// Theorem 2 sweep: `cases` random-traffic cases; with `reuse`, the planners reuse
-/// certified plans ([`planner_core::ReusePolicy::default`]).
-pub fn traffic_sweep(
-    cases: u64,
-    first_seed: u64,
-    duration_s: f64,
-    threads: usize,
-    reuse: bool,
-) -> TrafficReport {
-    let t0 = std::time::Instant::now();
-    let results = super::par::map_indexed(cases as usize, threads, |i| {
-        let seed = first_seed + i as u64;
-        let spec = random_traffic(seed, 30, duration_s).world();
-        let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
-        w.set_reuse(reuse.then(planner_core::ReusePolicy::default));
-        (seed, run_world(w, &mut |_| {}))
-    });
-    let sum = |f: fn(&Summary) -> u64| results.iter().map(|(_, s)| f(s)).sum::<u64>();
-    TrafficReport {
-        cases,
-        vehicles: sum(|s| s.vehicles as u64),
-        collisions: sum(|s| s.collisions),
-        invariant_violations: sum(|s| s.invariant_violations),
-        limit_violations: sum(|s| s.limit_violations + s.off_road),
-        lane_changes: sum(|s| s.lane_changes.changes as u64),
-        in_target_lane: sum(|s| s.lane_changes.in_target_lane as u64),
-        fallback_steps: sum(|s| s.fallback_steps),
-        yield_steps: sum(|s| s.yield_steps),
-        planner_steps: sum(|s| s.planner_steps),
-        reused_steps: sum(|s| s.reused_steps),
-        failing_seeds: results
-            .iter()
-            .filter(|(_, s)| s.collisions + s.invariant_violations > 0)
-            .map(|(seed, _)| *seed)
-            .collect(),
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    }
-}
-
 impl core::fmt::Display for MultilaneReport {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
@@ -366,34 +297,5 @@ impl core::fmt::Display for MultilaneReport {
             self.yield_steps,
             self.planner_steps
         )
-    }
-}
-
-impl core::fmt::Display for TrafficReport {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(
-            f,
-            "Theorem 2: {} random multi-lane cases, {} vehicles in {:.1} s\n  \
-             {} collisions, {} invariant violations, {} limit violations\n  \
-             {} lane changes; {} of {} vehicles in their target lane at the end\n  \
-             fallback steps {}, yield steps {}, certified plan reuses {} of {} planner steps",
-            self.cases,
-            self.vehicles,
-            self.wall_seconds,
-            self.collisions,
-            self.invariant_violations,
-            self.limit_violations,
-            self.lane_changes,
-            self.in_target_lane,
-            self.vehicles,
-            self.fallback_steps,
-            self.yield_steps,
-            self.reused_steps,
-            self.planner_steps
-        )?;
-        if !self.failing_seeds.is_empty() {
-            write!(f, "\n  failing seeds: {:?}", self.failing_seeds)?;
-        }
-        Ok(())
     }
 }

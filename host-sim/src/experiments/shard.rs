@@ -170,6 +170,9 @@ pub fn merge(mut parts: Vec<Output>) -> Result<Value, MergeError> {
         "multilane" | "throughput" | "faults" | "faults-grid" | "demand" => {
             report_of_runs(&first, &acc)
         }
+        "traffic" if first.settings.get("compare") == Some(&Value::Bool(true)) => {
+            comparison_of_sums(&acc)
+        }
         _ => Ok(acc),
     }
 }
@@ -311,6 +314,18 @@ fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
         }
     };
     report.map_err(|e| MergeError::Shape(e.to_string()))
+}
+
+/// `traffic --compare`'s merged sums → its ratios, computed once from the sums as the
+/// unsharded run does (a sum of the shards' ratios would mean nothing).
+fn comparison_of_sums(merged: &Value) -> Result<Value, MergeError> {
+    use super::traffic::{TrafficComparison, TrafficReport};
+    let part = |key: &str| -> Result<TrafficReport, MergeError> {
+        let v = merged.get(key).cloned().unwrap_or(Value::Null);
+        serde_json::from_value(v).map_err(|e| MergeError::Shape(format!("{key}: {e}")))
+    };
+    let r = TrafficComparison::of(part("current")?, part("every_step")?);
+    serde_json::to_value(r).map_err(|e| MergeError::Shape(e.to_string()))
 }
 
 /// Combines two results of the same shape, field by field (see the module's doc).
