@@ -62,13 +62,14 @@ pub fn platoons(a: PlatoonsArgs) -> ExitCode {
     let s = host_sim::experiments::platoon::sweep_range(first, end, a.seed, a.reuse);
     let safe =
         s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == end - first;
-    match a.shard {
-        Some(sh) => {
-            let settings = json!({"cases": a.cases, "seed": a.seed, "reuse": a.reuse});
-            emit("platoons", settings, sh, (first, end), &s, code(safe, true))
-        }
-        None => finish(&s, a.json, safe, true),
-    }
+    let out = Out {
+        sweep: "platoons",
+        settings: json!({"cases": a.cases, "seed": a.seed, "reuse": a.reuse}),
+        shard: a.shard,
+        range: (first, end),
+        json: a.json,
+    };
+    out.print(&s, safe)
 }
 
 /// Theorem 2 sweep (with `--compare`, beside the every-step baseline).

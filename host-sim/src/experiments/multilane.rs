@@ -142,11 +142,11 @@ pub fn run_one(
     solver: SolverChoice,
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Summary {
-    run_world(World::<20>::new(world, solver, None), trace)
+    run_world(&mut World::<20>::new(world, solver, None), trace)
 }
 
-/// Runs `w` to its end and returns its summary.
-pub fn run_world(mut w: World<20>, trace: &mut dyn FnMut(&TraceRow)) -> Summary {
+/// Runs `w` to its end and returns its summary (its counters stay in `w`).
+pub fn run_world(w: &mut World<20>, trace: &mut dyn FnMut(&TraceRow)) -> Summary {
     let t0 = std::time::Instant::now();
     while !w.finished() {
         // The in-process bus cannot fail.

@@ -227,13 +227,9 @@ fn run_road(s: &ScaleSettings, r: usize, n: usize) -> (Summary, Counters, StepCo
     let mut sim = World::<20>::new(road.world(), s.solver, None);
     sim.set_reuse(s.reuse);
     sim.measure_step_costs();
-    while !sim.finished() {
-        if sim.step(&mut |_| {}).is_err() {
-            break;
-        }
-    }
+    let summary = super::multilane::run_world(&mut sim, &mut |_| {});
     let costs = sim.step_costs().cloned().unwrap_or_default();
-    (sim.summary(0.0), *sim.counters(), costs)
+    (summary, *sim.counters(), costs)
 }
 
 /// Runs the vehicles of `s` on its roads, on its threads.

@@ -14,7 +14,7 @@
 //! stop at the same tolerance, so the change is rounding; with reuse it is bounded per
 //! reused step by the Lagrangian-dual certificate ([`planner_core::reuse`]).
 
-use super::multilane::random_traffic;
+use super::multilane::{random_traffic, run_world};
 use crate::world::summary::Summary;
 use crate::world::vehicle::Counters;
 use crate::world::{SolverChoice, World};
@@ -97,6 +97,11 @@ impl TrafficReport {
     pub fn iterations_per_solve(&self) -> f64 {
         self.solver_iterations as f64 / self.solved_steps.max(1) as f64
     }
+
+    /// Solver iterations per planner step (reused and unsolved steps count as none).
+    pub fn iterations_per_step(&self) -> f64 {
+        self.solver_iterations as f64 / self.planner_steps.max(1) as f64
+    }
 }
 
 /// One case run to its end: its summary and the planners' counters.
@@ -104,10 +109,8 @@ fn run_case(seed: u64, duration_s: f64, planning: Planning) -> (Summary, Counter
     let spec = random_traffic(seed, 30, duration_s).world();
     let mut w = World::<20>::new(spec, planning.solver, None);
     w.set_reuse(planning.reuse.then(planner_core::ReusePolicy::default));
-    let t0 = std::time::Instant::now();
-    // The in-process bus cannot fail: an error ends the case as it stands.
-    while !w.finished() && w.step(&mut |_| {}).is_ok() {}
-    (w.summary(t0.elapsed().as_secs_f64()), *w.counters())
+    let summary = run_world(&mut w, &mut |_| {});
+    (summary, *w.counters())
 }
 
 /// Theorem 2 sweep with the planner as shipped; with `reuse`, the planners reuse
@@ -185,12 +188,10 @@ pub struct TrafficComparison {
 impl TrafficComparison {
     /// The comparison of two sweeps over the same cases.
     pub fn of(current: TrafficReport, every_step: TrafficReport) -> Self {
-        let per_step =
-            |r: &TrafficReport| r.solver_iterations as f64 / r.planner_steps.max(1) as f64;
         let base = every_step.tracking_cost_per_step();
         Self {
             cost_given_up: (current.tracking_cost_per_step() - base) / base,
-            iterations_ratio: per_step(&current) / per_step(&every_step),
+            iterations_ratio: current.iterations_per_step() / every_step.iterations_per_step(),
             current,
             every_step,
         }
