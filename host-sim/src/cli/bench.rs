@@ -1,7 +1,7 @@
 //! Benchmarks: `scale` (vehicles in real time), `bench-planner` (our solver vs
 //! Clarabel) and `bench-can` (the CAN gateway with and without SecOC).
 
-use super::output::{bad_input, finish, print_json};
+use super::output::{bad_input, finish, out, print_json};
 use host_sim::reference::bench::BenchReport;
 use std::process::ExitCode;
 
@@ -125,12 +125,17 @@ pub fn bench_can(a: CanBenchArgs) -> ExitCode {
         };
     }
     let base = rows.first().map_or(1.0, |r| r.messages_per_s);
-    println!(
+    out!(
         "{:<14} {:>10} {:>10} {:>14} {:>14} {:>16}",
-        "config", "messages", "frames", "messages/s", "frames/s", "msg/s vs classic"
+        "config",
+        "messages",
+        "frames",
+        "messages/s",
+        "frames/s",
+        "msg/s vs classic"
     );
     for r in &rows {
-        println!(
+        out!(
             "{:<14} {:>10} {:>10} {:>14.0} {:>14.0} {:>16.2}",
             r.config,
             r.messages,
@@ -162,11 +167,10 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
         tolerance: a.reuse_tolerance,
         max_age: a.reuse_max_age,
     };
-    if let Some(p) = &a.plot {
-        if let Err(code) = super::output::check_plot(p) {
-            return code;
-        }
-    }
+    let plot = match super::output::plot_output(a.plot.as_deref()) {
+        Ok(p) => p,
+        Err(code) => return code,
+    };
     if a.sweep_vehicles.iter().any(|&v| v == 0 || v > 1_000_000)
         || a.sweep_threads.iter().any(|&t| t == 0 || t > 1024)
     {
@@ -196,9 +200,11 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
     if a.sweep {
         let vehicles: Vec<usize> = a.sweep_vehicles.iter().map(|&v| v as usize).collect();
         let r = sweep(&settings, &vehicles, &a.sweep_threads);
-        if let Some(p) = &a.plot {
-            if let Err(e) = host_sim::output::plot::scale(&r, p) {
-                return bad_input(e.to_string());
+        if let Some(out) = plot {
+            if let Err(code) =
+                super::output::draw_plot(out, |p| host_sim::output::plot::scale(&r, p))
+            {
+                return code;
             }
         }
         let safe = r
@@ -236,7 +242,7 @@ fn print_against_clarabel(report: &BenchReport) {
     // Clarabel three ways: setup + solve ("clarabel"), resident with the data updated in
     // place ("resident"), and solve() alone ("solve only"); each speedup is its median over
     // ours, in the same run.
-    println!(
+    out!(
         "{:>3} {:>5} {:>8} {:>12} {:>10} {:>14} {:>8} {:>12} {:>8} {:>12} {:>8} {:>10} {:>10} {:>6}",
         "N",
         "mode",
@@ -254,7 +260,7 @@ fn print_against_clarabel(report: &BenchReport) {
         "iters"
     );
     for r in &report.results {
-        println!(
+        out!(
             "{:>3} {:>5} {:>8} {:>12.2} {:>10.2} {:>14.1} {:>8.1} {:>12.1} {:>8.1} {:>12.1} {:>8.1} {:>10.1e} {:>10.1e} {:>6}",
             r.horizon,
             r.mode,
@@ -276,10 +282,10 @@ fn print_against_clarabel(report: &BenchReport) {
 
 /// The second table: ours against our interior-point method alone, same problems.
 fn print_against_interior_point(report: &BenchReport) {
-    println!(
+    out!(
         "\nours against the interior-point method alone (the solver before issue 19), same problems:"
     );
-    println!(
+    out!(
         "{:>3} {:>5} {:>11} {:>10} {:>8} {:>10} {:>10} {:>8} {:>8} {:>10} {:>6} {:>9}",
         "N",
         "mode",
@@ -295,7 +301,7 @@ fn print_against_interior_point(report: &BenchReport) {
         "ipm iters"
     );
     for r in &report.results {
-        println!(
+        out!(
             "{:>3} {:>5} {:>11.2} {:>10.2} {:>7.2}x {:>10.2} {:>10.2} {:>7.2}x {:>7.2}x {:>9.0}% {:>6} {:>9}",
             r.horizon,
             r.mode,
@@ -315,13 +321,13 @@ fn print_against_interior_point(report: &BenchReport) {
 
 /// The third table: certified plan reuse against solving every step.
 fn print_reuse(report: &BenchReport) {
-    println!(
+    out!(
         "\ncertified plan reuse on the warm drive (tolerance {}, at most {} steps without a solve), \
          against solving every step:",
         report.reuse.first().map_or(0.0, |r| r.tolerance),
         report.reuse.first().map_or(0, |r| r.max_age)
     );
-    println!(
+    out!(
         "{:>3} {:>6} {:>8} {:>12} {:>12} {:>12} {:>12} {:>8} {:>12} {:>12}",
         "N",
         "steps",
@@ -335,7 +341,7 @@ fn print_reuse(report: &BenchReport) {
         "max cert."
     );
     for r in &report.reuse {
-        println!(
+        out!(
             "{:>3} {:>6} {:>7.1}% {:>12.2} {:>12.2} {:>12.2} {:>12.2} {:>7.2}x {:>11.4}% {:>12.1e}",
             r.horizon,
             r.steps,

@@ -1,6 +1,6 @@
 //! `host-sim experiment …`: the paper's figures and the fault experiment.
 
-use super::output::{bad_input, check_duration, check_plot, finish};
+use super::output::{bad_input, check_duration, draw_plot, finish, plot_output};
 use super::SolverArg;
 use host_sim::bus::Faults;
 use host_sim::experiments::faults::{compare, FaultSettings};
@@ -406,20 +406,20 @@ fn fault_grid(
             );
         }
     }
-    if let Some(p) = &plot {
-        if let Err(code) = check_plot(p) {
-            return code;
-        }
-    }
+    let plot = match plot_output(plot.as_deref()) {
+        Ok(p) => p,
+        Err(code) => return code,
+    };
     if let Some(sh) = shard {
         return fault_grid_shard(cells, losses, delays, runs, sh);
     }
     let r = grid(&cells, runs, 1, 0);
-    if let Some(path) = &plot {
-        match host_sim::output::plot::fault_grid(&r, path) {
-            Ok(()) => eprintln!("wrote {}", path.display()),
-            Err(e) => return bad_input(e),
+    if let Some(out) = plot {
+        let shown = out.target().display().to_string();
+        if let Err(code) = draw_plot(out, |p| host_sim::output::plot::fault_grid(&r, p)) {
+            return code;
         }
+        eprintln!("wrote {shown}");
     }
     finish(&r, json, r.unsafe_cells == 0, true)
 }
@@ -509,18 +509,17 @@ fn demand(
     if let Err(code) = check_duration(duration, 7200.0) {
         return code;
     }
-    if let Some(p) = &plot {
-        if let Err(code) = check_plot(p) {
-            return code;
-        }
-    }
+    let plot = match plot_output(plot.as_deref()) {
+        Ok(p) => p,
+        Err(code) => return code,
+    };
     if let Some(sh) = shard {
         return demand_shard(&chosen, rates, duration, seeds, sh);
     }
     let r = host_sim::experiments::demand::run(&chosen, rates, duration, seeds, 0);
-    if let Some(path) = plot {
-        if let Err(e) = host_sim::output::plot::demand(&r, &path) {
-            return bad_input(e);
+    if let Some(out) = plot {
+        if let Err(code) = draw_plot(out, |p| host_sim::output::plot::demand(&r, p)) {
+            return code;
         }
     }
     let safe = r
@@ -544,17 +543,16 @@ fn multilane(
         Ok(f) => f,
         Err(e) => return bad_input(e),
     };
-    if let Some(p) = &plot {
-        if let Err(code) = check_plot(p) {
-            return code;
-        }
-    }
+    let plot = match plot_output(plot.as_deref()) {
+        Ok(p) => p,
+        Err(code) => return code,
+    };
     let solver = solver.choice();
     if let Some(sh) = shard {
         return multilane_shard(seeds, seed, solver, faults, sh);
     }
     let r = host_sim::experiments::multilane::experiment(seeds, seed, solver, faults, 0);
-    if let Some(path) = plot {
+    if let Some(out) = plot {
         let sc = host_sim::experiments::multilane::paper_scenario(seed);
         let name = format!("{} (Fig. 7 style)", sc.name);
         let world = sc.world();
@@ -564,8 +562,8 @@ fn multilane(
             ..PlotData::of(&world.network)
         };
         host_sim::experiments::multilane::run_one(world, solver, &mut |r| data.add(r));
-        if let Err(e) = host_sim::output::plot::write(&data, &name, &path) {
-            return bad_input(e);
+        if let Err(code) = draw_plot(out, |p| host_sim::output::plot::write(&data, &name, p)) {
+            return code;
         }
     }
     finish(
@@ -595,15 +593,14 @@ fn throughput(
     if let Some(sh) = shard {
         return throughput_shard(duration, seeds, seed, faults, sh);
     }
-    if let Some(p) = &plot {
-        if let Err(code) = check_plot(p) {
-            return code;
-        }
-    }
+    let plot = match plot_output(plot.as_deref()) {
+        Ok(p) => p,
+        Err(code) => return code,
+    };
     let r = host_sim::experiments::throughput::throughput(seeds, seed, duration, faults, 0);
-    if let Some(path) = plot {
-        if let Err(e) = host_sim::output::plot::bars(&r, &path) {
-            return bad_input(e);
+    if let Some(out) = plot {
+        if let Err(code) = draw_plot(out, |p| host_sim::output::plot::bars(&r, p)) {
+            return code;
         }
     }
     finish(

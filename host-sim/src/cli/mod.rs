@@ -26,6 +26,10 @@ use std::process::ExitCode;
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Write what the command prints (its JSON or its summary) to FILE instead of
+    /// stdout — whole or not at all: a refused or failed run leaves FILE as it was.
+    #[arg(long, global = true, value_name = "FILE")]
+    output: Option<PathBuf>,
 }
 
 /// The planners' solver.
@@ -133,9 +137,47 @@ enum Command {
     BenchCan(bench::CanBenchArgs),
 }
 
-/// Parses the command line and runs it.
+/// Parses the command line and runs it; with `--output`, what it printed is put in place
+/// only when the command ran to its end (exit 0, 1 or 3: a result, safe or not).
 pub fn main() -> ExitCode {
-    match Cli::parse().command {
+    let cli = Cli::parse();
+    let out = match cli
+        .output
+        .as_deref()
+        .map(|p| output::staged(p, "--output"))
+        .transpose()
+    {
+        Ok(o) => o,
+        Err(code) => return code,
+    };
+    if out.is_some() {
+        output::capture_stdout();
+    }
+    let code = dispatch(cli.command);
+    let Some(mut out) = out else {
+        return code;
+    };
+    let text = output::take_captured().unwrap_or_default();
+    let ran = [
+        ExitCode::SUCCESS,
+        ExitCode::from(output::EXIT_UNSAFE),
+        ExitCode::from(output::EXIT_NOT_LIVE),
+    ]
+    .contains(&code);
+    if !ran {
+        return code;
+    }
+    if let Err(e) = out.write_all(text.as_bytes()) {
+        return output::bad_input(format!("--output {}: {e}", out.target().display()));
+    }
+    match output::commit(out, "--output") {
+        Ok(()) => code,
+        Err(c) => c,
+    }
+}
+
+fn dispatch(command: Command) -> ExitCode {
+    match command {
         Command::Run {
             file,
             seed,

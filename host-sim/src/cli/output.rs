@@ -2,7 +2,9 @@
 //! code — 0 ok, 1 unsafe (a collision or a violation), 2 bad input, 3 a liveness goal
 //! missed (or a deadlock), 4 a CAN bus failure.
 
+use host_sim::output::staged::Staged;
 use std::process::ExitCode;
+use std::sync::Mutex;
 
 /// A collision or a safety or limit violation was seen.
 pub const EXIT_UNSAFE: u8 = 1;
@@ -46,10 +48,40 @@ pub fn tidy(v: &mut serde_json::Value) {
     }
 }
 
-/// Prints `text` and a newline to stdout; a reader that went away (`| head`) ends the
-/// output quietly instead of a panic.
+/// `println!` through [`say`]: to stdout, or into the `--output` buffer.
+macro_rules! out {
+    ($($arg:tt)*) => {
+        let _ = $crate::cli::output::say(&format!($($arg)*));
+    };
+}
+pub(crate) use out;
+
+/// What `--output FILE` collects instead of printing: `None` prints to stdout.
+static CAPTURED: Mutex<Option<String>> = Mutex::new(None);
+
+/// From now on, what the command would print goes into a buffer ([`take_captured`]).
+pub fn capture_stdout() {
+    if let Ok(mut c) = CAPTURED.lock() {
+        *c = Some(String::new());
+    }
+}
+
+/// What was captured since [`capture_stdout`].
+pub fn take_captured() -> Option<String> {
+    CAPTURED.lock().ok().and_then(|mut c| c.take())
+}
+
+/// Prints `text` and a newline to stdout (or into the `--output` buffer); a reader that
+/// went away (`| head`) ends the output quietly instead of a panic.
 pub fn say(text: &str) -> Result<(), ExitCode> {
     use std::io::Write;
+    if let Ok(mut c) = CAPTURED.lock() {
+        if let Some(buf) = c.as_mut() {
+            buf.push_str(text);
+            buf.push('\n');
+            return Ok(());
+        }
+    }
     let mut out = std::io::stdout().lock();
     match writeln!(out, "{text}").and_then(|()| out.flush()) {
         Ok(()) => Ok(()),
@@ -107,9 +139,9 @@ pub fn check_duration(duration: f64, max: f64) -> Result<(), ExitCode> {
     }
 }
 
-/// A `--plot` path must end in .png or .svg and be creatable now (so that a long run is
-/// not wasted on an output it cannot write).
-pub fn check_plot(path: &std::path::Path) -> Result<(), ExitCode> {
+/// A `--plot` path must end in .png or .svg and be writable now (so that a long run is
+/// not wasted on an output it cannot write): its staged file, to draw into and commit.
+pub fn check_plot(path: &std::path::Path) -> Result<Staged, ExitCode> {
     if !matches!(
         path.extension().and_then(|e| e.to_str()),
         Some("png" | "svg")
@@ -119,12 +151,32 @@ pub fn check_plot(path: &std::path::Path) -> Result<(), ExitCode> {
             path.display()
         )));
     }
-    creatable(path, "--plot")
+    staged(path, "--plot")
 }
 
-/// `path` can be created (it is, empty; the run writes it at the end).
-pub fn creatable(path: &std::path::Path, flag: &str) -> Result<(), ExitCode> {
-    std::fs::File::create(path)
-        .map(|_| ())
-        .map_err(|e| bad_input(format!("{flag} {}: {e}", path.display())))
+/// The staged output for `path` (see [`Staged`]: the target is only replaced when the
+/// output is complete), or exit 2 naming `flag`.
+pub fn staged(path: &std::path::Path, flag: &str) -> Result<Staged, ExitCode> {
+    Staged::create(path).map_err(|e| bad_input(format!("{flag} {}: {e}", path.display())))
+}
+
+/// Commits a complete output, or exit 2 naming `flag`.
+pub fn commit(out: Staged, flag: &str) -> Result<(), ExitCode> {
+    let shown = out.target().display().to_string();
+    out.commit()
+        .map_err(|e| bad_input(format!("{flag} {shown}: {e}")))
+}
+
+/// The staged `--plot` output, if asked for (checked now, before anything runs).
+pub fn plot_output(plot: Option<&std::path::Path>) -> Result<Option<Staged>, ExitCode> {
+    plot.map(check_plot).transpose()
+}
+
+/// Draws a complete result with `draw` into the staged plot, and puts it in place.
+pub fn draw_plot<E: std::fmt::Display>(
+    out: Staged,
+    draw: impl FnOnce(&std::path::Path) -> Result<(), E>,
+) -> Result<(), ExitCode> {
+    draw(out.temp_path()).map_err(bad_input)?;
+    commit(out, "--plot")
 }

@@ -1,8 +1,9 @@
 //! `host-sim run FILE`: a scenario — a road, an intersection or a network — every vehicle
 //! its own planner, talking only over the bus; its trace, plot and viewer page.
 
-use super::output::{bad_input, check_plot, code, creatable, print_json, EXIT_BUS};
+use super::output::{bad_input, check_plot, code, commit, print_json, staged, EXIT_BUS};
 use host_sim::output::plot::PlotData;
+use host_sim::output::staged::Staged;
 use host_sim::output::trace::TraceWriter;
 use host_sim::output::viewer::Viewer;
 use host_sim::world::summary::Summary;
@@ -37,22 +38,23 @@ pub struct RunArgs {
     pub can_fd: bool,
 }
 
-/// Where a run's rows go.
+/// Where a run's rows go, and the staged files they end in (nothing is written to an
+/// output's path before the run is complete).
 struct Sinks {
-    trace: Option<TraceWriter<BufWriter<std::fs::File>>>,
-    plot: Option<PlotData>,
-    viewer: Option<Viewer>,
+    trace: Option<(TraceWriter<BufWriter<std::fs::File>>, Staged)>,
+    plot: Option<(PlotData, Staged)>,
+    viewer: Option<(Viewer, Staged)>,
 }
 
 impl Sinks {
     fn row(&mut self, r: &TraceRow) {
-        if let Some(w) = self.trace.as_mut() {
+        if let Some((w, _)) = self.trace.as_mut() {
             w.row(r);
         }
-        if let Some(p) = self.plot.as_mut() {
+        if let Some((p, _)) = self.plot.as_mut() {
             p.add(r);
         }
-        if let Some(v) = self.viewer.as_mut() {
+        if let Some((v, _)) = self.viewer.as_mut() {
             v.add(r);
         }
     }
@@ -60,19 +62,22 @@ impl Sinks {
 
 /// `host-sim run`.
 pub fn run(a: RunArgs) -> ExitCode {
+    let keys = match link_keys(&a) {
+        Ok(k) => k,
+        Err(code) => return code,
+    };
     match prepare(&a) {
-        Ok((spec, sinks)) => execute(&a, spec, sinks),
+        Ok((spec, sinks)) => execute(&a, keys, spec, sinks),
         Err(code) => code,
     }
 }
 
-/// Every input and output checked before anything runs.
+/// Every input checked before any output is staged, and every output staged (so that
+/// one that cannot be written is refused) before anything runs; no existing file is
+/// touched until the run is complete.
 fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
     if a.bus != "in-process" {
         super::fleet::check_bus(&a.bus)?;
-    }
-    if let Some(p) = &a.plot {
-        check_plot(p)?;
     }
     if let Some(p) = &a.html {
         if p.extension().and_then(|e| e.to_str()) != Some("html") {
@@ -81,29 +86,34 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
                 p.display()
             )));
         }
-        creatable(p, "--html")?;
     }
     let spec = host_sim::scenario::load(&a.file).map_err(bad_input)?;
     if a.bus != "in-process" {
         super::fleet::fits_the_bus(&a.file, &spec)?;
     }
+    let plot = match &a.plot {
+        Some(p) => Some((PlotData::of(&spec.network), check_plot(p)?)),
+        None => None,
+    };
+    let viewer = match &a.html {
+        Some(p) => Some((
+            Viewer::new(&spec.network, host_sim::monitor::Limits::table_i().h),
+            staged(p, "--html")?,
+        )),
+        None => None,
+    };
     let trace = match &a.trace {
         Some(p) => {
-            creatable(p, "--trace")?;
-            let f = std::fs::File::create(p)
+            let mut out = staged(p, "--trace")?;
+            let f = out
+                .take_file()
+                .ok_or_else(|| bad_input(format!("--trace {}", p.display())))?;
+            let w = TraceWriter::new(BufWriter::new(f), &spec.network)
                 .map_err(|e| bad_input(format!("--trace {}: {e}", p.display())))?;
-            Some(
-                TraceWriter::new(BufWriter::new(f), &spec.network)
-                    .map_err(|e| bad_input(format!("--trace {}: {e}", p.display())))?,
-            )
+            Some((w, out))
         }
         None => None,
     };
-    let plot = a.plot.as_ref().map(|_| PlotData::of(&spec.network));
-    let viewer = a
-        .html
-        .as_ref()
-        .map(|_| Viewer::new(&spec.network, host_sim::monitor::Limits::table_i().h));
     Ok((
         spec,
         Sinks {
@@ -114,19 +124,26 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
     ))
 }
 
-fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
-    let keys = match super::fleet::keys(a.auth, a.keys.as_deref()) {
-        Ok(k) => k,
-        Err(e) => return bad_input(e),
-    };
+/// The link's keys, or why the link flags do not fit the bus.
+fn link_keys(a: &RunArgs) -> Result<Option<std::sync::Arc<host_sim::fleet::can::Keys>>, ExitCode> {
+    let keys = super::fleet::keys(a.auth, a.keys.as_deref()).map_err(bad_input)?;
     if keys.is_some() && a.bus == "in-process" {
-        return bad_input("--auth and --keys authenticate CAN frames: use them with --bus can-hub or an interface");
+        return Err(bad_input("--auth and --keys authenticate CAN frames: use them with --bus can-hub or an interface"));
     }
     if a.can_fd && a.bus == "in-process" {
-        return bad_input(
+        return Err(bad_input(
             "--can-fd puts messages on CAN FD frames: use it with --bus can-hub or an interface",
-        );
+        ));
     }
+    Ok(keys)
+}
+
+fn execute(
+    a: &RunArgs,
+    keys: Option<std::sync::Arc<host_sim::fleet::can::Keys>>,
+    spec: WorldSpec,
+    mut sinks: Sinks,
+) -> ExitCode {
     let name = spec.name.clone();
     let net = spec.network.clone();
     let outcome = if a.bus == "in-process" {
@@ -151,24 +168,10 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
         Ok(x) => x,
         Err(code) => return code,
     };
-    if let Some(w) = sinks.trace {
-        if let Err(e) = w.finish() {
-            return bad_input(format!("--trace: {e}"));
-        }
-    }
-    let mut written: Vec<String> = a.trace.iter().map(|p| p.display().to_string()).collect();
-    if let (Some(p), Some(data)) = (&a.plot, &sinks.plot) {
-        if let Err(e) = host_sim::output::plot::any(data, &net, &name, p) {
-            return bad_input(e);
-        }
-        written.push(p.display().to_string());
-    }
-    if let (Some(p), Some(v)) = (&a.html, &sinks.viewer) {
-        if let Err(e) = v.write(&name, p) {
-            return bad_input(format!("--html {}: {e}", p.display()));
-        }
-        written.push(p.display().to_string());
-    }
+    let written = match write_outputs(sinks, &net, &name) {
+        Ok(w) => w,
+        Err(code) => return code,
+    };
     if let Some(d) = &summary.deadlock {
         eprintln!("{}: {d}", summary.scenario);
     }
@@ -188,6 +191,32 @@ fn execute(a: &RunArgs, spec: WorldSpec, mut sinks: Sinks) -> ExitCode {
         }
     }
     code(summary.unsafe_events() == 0, summary.completed)
+}
+
+/// Finishes every output of a complete run and puts each in place; the paths written.
+fn write_outputs(
+    sinks: Sinks,
+    net: &host_sim::world::network::Network,
+    name: &str,
+) -> Result<Vec<String>, ExitCode> {
+    let mut written = Vec::new();
+    if let Some((w, out)) = sinks.trace {
+        w.finish().map_err(|e| bad_input(format!("--trace: {e}")))?;
+        written.push(out.target().display().to_string());
+        commit(out, "--trace")?;
+    }
+    if let Some((data, out)) = sinks.plot {
+        host_sim::output::plot::any(&data, net, name, out.temp_path()).map_err(bad_input)?;
+        written.push(out.target().display().to_string());
+        commit(out, "--plot")?;
+    }
+    if let Some((v, mut out)) = sinks.viewer {
+        out.write_all(v.page(name).as_bytes())
+            .map_err(|e| bad_input(format!("--html {}: {e}", out.target().display())))?;
+        written.push(out.target().display().to_string());
+        commit(out, "--html")?;
+    }
+    Ok(written)
 }
 
 /// Runs a world in one task on the in-process bus.

@@ -1,7 +1,7 @@
 //! The theorems' sweeps: `platoons` (Theorem 1), `traffic` (Theorem 2), `deadends`
 //! (Theorem 3), `crossings` (Theorems 4 and 5).
 
-use super::output::{check_duration, code, finish, print_json, say, EXIT_BAD_INPUT};
+use super::output::{check_duration, code, finish, out, print_json, say, EXIT_BAD_INPUT};
 use host_sim::experiments::shard::{self, Header, Output, Shard};
 use serde_json::{json, Value};
 use std::path::PathBuf;
@@ -327,7 +327,7 @@ fn report<T: serde::Serialize + std::fmt::Debug>(
             return code;
         }
     } else {
-        println!(
+        out!(
             "{} cases, {} vehicles: {} collisions, {} invariant violations, {} limit violations, \
              {} unpermitted entries, {} unfinished vehicles, {} deadlocks; every goal met by \
              {:.1} s at the latest",
@@ -342,9 +342,12 @@ fn report<T: serde::Serialize + std::fmt::Debug>(
             t.max_finish_time_s
         );
         for f in failing {
-            println!(
+            out!(
                 "\n# failing case {} ({}): {}\n{}",
-                f.case, f.label, f.reason, f.scenario
+                f.case,
+                f.label,
+                f.reason,
+                f.scenario
             );
         }
     }
