@@ -9,11 +9,11 @@ use crate::secoc::{self, AuthError, FreshnessRx, Key, KeyStore, TRAILER_LEN};
 use crate::wire::{
     fd_len, frame_id, split_id, Message, MessageKind, Request, TrackWire, CHUNK, CLOCK_ADDRESS,
     FD_INDEX, FD_SECURED_INDEX, HEADING_RES, MANAGER_ADDRESS, MANAGER_LAST, MAX_FRAMES, NO_LANE,
-    POS_RES, SPEED_LIMIT, SPEED_RES, TIME_RES, YAW_RATE_RES,
+    POS_RES, SPEED_LIMIT, SPEED_RES, YAW_RATE_RES,
 };
 use embedded_can::{ExtendedId, Frame, Id};
 use heapless::Vec;
-use planner_core::{Real, VehicleState};
+use planner_core::{Instant, Real, VehicleState};
 
 /// The frames of one message.
 pub type Frames<Fr> = Vec<Fr, MAX_FRAMES>;
@@ -33,8 +33,6 @@ pub enum Field {
     YawRate,
     /// A lane.
     Lane,
-    /// A time.
-    Time,
     /// A position along a path.
     PathPosition,
     /// A track's heading.
@@ -112,8 +110,9 @@ fn lane_nibble(l: Option<u8>) -> Result<u8, EncodeError> {
     }
 }
 
-fn time<F: Real>(t: F) -> Result<u32, EncodeError> {
-    Ok(q(t, TIME_RES, 0.0, f64::from(u32::MAX), Field::Time)? as u32)
+/// A time as the wire carries it: the low 32 bits of its milliseconds ([`crate::wire`]).
+fn time(t: Instant) -> u32 {
+    t.as_millis() as u32
 }
 
 /// A track as its byte: heading in the low nibble, lane in the high one.
@@ -177,12 +176,13 @@ impl StateWire {
             yaw: q(s.omega, YAW_RATE_RES, -32768.0, 32767.0, Field::YawRate)? as i16,
             lanes: lane_nibble(Some(s.lane))? | lane_nibble(s.alpha)? << 4,
             beta_flags: lane_nibble(s.beta)? | flags,
-            stamp: time(s.stamp)?,
+            stamp: time(s.stamp),
         })
     }
 
-    /// The state of vehicle `id` from these fields, if plausible.
-    fn state<F: Real>(&self, id: u16) -> Result<VehicleState<F>, DecodeError> {
+    /// The state of vehicle `id` from these fields, if plausible; its stamp restored as
+    /// the instant nearest `now`.
+    fn state<F: Real>(&self, id: u16, now: Instant) -> Result<VehicleState<F>, DecodeError> {
         let f = |x: f64| F::from_f64(x);
         let v = f64::from(self.speed) * SPEED_RES;
         if v > SPEED_LIMIT {
@@ -210,7 +210,7 @@ impl StateWire {
             lane: own,
             alpha: lane(self.lanes >> 4),
             beta: lane(self.beta_flags & 0x0F),
-            stamp: f(f64::from(self.stamp) * TIME_RES),
+            stamp: restore_millis(self.stamp, now),
             cooperative: self.beta_flags & NOT_COOPERATIVE == 0,
         })
     }
@@ -263,13 +263,13 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
                     .get(..3)
                     .unwrap_or(&[0, 0, 0]),
             );
-            w.put(&time(r.arrival)?.to_le_bytes());
+            w.put(&time(r.arrival).to_le_bytes());
         }
         Message::JunctionExit { junction, id, at } => {
             // Frame 0: id, junction, time | 1: CRC.
             w.put(&id.to_le_bytes());
             w.put(&[*junction]);
-            w.put(&time(*at)?.to_le_bytes());
+            w.put(&time(*at).to_le_bytes());
         }
         Message::Request(r) => {
             // Frame 0: id, inlet, outlet, s; frame 1: arrival, speed, CRC.
@@ -281,14 +281,14 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
                     .get(..3)
                     .unwrap_or(&[0, 0, 0]),
             );
-            w.put(&time(r.arrival)?.to_le_bytes());
+            w.put(&time(r.arrival).to_le_bytes());
             w.put(&(q(r.v, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16).to_le_bytes());
         }
         Message::Grant { id, until: t }
         | Message::Revoke { id, at: t }
         | Message::Exit { id, at: t } => {
             w.put(&id.to_le_bytes());
-            w.put(&time(*t)?.to_le_bytes());
+            w.put(&time(*t).to_le_bytes());
         }
         Message::Sync { period, last } => {
             w.put(&period.to_le_bytes());
@@ -473,15 +473,13 @@ pub fn encode_secured<F: Real, Fr: Frame>(
     Ok(out)
 }
 
-/// What a secured receiver verifies with: the senders' keys, its freshness record and
-/// its clock (ms).
+/// What a secured receiver verifies with: the senders' keys and its freshness record
+/// (its clock is the `now` of [`Reassembler::push_secured`]).
 pub struct Verifier<'a, const K: usize, const R: usize> {
     /// Keys by source address.
     pub keys: &'a KeyStore<K>,
     /// The last accepted freshness per sender and kind.
     pub freshness: &'a mut FreshnessRx<R>,
-    /// The receiver's time on the shared clock (ms).
-    pub now_ms: u64,
 }
 
 /// Reassembly and acceptance state for one sender and kind.
@@ -494,7 +492,7 @@ struct Slot {
     bytes: [u8; MAX_FRAMES * CHUNK],
     /// Counter of the last accepted message.
     last_counter: Option<u8>,
-    /// Stamp of the last accepted state (ms).
+    /// Stamp of the last accepted state (the wire's ms), or period of the last tick.
     last_stamp: Option<u32>,
 }
 
@@ -526,28 +524,34 @@ impl<const CAP: usize> Reassembler<CAP> {
         Self { slots: Vec::new() }
     }
 
-    /// Takes one received frame.
+    /// Takes one frame received at `now` (the receiver's clock): the times in a message
+    /// it completes are restored, from the wire's low 32 bits of milliseconds, as the
+    /// instants nearest `now` ([`restore_millis`]).
     pub fn push<F: Real, Fr: Frame>(
         &mut self,
         frame: &Fr,
+        now: Instant,
     ) -> Result<Option<Message<F>>, DecodeError> {
-        self.take::<F, Fr, 0, 0>(frame, None)
+        self.take::<F, Fr, 0, 0>(frame, now, None)
     }
 
-    /// Takes one received frame of a secured stream: a message is accepted only after
-    /// its authenticator frame (see [`encode_secured`]) verifies under `v`; until then,
-    /// and on any error, nothing is accepted and nothing recorded.
+    /// Takes one frame of a secured stream received at `now`: a message is accepted only
+    /// after its authenticator frame (see [`encode_secured`]) verifies under `v` (its
+    /// freshness checked against `now`); until then, and on any error, nothing is
+    /// accepted and nothing recorded.
     pub fn push_secured<F: Real, Fr: Frame, const K: usize, const R: usize>(
         &mut self,
         frame: &Fr,
+        now: Instant,
         v: Verifier<'_, K, R>,
     ) -> Result<Option<Message<F>>, DecodeError> {
-        self.take(frame, Some(v))
+        self.take(frame, now, Some(v))
     }
 
     fn take<F: Real, Fr: Frame, const K: usize, const R: usize>(
         &mut self,
         frame: &Fr,
+        now: Instant,
         auth: Option<Verifier<'_, K, R>>,
     ) -> Result<Option<Message<F>>, DecodeError> {
         let raw = match frame.id() {
@@ -581,7 +585,7 @@ impl<const CAP: usize> Reassembler<CAP> {
         };
         let mut result = None;
         if whole {
-            result = Some(self.complete(&mut slot, pos, counter, &trailer, auth)?);
+            result = Some(self.complete(&mut slot, pos, counter, &trailer, now, auth)?);
         }
         match pos.and_then(|i| self.slots.get_mut(i)) {
             Some(s) => *s = slot,
@@ -599,6 +603,7 @@ impl<const CAP: usize> Reassembler<CAP> {
         pos: Option<usize>,
         counter: u8,
         trailer: &[u8; TRAILER_LEN],
+        now: Instant,
         auth: Option<Verifier<'_, K, R>>,
     ) -> Result<Message<F>, DecodeError> {
         let (kind, sa) = (slot.kind, slot.sa);
@@ -611,7 +616,7 @@ impl<const CAP: usize> Reassembler<CAP> {
         if slot.last_counter == Some(counter) {
             return Err(DecodeError::Duplicate);
         }
-        let msg = decode_body::<F>(kind, body)?;
+        let msg = decode_body::<F>(kind, body, now)?;
         if !sender_ok(&msg, sa) {
             return Err(DecodeError::SenderMismatch);
         }
@@ -622,8 +627,13 @@ impl<const CAP: usize> Reassembler<CAP> {
             MessageKind::Sync => Some(rd_u32(body, 0)),
             _ => None,
         };
+        // Both wrap (stamps every 49.7 days, periods every 2³²): "newer" is serial-number
+        // arithmetic (RFC 1982), true for anything less than half the range ahead.
         if let Some(stamp) = ordinal {
-            if slot.last_stamp.is_some_and(|l| stamp <= l) {
+            if slot
+                .last_stamp
+                .is_some_and(|l| stamp.wrapping_sub(l) as i32 <= 0)
+            {
                 return Err(DecodeError::Stale);
             }
             slot.last_stamp = Some(stamp);
@@ -635,7 +645,15 @@ impl<const CAP: usize> Reassembler<CAP> {
         if let Some(v) = auth {
             let all = slot.bytes.get(..total).unwrap_or(&[]);
             v.freshness
-                .verify(v.keys, kind as u8, sa, counter, all, trailer, v.now_ms)
+                .verify(
+                    v.keys,
+                    kind as u8,
+                    sa,
+                    counter,
+                    all,
+                    trailer,
+                    now.as_millis(),
+                )
                 .map_err(DecodeError::Auth)?;
         }
         slot.last_counter = Some(counter);
@@ -772,9 +790,33 @@ fn speed(raw: u16) -> Result<f64, DecodeError> {
     Ok(v)
 }
 
-/// Decodes a verified payload and checks plausibility.
-fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, DecodeError> {
+/// The instant whose milliseconds have the low 32 bits `low` and that is nearest `now`
+/// (the wire carries times that way, [`crate::wire`]): exact for any time within 24.8
+/// days of the receiver's clock, whatever either clock reads.
+pub fn restore_millis(low: u32, now: Instant) -> Instant {
+    const RANGE: u64 = 1 << 32;
+    let now_ms = now.as_millis();
+    let base = (now_ms & !(RANGE - 1)) | u64::from(low);
+    let mut best = base;
+    for c in [base.checked_sub(RANGE), base.checked_add(RANGE)]
+        .into_iter()
+        .flatten()
+    {
+        if c.abs_diff(now_ms) < best.abs_diff(now_ms) {
+            best = c;
+        }
+    }
+    Instant::from_millis(best)
+}
+
+/// Decodes a verified payload received at `now` and checks plausibility.
+fn decode_body<F: Real>(
+    kind: MessageKind,
+    b: &[u8],
+    now: Instant,
+) -> Result<Message<F>, DecodeError> {
     let f = |x: f64| F::from_f64(x);
+    let t = |at: usize| restore_millis(rd_u32(b, at), now);
     let byte = |i: usize| b.get(i).copied().unwrap_or(0);
     Ok(match kind {
         MessageKind::State => Message::State(
@@ -788,7 +830,7 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
                 yaw: rd_u16(b, 14) as i16,
                 stamp: rd_u32(b, 16),
             }
-            .state(rd_u16(b, 0))?,
+            .state(rd_u16(b, 0), now)?,
         ),
         MessageKind::Located => Message::Located {
             segment: rd_u16(b, 2),
@@ -802,7 +844,7 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
                 yaw: rd_u16(b, 18) as i16,
                 stamp: rd_u32(b, 21),
             }
-            .state(rd_u16(b, 0))?,
+            .state(rd_u16(b, 0), now)?,
         },
         MessageKind::JunctionRequest => {
             let (inlet, outlet) = (track_of(byte(3))?, track_of(byte(4))?);
@@ -813,7 +855,7 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
                     id: rd_u16(b, 0),
                     inlet,
                     outlet,
-                    arrival: f(f64::from(rd_u32(b, 10)) * TIME_RES),
+                    arrival: t(10),
                     s: f(f64::from(s) * POS_RES),
                     v: f(speed(rd_u16(b, 5))?),
                 },
@@ -822,7 +864,7 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
         MessageKind::JunctionExit => Message::JunctionExit {
             junction: byte(2),
             id: rd_u16(b, 0),
-            at: f(f64::from(rd_u32(b, 3)) * TIME_RES),
+            at: t(3),
         },
         MessageKind::Request => {
             let (inlet, outlet) = (track_of(byte(2))?, track_of(byte(3))?);
@@ -831,14 +873,14 @@ fn decode_body<F: Real>(kind: MessageKind, b: &[u8]) -> Result<Message<F>, Decod
                 id: rd_u16(b, 0),
                 inlet,
                 outlet,
-                arrival: f(f64::from(rd_u32(b, 7)) * TIME_RES),
+                arrival: t(7),
                 s: f(f64::from(s) * POS_RES),
                 v: f(speed(rd_u16(b, 11))?),
             })
         }
         MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit => {
             let id = rd_u16(b, 0);
-            let t = f(f64::from(rd_u32(b, 2)) * TIME_RES);
+            let t = t(2);
             match kind {
                 MessageKind::Grant => Message::Grant { id, until: t },
                 MessageKind::Revoke => Message::Revoke { id, at: t },
@@ -865,6 +907,14 @@ mod tests {
 
     use crate::frame::PlainFrame as TestFrame;
 
+    /// The receiver's clock in these tests (every stamp is within 24.8 days of it).
+    const NOW: Instant = Instant::from_secs(20);
+
+    /// `s` seconds after the epoch, to the millisecond.
+    fn secs(s: f64) -> Instant {
+        Instant::from_millis((s * 1e3).round() as u64)
+    }
+
     fn state() -> VehicleState<f64> {
         VehicleState {
             id: 0x0107,
@@ -876,8 +926,57 @@ mod tests {
             lane: 2,
             alpha: Some(1),
             beta: None,
-            stamp: 12.34,
+            stamp: secs(12.34),
             cooperative: true,
+        }
+    }
+
+    /// States every 10 ms, received 3 ms later, by a receiver whose clock reads 0, 60
+    /// days, just before the wire's 32-bit milliseconds wrap (49.7 days), or a century:
+    /// every one is accepted (none stale across the wrap) with its stamp restored exactly,
+    /// and encoding never runs out of range.
+    #[test]
+    fn every_fresh_state_is_taken_whatever_the_uptime_and_across_the_wrap() {
+        let day = 86_400_000u64;
+        for base_ms in [0, 60 * day, (1 << 32) - 500, 36_525 * day] {
+            let mut r = Reassembler::<4>::new();
+            for k in 0..100u64 {
+                let stamp = Instant::from_millis(base_ms + 10 * k);
+                let st = VehicleState { stamp, ..state() };
+                let frames: Frames<TestFrame> =
+                    encode(&Message::State(st), 0x07, k as u8).expect("any uptime encodes");
+                let now = stamp.saturating_add(planner_core::Duration::from_millis(3));
+                let mut got = None;
+                for f in &frames {
+                    got = r.push::<f32, _>(f, now).expect("fresh");
+                }
+                let Some(Message::State(s)) = got else {
+                    panic!("a state at {base_ms} + {k}");
+                };
+                assert_eq!(s.stamp, stamp);
+            }
+        }
+    }
+
+    #[test]
+    fn restored_times_are_the_nearest_to_the_receivers_clock() {
+        let wrap = 1u64 << 32;
+        let at = |ms| Instant::from_millis(ms);
+        // Just after the wrap, a stamp sent just before it.
+        assert_eq!(
+            restore_millis((wrap - 5) as u32, at(wrap + 3)),
+            at(wrap - 5)
+        );
+        // Just before it, a stamp from a sender whose clock is a little ahead.
+        assert_eq!(restore_millis(2, at(wrap - 1)), at(wrap + 2));
+        // Near the epoch, nothing before it.
+        assert_eq!(restore_millis(u32::MAX, at(1)), at(u64::from(u32::MAX)));
+        assert_eq!(restore_millis(7, at(0)), at(7));
+        // 24 days either way is exact.
+        let now = 3 * wrap + 12_345;
+        for d in [0, 1, 24 * 86_400_000] {
+            assert_eq!(restore_millis((now + d) as u32, at(now)), at(now + d));
+            assert_eq!(restore_millis((now - d) as u32, at(now)), at(now - d));
         }
     }
 
@@ -887,9 +986,9 @@ mod tests {
         let frames: Frames<TestFrame> = encode(&m, 0x07, 3).unwrap();
         assert_eq!(frames.len(), 3);
         let mut r = Reassembler::<4>::new();
-        assert_eq!(r.push::<f64, _>(&frames[0]), Ok(None));
-        assert_eq!(r.push::<f64, _>(&frames[1]), Ok(None));
-        let Ok(Some(Message::State(s))) = r.push::<f64, _>(&frames[2]) else {
+        assert_eq!(r.push::<f64, _>(&frames[0], NOW), Ok(None));
+        assert_eq!(r.push::<f64, _>(&frames[1], NOW), Ok(None));
+        let Ok(Some(Message::State(s))) = r.push::<f64, _>(&frames[2], NOW) else {
             panic!("a state");
         };
         let e = state();
@@ -898,46 +997,49 @@ mod tests {
             (e.id, e.lane, e.alpha, e.beta)
         );
         assert!((s.x - e.x).abs() <= 0.005 && (s.y - e.y).abs() <= 0.005);
-        assert!((s.v - e.v).abs() <= 0.01 && (s.stamp - e.stamp).abs() <= 0.0005);
+        assert!((s.v - e.v).abs() <= 0.01 && s.stamp == e.stamp);
         assert!(
             (s.theta - e.theta).abs() <= HEADING_RES && (s.omega - e.omega).abs() <= YAW_RATE_RES
         );
         // The same message again: duplicate (same counter), reassembler unchanged.
         let before = r.clone().slots;
-        assert_eq!(r.push::<f64, _>(&frames[0]), Ok(None));
-        assert_eq!(r.push::<f64, _>(&frames[1]), Ok(None));
-        assert_eq!(r.push::<f64, _>(&frames[2]), Err(DecodeError::Duplicate));
+        assert_eq!(r.push::<f64, _>(&frames[0], NOW), Ok(None));
+        assert_eq!(r.push::<f64, _>(&frames[1], NOW), Ok(None));
+        assert_eq!(
+            r.push::<f64, _>(&frames[2], NOW),
+            Err(DecodeError::Duplicate)
+        );
         // A newer counter but an older stamp: stale.
         let mut old = state();
-        old.stamp = 1.0;
+        old.stamp = secs(1.0);
         let frames: Frames<TestFrame> = encode(&Message::State(old), 0x07, 4).unwrap();
-        let _ = r.push::<f64, _>(&frames[0]);
-        let _ = r.push::<f64, _>(&frames[1]);
-        assert_eq!(r.push::<f64, _>(&frames[2]), Err(DecodeError::Stale));
+        let _ = r.push::<f64, _>(&frames[0], NOW);
+        let _ = r.push::<f64, _>(&frames[1], NOW);
+        assert_eq!(r.push::<f64, _>(&frames[2], NOW), Err(DecodeError::Stale));
         assert_eq!(r.slots[0].last_counter, before[0].last_counter);
         // A flipped bit: CRC.
         let mut newer = state();
-        newer.stamp = 20.0;
+        newer.stamp = secs(20.0);
         let mut frames: Frames<TestFrame> = encode(&Message::State(newer), 0x07, 5).unwrap();
         let mut d = [0u8; 8];
         d.copy_from_slice(frames[1].data());
         d[3] ^= 0x10;
         frames[1] = TestFrame::new(frames[1].id(), &d).unwrap();
-        let _ = r.push::<f64, _>(&frames[0]);
-        let _ = r.push::<f64, _>(&frames[1]);
-        assert_eq!(r.push::<f64, _>(&frames[2]), Err(DecodeError::Crc));
+        let _ = r.push::<f64, _>(&frames[0], NOW);
+        let _ = r.push::<f64, _>(&frames[1], NOW);
+        assert_eq!(r.push::<f64, _>(&frames[2], NOW), Err(DecodeError::Crc));
         // A continuation without its first frame.
         let mut r2 = Reassembler::<4>::new();
         assert_eq!(
-            r2.push::<f64, _>(&frames[2]),
+            r2.push::<f64, _>(&frames[2], NOW),
             Err(DecodeError::OutOfSequence)
         );
         // Sender address and id disagree.
         let frames: Frames<TestFrame> = encode(&Message::State(state()), 0x08, 1).unwrap();
-        let _ = r2.push::<f64, _>(&frames[0]);
-        let _ = r2.push::<f64, _>(&frames[1]);
+        let _ = r2.push::<f64, _>(&frames[0], NOW);
+        let _ = r2.push::<f64, _>(&frames[1], NOW);
         assert_eq!(
-            r2.push::<f64, _>(&frames[2]),
+            r2.push::<f64, _>(&frames[2], NOW),
             Err(DecodeError::SenderMismatch)
         );
     }
@@ -954,26 +1056,44 @@ mod tests {
                 heading: 3,
                 lane: 1,
             },
-            arrival: 3.5,
+            arrival: secs(3.5),
             s: 97.25,
             v: 13.9,
         };
         let mut r = Reassembler::<8>::new();
         for (m, sa) in [
             (Message::Request(req), 9u8),
-            (Message::Grant { id: 9, until: 4.0 }, MANAGER_ADDRESS),
-            (Message::Revoke { id: 9, at: 4.5 }, MANAGER_ADDRESS),
-            (Message::Exit { id: 9, at: 9.0 }, 9),
+            (
+                Message::Grant {
+                    id: 9,
+                    until: secs(4.0),
+                },
+                MANAGER_ADDRESS,
+            ),
+            (
+                Message::Revoke {
+                    id: 9,
+                    at: secs(4.5),
+                },
+                MANAGER_ADDRESS,
+            ),
+            (
+                Message::Exit {
+                    id: 9,
+                    at: secs(9.0),
+                },
+                9,
+            ),
         ] {
             let frames: Frames<TestFrame> = encode(&m, sa, 0).unwrap();
             let mut got = None;
             for f in &frames {
-                got = r.push::<f64, _>(f).unwrap();
+                got = r.push::<f64, _>(f, NOW).unwrap();
             }
             match (got.unwrap(), m) {
                 (Message::Request(a), Message::Request(b)) => {
                     assert_eq!((a.id, a.inlet, a.outlet), (b.id, b.inlet, b.outlet));
-                    assert!((a.s - b.s).abs() < 0.006 && (a.arrival - b.arrival).abs() < 1e-9);
+                    assert!((a.s - b.s).abs() < 0.006 && a.arrival == b.arrival);
                 }
                 (a, b) => assert_eq!(a, b),
             }
@@ -981,14 +1101,20 @@ mod tests {
         // A grant or revoke from anyone but the manager is refused (a vehicle granting
         // itself entry), and leaves the reassembler as it was.
         for m in [
-            Message::Grant { id: 9, until: 5.0 },
-            Message::Revoke { id: 9, at: 5.0 },
+            Message::<f64>::Grant {
+                id: 9,
+                until: secs(5.0),
+            },
+            Message::Revoke {
+                id: 9,
+                at: secs(5.0),
+            },
         ] {
             for sa in [9u8, 0, CLOCK_ADDRESS] {
                 let frames: Frames<TestFrame> = encode(&m, sa, 3).unwrap();
                 let before = r.slots.clone();
                 assert_eq!(
-                    r.push::<f64, _>(&frames[0]),
+                    r.push::<f64, _>(&frames[0], NOW),
                     Err(DecodeError::SenderMismatch)
                 );
                 assert_eq!(r.slots, before);
@@ -1020,7 +1146,7 @@ mod tests {
                 heading: 3,
                 lane: 1,
             },
-            arrival: 3.5,
+            arrival: secs(3.5),
             s: 97.25,
             v: 13.9,
         }
@@ -1031,11 +1157,14 @@ mod tests {
         let mut st = state();
         st.id = 9;
         [
-            Message::Exit { id: 9, at: 9.0 },
+            Message::Exit {
+                id: 9,
+                at: secs(9.0),
+            },
             Message::JunctionExit {
                 junction: 2,
                 id: 9,
-                at: 9.0,
+                at: secs(9.0),
             },
             Message::Request(request(9)),
             Message::JunctionRequest {
@@ -1060,7 +1189,7 @@ mod tests {
         let frames: Frames<TestFrame> = encode(m, sa, counter).unwrap();
         let mut last = Ok(None);
         for f in &frames {
-            last = r.push::<f64, _>(f);
+            last = r.push::<f64, _>(f, NOW);
         }
         last
     }
@@ -1089,8 +1218,20 @@ mod tests {
                 (jrq, 9),
                 (st, 9),
                 (loc, 9),
-                (Message::Grant { id: 9, until: 4.0 }, MANAGER_ADDRESS),
-                (Message::Revoke { id: 9, at: 4.0 }, MANAGER_ADDRESS),
+                (
+                    Message::Grant {
+                        id: 9,
+                        until: secs(4.0),
+                    },
+                    MANAGER_ADDRESS,
+                ),
+                (
+                    Message::Revoke {
+                        id: 9,
+                        at: secs(4.0),
+                    },
+                    MANAGER_ADDRESS,
+                ),
                 (
                     Message::Sync {
                         period: 4,
@@ -1123,9 +1264,9 @@ mod tests {
                 let v = Verifier {
                     keys: &self.keys,
                     freshness: &mut self.fresh,
-                    now_ms,
                 };
-                self.r.push_secured::<f64, _, 8, 16>(f, v)
+                self.r
+                    .push_secured::<f64, _, 8, 16>(f, Instant::from_millis(now_ms), v)
             }
             fn push_all(
                 &mut self,
@@ -1170,11 +1311,15 @@ mod tests {
                 // and ticks are refused by their stamps first).
                 let later = match m {
                     Message::State(mut st) => {
-                        st.stamp += 0.1;
+                        st.stamp = st
+                            .stamp
+                            .saturating_add(planner_core::Duration::from_millis(100));
                         Message::State(st)
                     }
                     Message::Located { segment, mut state } => {
-                        state.stamp += 0.1;
+                        state.stamp = state
+                            .stamp
+                            .saturating_add(planner_core::Duration::from_millis(100));
                         Message::Located { segment, state }
                     }
                     Message::Sync { period, last } => Message::Sync {
@@ -1200,7 +1345,7 @@ mod tests {
                 let mut plain = Reassembler::<8>::new();
                 let mut res = Ok(None);
                 for f in &frames {
-                    res = plain.push::<f64, _>(f);
+                    res = plain.push::<f64, _>(f, NOW);
                 }
                 assert_eq!(res, Err(DecodeError::BadFrameIndex));
             }
@@ -1210,7 +1355,10 @@ mod tests {
         fn a_forged_grant_is_refused_and_changes_nothing() {
             // A vehicle writes the manager's address: the CRC and the sender rule pass, the
             // MAC (under the vehicle's own key, or any but the manager's) does not.
-            let grant = Message::Grant { id: 8, until: 9.0 };
+            let grant = Message::<f64>::Grant {
+                id: 8,
+                until: secs(9.0),
+            };
             let mut rx = Rx::new();
             let forged = sign(&grant, MANAGER_ADDRESS, 1, 8, 2_000);
             let before = rx.r.slots.clone();
@@ -1243,7 +1391,10 @@ mod tests {
 
         #[test]
         fn stale_spliced_and_padded_authenticators_are_refused() {
-            let m = Message::Exit { id: 9, at: 1.0 };
+            let m = Message::Exit {
+                id: 9,
+                at: secs(1.0),
+            };
             let mut rx = Rx::new();
             // Recorded a second ago: outside the 500 ms window.
             let old = sign(&m, 9, 2, 9, 10_000);
@@ -1253,7 +1404,16 @@ mod tests {
             );
             // The authenticator of another message (another time) spliced onto this one.
             let a = sign(&m, 9, 2, 9, 20_000);
-            let b = sign(&Message::Exit { id: 9, at: 2.0 }, 9, 2, 9, 20_001);
+            let b = sign(
+                &Message::Exit {
+                    id: 9,
+                    at: secs(2.0),
+                },
+                9,
+                2,
+                9,
+                20_001,
+            );
             let spliced = [a[0], b[1]];
             assert_eq!(
                 *rx.push_all(&spliced, 20_001).last().unwrap(),
@@ -1307,10 +1467,10 @@ mod tests {
                 }
                 assert!(f.data()[used..].iter().all(|b| *b == 0));
                 let mut r = Reassembler::<8>::new();
-                let got = r.push::<f64, _>(&f).unwrap().unwrap();
+                let got = r.push::<f64, _>(&f, NOW).unwrap().unwrap();
                 assert_eq!(encode::<f64, TestFrame>(&got, sa, 5).unwrap(), classic);
                 let before = r.slots.clone();
-                assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::Duplicate));
+                assert_eq!(r.push::<f64, _>(&f, NOW), Err(DecodeError::Duplicate));
                 assert_eq!(r.slots, before);
             }
             // A classic frame type cannot carry a message beyond 8 bytes.
@@ -1330,7 +1490,7 @@ mod tests {
             let mut r = Reassembler::<8>::new();
             // A classic first frame of another message is pending.
             let classic: Frames<TestFrame> = encode(&st, 0x07, 9).unwrap();
-            assert_eq!(r.push::<f64, _>(&classic[0]), Ok(None));
+            assert_eq!(r.push::<f64, _>(&classic[0], NOW), Ok(None));
             let before = r.slots.clone();
             let mut longer = [0u8; 32];
             longer[..24].copy_from_slice(d);
@@ -1358,13 +1518,16 @@ mod tests {
                 ),
             ];
             for (bad, why) in cases {
-                assert_eq!(r.push::<f64, _>(&bad), Err(why));
+                assert_eq!(r.push::<f64, _>(&bad, NOW), Err(why));
                 assert_eq!(r.slots, before, "{why:?} changed the reassembler");
             }
             // The genuine frame supersedes the pending classic reassembly.
-            assert!(matches!(r.push::<f64, _>(&f), Ok(Some(Message::State(_)))));
+            assert!(matches!(
+                r.push::<f64, _>(&f, NOW),
+                Ok(Some(Message::State(_)))
+            ));
             assert_eq!(
-                r.push::<f64, _>(&classic[1]),
+                r.push::<f64, _>(&classic[1], NOW),
                 Err(DecodeError::OutOfSequence)
             );
         }
@@ -1393,7 +1556,7 @@ mod tests {
                 );
                 // A plain receiver reads the message (it verifies nothing).
                 assert!(Reassembler::<8>::new()
-                    .push::<f64, _>(&f)
+                    .push::<f64, _>(&f, NOW)
                     .unwrap()
                     .is_some());
                 // A secured receiver never takes a frame without an authenticator.
@@ -1405,7 +1568,10 @@ mod tests {
                 assert!(rx.r.slots.is_empty());
             }
             // A vehicle forging the manager's grant: refused, nothing recorded.
-            let grant = Message::Grant { id: 8, until: 9.0 };
+            let grant = Message::<f64>::Grant {
+                id: 8,
+                until: secs(9.0),
+            };
             let forged: FdFrame =
                 encode_fd_secured(&grant, MANAGER_ADDRESS, 1, &derive_key(&MASTER, 8), 2_000)
                     .unwrap();
@@ -1449,36 +1615,48 @@ mod tests {
         // Two states of one sender: frames of the second must not complete the first,
         // whatever their CRC (which alone lets 1 in 256 splices through).
         let (mut a, mut b) = (state(), state());
-        a.stamp = 20.0;
-        b.stamp = 21.0;
+        a.stamp = secs(20.0);
+        b.stamp = secs(21.0);
         b.x = -50.0;
         let fa: Frames<TestFrame> = encode(&Message::State(a), 0x07, 3).unwrap();
         let fb: Frames<TestFrame> = encode(&Message::State(b), 0x07, 4).unwrap();
         let mut r = Reassembler::<4>::new();
-        assert_eq!(r.push::<f64, _>(&fa[0]), Ok(None));
+        assert_eq!(r.push::<f64, _>(&fa[0], NOW), Ok(None));
         let kept = r.slots.clone();
         // b's second frame after a's first: another counter.
-        assert_eq!(r.push::<f64, _>(&fb[1]), Err(DecodeError::OutOfSequence));
+        assert_eq!(
+            r.push::<f64, _>(&fb[1], NOW),
+            Err(DecodeError::OutOfSequence)
+        );
         assert_eq!(r.slots, kept, "a refused frame changes nothing");
         // a's last frame before its second: out of order.
-        assert_eq!(r.push::<f64, _>(&fa[2]), Err(DecodeError::OutOfSequence));
+        assert_eq!(
+            r.push::<f64, _>(&fa[2], NOW),
+            Err(DecodeError::OutOfSequence)
+        );
         assert_eq!(r.slots, kept);
         // a itself still completes.
-        assert_eq!(r.push::<f64, _>(&fa[1]), Ok(None));
-        let Ok(Some(Message::State(got))) = r.push::<f64, _>(&fa[2]) else {
+        assert_eq!(r.push::<f64, _>(&fa[1], NOW), Ok(None));
+        let Ok(Some(Message::State(got))) = r.push::<f64, _>(&fa[2], NOW) else {
             panic!("a completes");
         };
         assert!((got.x - a.x).abs() < 0.01);
         // b's first frame, then a's (old) frames: a's counter is not b's.
-        assert_eq!(r.push::<f64, _>(&fb[0]), Ok(None));
-        assert_eq!(r.push::<f64, _>(&fa[1]), Err(DecodeError::OutOfSequence));
+        assert_eq!(r.push::<f64, _>(&fb[0], NOW), Ok(None));
+        assert_eq!(
+            r.push::<f64, _>(&fa[1], NOW),
+            Err(DecodeError::OutOfSequence)
+        );
         // A splice whose CRC happens to match is still refused: build b's second frame
         // with a's counter in its header and check that the counter alone refuses it.
         let mut d = [0u8; 8];
         d.copy_from_slice(fb[1].data());
         d[0] = (d[0] & 0xF0) | 0x03;
         let forged = TestFrame::new(fb[1].id(), &d).unwrap();
-        assert_eq!(r.push::<f64, _>(&forged), Err(DecodeError::OutOfSequence));
+        assert_eq!(
+            r.push::<f64, _>(&forged, NOW),
+            Err(DecodeError::OutOfSequence)
+        );
     }
 
     #[test]
@@ -1490,7 +1668,7 @@ mod tests {
         let f = tick(7, false, CLOCK_ADDRESS, 1);
         assert_eq!(f.len(), 1);
         assert_eq!(
-            r.push::<f64, _>(&f[0]),
+            r.push::<f64, _>(&f[0], NOW),
             Ok(Some(Message::Sync {
                 period: 7,
                 last: false
@@ -1498,15 +1676,15 @@ mod tests {
         );
         // A tick not newer than the last, or from another node, is refused.
         assert_eq!(
-            r.push::<f64, _>(&tick(7, false, CLOCK_ADDRESS, 2)[0]),
+            r.push::<f64, _>(&tick(7, false, CLOCK_ADDRESS, 2)[0], NOW),
             Err(DecodeError::Stale)
         );
         assert_eq!(
-            r.push::<f64, _>(&tick(8, false, 0x12, 2)[0]),
+            r.push::<f64, _>(&tick(8, false, 0x12, 2)[0], NOW),
             Err(DecodeError::SenderMismatch)
         );
         assert_eq!(
-            r.push::<f64, _>(&tick(8, true, CLOCK_ADDRESS, 2)[0]),
+            r.push::<f64, _>(&tick(8, true, CLOCK_ADDRESS, 2)[0], NOW),
             Ok(Some(Message::Sync {
                 period: 8,
                 last: true
@@ -1519,24 +1697,24 @@ mod tests {
         let mut r = Reassembler::<2>::new();
         let std_id = embedded_can::StandardId::new(0x123).unwrap();
         let f = TestFrame::new(std_id, &[0; 8]).unwrap();
-        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::NotOurs));
+        assert_eq!(r.push::<f64, _>(&f, NOW), Err(DecodeError::NotOurs));
         let f = TestFrame::new(ExtendedId::new(0x18FEF100).unwrap(), &[0; 8]).unwrap();
-        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::ForeignId));
+        assert_eq!(r.push::<f64, _>(&f, NOW), Err(DecodeError::ForeignId));
         let f = TestFrame::new(
             ExtendedId::new(frame_id(MessageKind::Grant, 0, 0)).unwrap(),
             &[0; 5],
         )
         .unwrap();
-        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::BadLength));
+        assert_eq!(r.push::<f64, _>(&f, NOW), Err(DecodeError::BadLength));
         let f = TestFrame::new(
             ExtendedId::new(frame_id(MessageKind::Grant, 1, 0)).unwrap(),
             &[0x10; 8],
         )
         .unwrap();
-        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::BadFrameIndex));
+        assert_eq!(r.push::<f64, _>(&f, NOW), Err(DecodeError::BadFrameIndex));
         let raw = 6 << 26 | 0xFF << 16 | 0xC0 << 8 | 1;
         let f = TestFrame::new(ExtendedId::new(raw).unwrap(), &[0; 8]).unwrap();
-        assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::UnknownKind(12)));
+        assert_eq!(r.push::<f64, _>(&f, NOW), Err(DecodeError::UnknownKind(12)));
         assert!(r.slots.is_empty());
     }
 
@@ -1634,20 +1812,20 @@ mod tests {
         fn decoded_headings_and_speeds_are_bounded() {
             let pi = core::f64::consts::PI;
             let at_pi = (pi / HEADING_RES).round() as i16;
-            assert!(wire_state(at_pi, 0).state::<f64>(7).is_ok());
-            assert!(wire_state(-at_pi, 0).state::<f64>(7).is_ok());
+            assert!(wire_state(at_pi, 0).state::<f64>(7, NOW).is_ok());
+            assert!(wire_state(-at_pi, 0).state::<f64>(7, NOW).is_ok());
             assert_eq!(
-                wire_state(at_pi + 2, 0).state::<f64>(7).err(),
+                wire_state(at_pi + 2, 0).state::<f64>(7, NOW).err(),
                 Some(DecodeError::OutOfRange(Field::Heading))
             );
             assert_eq!(
-                wire_state(i16::MAX, 0).state::<f64>(7).err(),
+                wire_state(i16::MAX, 0).state::<f64>(7, NOW).err(),
                 Some(DecodeError::OutOfRange(Field::Heading))
             );
             let limit = (SPEED_LIMIT / SPEED_RES).round() as u16;
-            assert!(wire_state(0, limit).state::<f64>(7).is_ok());
+            assert!(wire_state(0, limit).state::<f64>(7, NOW).is_ok());
             assert_eq!(
-                wire_state(0, limit + 1).state::<f64>(7).err(),
+                wire_state(0, limit + 1).state::<f64>(7, NOW).err(),
                 Some(DecodeError::OutOfRange(Field::Speed))
             );
             assert_eq!(speed(limit), Ok(SPEED_LIMIT));
@@ -1659,7 +1837,7 @@ mod tests {
             let id = ExtendedId::new(frame_id(MessageKind::Grant, 0, MANAGER_ADDRESS)).unwrap();
             let f = TestFrame::new_remote(id, 8).unwrap();
             let mut r = Reassembler::<2>::new();
-            assert_eq!(r.push::<f64, _>(&f), Err(DecodeError::NotOurs));
+            assert_eq!(r.push::<f64, _>(&f, NOW), Err(DecodeError::NotOurs));
             assert!(r.slots.is_empty());
         }
 
@@ -1668,13 +1846,13 @@ mod tests {
             let mut r = Reassembler::<8>::new();
             let mut st = state();
             st.id = 7;
-            st.stamp = 20.0;
+            st.stamp = secs(20.0);
             let newer = Message::Located {
                 segment: 1,
                 state: st,
             };
             assert!(matches!(push_all(&mut r, &newer, 7, 1), Ok(Some(_))));
-            st.stamp = 10.0;
+            st.stamp = secs(10.0);
             let older = Message::Located {
                 segment: 1,
                 state: st,
@@ -1686,7 +1864,7 @@ mod tests {
         fn junction_messages_keep_every_field() {
             let mut req = request(9);
             req.s = 1000.25; // beyond 16 bits at 0.01 m: the third byte counts
-            req.arrival = 123.456;
+            req.arrival = secs(123.456);
             req.v = 13.9;
             let m = Message::JunctionRequest {
                 junction: 2,
@@ -1705,22 +1883,18 @@ mod tests {
                 (2, 9, req.inlet, req.outlet)
             );
             assert!((got.s - req.s).abs() < 0.006, "{}", got.s);
-            assert!(
-                (got.arrival - req.arrival).abs() < 0.0006,
-                "{}",
-                got.arrival
-            );
+            assert_eq!(got.arrival, req.arrival);
             assert!((got.v - req.v).abs() < 0.011, "{}", got.v);
             // The plain request too.
             let Ok(Some(Message::Request(got))) = push_all(&mut r, &Message::Request(req), 9, 1)
             else {
                 panic!("a request");
             };
-            assert!((got.s - req.s).abs() < 0.006 && (got.arrival - req.arrival).abs() < 0.0006);
+            assert!((got.s - req.s).abs() < 0.006 && got.arrival == req.arrival);
             let exit = Message::JunctionExit {
                 junction: 2,
                 id: 9,
-                at: 77.125,
+                at: secs(77.125),
             };
             assert_eq!(push_all(&mut r, &exit, 9, 2), Ok(Some(exit)));
         }

@@ -38,4 +38,7 @@ pub mod wire;
 
 pub use codec::{encode, encode_fd, DecodeError, EncodeError, Frames, Reassembler};
 pub use frame::{FdFrame, PlainFrame};
+/// The time type of every message ([`planner_core::time`]): integer microseconds on the
+/// fleet's clock.
+pub use planner_core::{Duration, Instant};
 pub use wire::{Message, MessageKind};

@@ -14,8 +14,10 @@
 //!
 //! **Units** (SAE J2735 BSM resolutions where they fit): speed 0.02 m/s (u16), heading
 //! 0.0125° (i16), yaw rate 0.01°/s (i16); positions in road coordinates, x 0.01 m (i32),
-//! y 0.01 m (i16), position along an intersection path 0.01 m (u24); times 1 ms (u32, the
-//! sender's clock); lanes 4 bits, 15 = none. All little-endian.
+//! y 0.01 m (i16), position along an intersection path 0.01 m (u24); times 1 ms (u32: the
+//! low 32 bits of the sender's clock in milliseconds, [`planner_core::time`]; they wrap
+//! every 49.7 days, and a receiver restores the full instant as the one nearest its own
+//! clock, [`crate::codec::restore_millis`]); lanes 4 bits, 15 = none. All little-endian.
 //!
 //! **Networks** add a state with its segment (kind 7, 4 frames: id, segment, lanes, β
 //! and flags | x, y | heading, speed, yaw rate | stamp, CRC), a request with its junction
@@ -35,7 +37,7 @@
 //! [`Message::Sync`] from [`CLOCK_ADDRESS`] (period number u32, end flag u8), protected
 //! like every other message.
 
-use planner_core::VehicleState;
+use planner_core::{Instant, VehicleState};
 
 /// J1939 priority of every frame.
 pub const PRIORITY: u32 = 6;
@@ -88,7 +90,7 @@ pub const HEADING_RES: f64 = 0.0125 * core::f64::consts::PI / 180.0;
 pub const YAW_RATE_RES: f64 = 0.01 * core::f64::consts::PI / 180.0;
 /// Position resolution (m per bit).
 pub const POS_RES: f64 = 0.01;
-/// Time resolution (s per bit).
+/// Time resolution (s per bit): times travel as whole milliseconds.
 pub const TIME_RES: f64 = 0.001;
 /// Largest plausible speed a receiver accepts (m/s): well above any road vehicle's.
 pub const SPEED_LIMIT: f64 = 100.0;
@@ -161,8 +163,8 @@ pub struct Request<F> {
     pub inlet: TrackWire,
     /// Its outlet.
     pub outlet: TrackWire,
-    /// When it entered A_C (sender's clock, s).
-    pub arrival: F,
+    /// When it entered A_C (sender's clock).
+    pub arrival: Instant,
     /// Its position along its route's path (m).
     pub s: F,
     /// Its speed (m/s).
@@ -176,26 +178,26 @@ pub enum Message<F> {
     State(VehicleState<F>),
     /// Registration / crossing request (V2I).
     Request(Request<F>),
-    /// Permission for `id` until `until` (I2V lease, intersection clock, s).
+    /// Permission for `id` until `until` (I2V lease, intersection clock).
     Grant {
         /// The permitted vehicle.
         id: u16,
-        /// Lease end (s).
-        until: F,
+        /// Lease end.
+        until: Instant,
     },
-    /// Permission of `id` withdrawn at `at` (s).
+    /// Permission of `id` withdrawn at `at`.
     Revoke {
         /// The vehicle.
         id: u16,
-        /// When (s).
-        at: F,
+        /// When.
+        at: Instant,
     },
-    /// `id` left the intersection area at `at` (s).
+    /// `id` left the intersection area at `at`.
     Exit {
         /// The vehicle.
         id: u16,
-        /// When (s).
-        at: F,
+        /// When.
+        at: Instant,
     },
     /// A vehicle state on segment `segment` of a network, in its frame (V2V).
     Located {
@@ -211,14 +213,14 @@ pub enum Message<F> {
         /// The request.
         request: Request<F>,
     },
-    /// `id` left junction `junction` of a network at `at` (s).
+    /// `id` left junction `junction` of a network at `at`.
     JunctionExit {
         /// The junction.
         junction: u8,
         /// The vehicle.
         id: u16,
-        /// When (s).
-        at: F,
+        /// When.
+        at: Instant,
     },
     /// The time master's tick: period `period` begins (a simulated fleet's clock, sent by
     /// [`CLOCK_ADDRESS`]; nodes act on it as CANopen nodes act on SYNC).

@@ -5,8 +5,19 @@
 
 use can_gateway::log::candump_line;
 use can_gateway::wire::{Request, TrackWire, CLOCK_ADDRESS, MANAGER_ADDRESS};
-use can_gateway::{encode, Frames, Message};
+use can_gateway::{encode, Frames, Instant, Message};
 use planner_core::VehicleState;
+
+/// `ms` milliseconds after the epoch.
+fn ms(ms: u64) -> Instant {
+    Instant::from_millis(ms)
+}
+
+/// An instant as the DBC's time signals show it: seconds, at 1 ms, from the low 32 bits
+/// of the milliseconds.
+fn dbc_secs(t: Instant) -> f64 {
+    f64::from(t.as_millis() as u32) * 1e-3
+}
 use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
@@ -21,7 +32,7 @@ fn message_of(frames: &Frames<F8>) -> (Message<f64>, u8, u8) {
     let mut r = Reassembler::<2>::new();
     let mut msg = None;
     for f in frames {
-        msg = r.push::<f64, _>(f).expect("valid frames");
+        msg = r.push::<f64, _>(f, ms(0)).expect("valid frames");
     }
     let Some(Id::Extended(id)) = frames.first().map(|f| f.id()) else {
         panic!("extended frames")
@@ -99,7 +110,7 @@ fn cantools_decodes_the_gateways_candump_log() {
             lane: i as u8,
             alpha: (i == 1).then_some(2),
             beta: (i == 2).then_some(1),
-            stamp: 12.34 + i as f64,
+            stamp: ms(12_340 + 1_000 * i as u64),
             cooperative: i != 1,
         };
         let frames: Frames<F8> = encode(&Message::State(s), s.id as u8, i as u8).expect("encodes");
@@ -125,7 +136,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                 ],
                 vec![
                     ("YawRate", s.omega * deg),
-                    ("Timestamp", s.stamp),
+                    ("Timestamp", dbc_secs(s.stamp)),
                     ("FrameIndex", 2.0),
                 ],
             ],
@@ -143,7 +154,7 @@ fn cantools_decodes_the_gateways_candump_log() {
             heading: 3,
             lane: 1,
         },
-        arrival: 3.5,
+        arrival: ms(3_500),
         s: 97.25,
         v: 13.9,
     };
@@ -166,16 +177,33 @@ fn cantools_decodes_the_gateways_candump_log() {
     );
     for (m, sa, name) in [
         (
-            Message::Grant { id: 9, until: 4.0 },
+            Message::Grant {
+                id: 9,
+                until: ms(4_000),
+            },
             MANAGER_ADDRESS,
             "LeaseUntil",
         ),
-        (Message::Revoke { id: 9, at: 4.5 }, MANAGER_ADDRESS, "At"),
-        (Message::Exit { id: 9, at: 9.0 }, 9, "At"),
+        (
+            Message::<f64>::Revoke {
+                id: 9,
+                at: ms(4_500),
+            },
+            MANAGER_ADDRESS,
+            "At",
+        ),
+        (
+            Message::Exit {
+                id: 9,
+                at: ms(9_000),
+            },
+            9,
+            "At",
+        ),
     ] {
         let t = match m {
-            Message::Grant { until, .. } => until,
-            Message::Revoke { at, .. } | Message::Exit { at, .. } => at,
+            Message::Grant { until, .. } => dbc_secs(until),
+            Message::Revoke { at, .. } | Message::Exit { at, .. } => dbc_secs(at),
             _ => 0.0,
         };
         let frames: Frames<F8> = encode(&m, sa, 1).expect("encodes");
@@ -198,7 +226,7 @@ fn cantools_decodes_the_gateways_candump_log() {
         lane: 2,
         alpha: None,
         beta: Some(1),
-        stamp: 42.125,
+        stamp: ms(42_125),
         cooperative: false,
     };
     let deg = 180.0 / std::f64::consts::PI;
@@ -228,7 +256,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                 ("Speed", st.v),
                 ("YawRate", st.omega * deg),
             ],
-            vec![("Timestamp", st.stamp), ("FrameIndex", 3.0)],
+            vec![("Timestamp", dbc_secs(st.stamp)), ("FrameIndex", 3.0)],
         ],
         &mut log,
         &mut expected,
@@ -261,10 +289,10 @@ fn cantools_decodes_the_gateways_candump_log() {
         &mut expected,
     );
     for junction in [2u8, 255] {
-        let m = Message::JunctionExit {
+        let m = Message::<f64>::JunctionExit {
             junction,
             id: 9,
-            at: 9.25,
+            at: ms(9_250),
         };
         let frames: Frames<F8> = encode(&m, 9, 3).expect("encodes");
         push(

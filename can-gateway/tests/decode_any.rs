@@ -5,7 +5,7 @@
 use can_gateway::wire::{
     MessageKind, Request, TrackWire, HEADING_RES, POS_RES, SPEED_RES, YAW_RATE_RES,
 };
-use can_gateway::{encode, Frames, Message, Reassembler};
+use can_gateway::{encode, Frames, Instant, Message, Reassembler};
 use embedded_can::{ExtendedId, Frame, Id, StandardId};
 use planner_core::VehicleState;
 use proptest::prelude::*;
@@ -52,11 +52,11 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(20_000))]
 
     #[test]
-    fn any_frames_never_panic_and_errors_change_nothing(frames in prop::collection::vec(any_frame(), 1..40)) {
+    fn any_frames_never_panic_and_errors_change_nothing(frames in prop::collection::vec(any_frame(), 1..40), now_ms in any::<u64>()) {
         let mut r = Reassembler::<8>::new();
         for f in &frames {
             let before = format!("{r:?}");
-            match r.push::<f64, _>(f) {
+            match r.push::<f64, _>(f, Instant::from_millis(now_ms)) {
                 Err(_) => prop_assert_eq!(before, format!("{r:?}")),
                 Ok(Some(Message::State(s))) => {
                     prop_assert!(s.x.is_finite() && s.v >= 0.0 && s.v <= 100.0);
@@ -77,17 +77,21 @@ proptest! {
         lane in 0u8..15,
         alpha in prop::option::of(0u8..15),
         beta in prop::option::of(0u8..15),
-        stamp in 0.0f64..4.0e6,
+        stamp_ms in 0u64..u64::MAX / 1_000,
+        skew_ms in -86_400_000i64..86_400_000,
         counter in 0u8..16,
         cooperative in any::<bool>(),
     ) {
+        // Any uptime; the receiver's clock within a day of the stamp either way.
+        let stamp = Instant::from_millis(stamp_ms);
+        let now = Instant::from_millis(stamp_ms.saturating_add_signed(skew_ms));
         let s = VehicleState { id, x, y, theta, v, omega, lane, alpha, beta, stamp, cooperative };
         let frames: Frames<F8> = encode(&Message::State(s), (id & 0xFF) as u8, counter).expect("in range");
         prop_assert_eq!(frames.len(), MessageKind::State.frames());
         let mut r = Reassembler::<2>::new();
         let mut got = None;
         for f in &frames {
-            got = r.push::<f64, _>(f).expect("valid frames");
+            got = r.push::<f64, _>(f, now).expect("valid frames");
         }
         let Some(Message::State(d)) = got else { panic!("a state") };
         prop_assert_eq!((d.id, d.lane, d.alpha, d.beta, d.cooperative), (id, lane, alpha, beta, cooperative));
@@ -96,21 +100,22 @@ proptest! {
         prop_assert!((d.theta - theta).abs() <= HEADING_RES / 2.0 + 1e-9);
         prop_assert!((d.v - v).abs() <= SPEED_RES / 2.0 + 1e-9);
         prop_assert!((d.omega - omega).abs() <= YAW_RATE_RES / 2.0 + 1e-9);
-        prop_assert!((d.stamp - stamp).abs() <= 0.0005 + 1e-9);
+        prop_assert_eq!(d.stamp, stamp);
     }
 
     #[test]
-    fn request_round_trip(id in any::<u16>(), h in 0u8..4, l in 0u8..2, s in 0.0f64..1.0e5, v in 0.0f64..50.0, at in 0.0f64..1.0e5) {
+    fn request_round_trip(id in any::<u16>(), h in 0u8..4, l in 0u8..2, s in 0.0f64..1.0e5, v in 0.0f64..50.0, at_ms in 0u64..1u64 << 40) {
+        let at = Instant::from_millis(at_ms);
         let req = Request { id, inlet: TrackWire { heading: h, lane: l }, outlet: TrackWire { heading: (h + 1) % 4, lane: l }, arrival: at, s, v };
         let frames: Frames<F8> = encode(&Message::Request(req), (id & 0xFF) as u8, 0).expect("in range");
         let mut r = Reassembler::<2>::new();
         let mut got = None;
         for f in &frames {
-            got = r.push::<f64, _>(f).expect("valid");
+            got = r.push::<f64, _>(f, at).expect("valid");
         }
         let Some(Message::Request(d)) = got else { panic!("a request") };
         prop_assert_eq!((d.id, d.inlet, d.outlet), (id, req.inlet, req.outlet));
         prop_assert!((d.s - s).abs() <= POS_RES / 2.0 + 1e-9 && (d.v - v).abs() <= SPEED_RES / 2.0 + 1e-9);
-        prop_assert!((d.arrival - at).abs() <= 0.0005 + 1e-9);
+        prop_assert_eq!(d.arrival, at);
     }
 }

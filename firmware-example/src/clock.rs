@@ -1,6 +1,8 @@
 //! Time for the control loop: SysTick as a 1 kHz interrupt plus its down-counter gives a
 //! monotonic clock in core-clock ticks, and an embedded-hal 1.0 [`DelayNs`] that sleeps
-//! (`wfi`) through whole milliseconds, so the 10 ms loop idles instead of spinning.
+//! (`wfi`) through whole milliseconds, so the 10 ms loop idles instead of spinning. The
+//! node's time for the planners ([`Clock::instant`], a `planner_core::Instant`) is that
+//! count from what the clock read at start — 60 days here, as after a long uptime.
 //!
 //! Under QEMU with `-icount shift=3,sleep=off` one instruction is 8 ns of virtual time (a
 //! 125 MHz core, below the 168 MHz of common M4F parts) and a sleeping core jumps straight
@@ -10,6 +12,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
 use cortex_m_rt::exception;
 use embedded_hal::delay::DelayNs;
+use planner_core::Instant;
 
 /// SysTick input clock: the MPS2 board's 25 MHz system clock.
 pub const TICKS_PER_SECOND: u64 = 25_000_000;
@@ -24,13 +27,15 @@ fn SysTick() {
     MILLIS.fetch_add(1, Ordering::Relaxed);
 }
 
-/// The SysTick clock (a handle: the state lives in SysTick and [`MILLIS`]).
+/// The SysTick clock (a handle: the state lives in SysTick and [`MILLIS`]), and what it
+/// read at start.
 #[derive(Debug, Clone, Copy)]
-pub struct Clock(());
+pub struct Clock(Instant);
 
 impl Clock {
-    /// Takes SysTick: 1 ms reload from the core clock, interrupt on.
-    pub fn start(mut syst: SYST) -> Self {
+    /// Takes SysTick (1 ms reload from the core clock, interrupt on); the node's time
+    /// reads `at` now.
+    pub fn start(mut syst: SYST, at: Instant) -> Self {
         syst.set_clock_source(SystClkSource::Core);
         syst.set_reload(TICKS_PER_MS - 1);
         syst.clear_current();
@@ -44,7 +49,14 @@ impl Clock {
         }
         MILLIS.store(0, Ordering::Relaxed);
         syst.enable_interrupt();
-        Clock(())
+        Clock(at)
+    }
+
+    /// The node's time now: the start reading plus the ticks since, in microseconds.
+    pub fn instant(&self) -> Instant {
+        let us = self.now() / (TICKS_PER_SECOND / 1_000_000);
+        self.0
+            .saturating_add(planner_core::Duration::from_micros(us))
     }
 
     /// Ticks (1/25 MHz) since start. The interrupt comes as the counter reaches 0, so 0 is

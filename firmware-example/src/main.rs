@@ -150,7 +150,7 @@ fn main() -> ! {
         Some(cp) => cp,
         None => exit(false),
     };
-    let clock = Clock::start(cp.SYST);
+    let clock = Clock::start(cp.SYST, scenarios::CLOCK_START);
     let per_tick = calibrate(&clock);
     defmt::info!(
         "calibration: {=u32} instructions per SysTick tick",
@@ -236,7 +236,17 @@ fn main() -> ! {
         core::mem::size_of::<planner_core::LanePlanner<f32, N>>()
             + core::mem::size_of::<planner_core::WorldView<f32, 32>>()
     );
-    let Some(a) = scenarios::approach::<N>(planner, &mut { now }, &mut emit) else {
+    // The node's clock started at 60 days of uptime. The approach stamps its periods
+    // from that nominal start (period k at CLOCK_START + k·h), so that the host mirror,
+    // which has no SysTick, computes the same stamps and must plan the same commands.
+    let start = clock.instant();
+    defmt::info!(
+        "clock: {=u64} ms of uptime at the first period",
+        start.as_millis()
+    );
+    let Some(a) =
+        scenarios::approach::<N>(planner, scenarios::CLOCK_START, &mut { now }, &mut emit)
+    else {
         exit(false)
     };
     defmt::info!(

@@ -11,9 +11,14 @@
 use can_gateway::{encode, Frames, Message, PlainFrame, Reassembler};
 use embedded_can::{nb::Can, ErrorKind};
 use planner_core::{
-    FallbackReason, LaneEvent, LaneObservation, LanePlanner, Observation, Planner, Pose, Road,
-    StepStatus, VehicleState, WorldView,
+    Duration, FallbackReason, Instant, LaneEvent, LaneObservation, LanePlanner, Observation,
+    Planner, Pose, Road, StepStatus, VehicleState, WorldView,
 };
+
+/// What the firmware's clock reads at power-up: 60 days of uptime, so that every run
+/// shows that stamps, ages and the wire's wrapping milliseconds do not depend on how
+/// long the vehicle has been on (`planner_core::time`).
+pub const CLOCK_START: Instant = Instant::from_secs(60 * 86_400);
 
 /// Steps of the approach.
 pub const APPROACH_STEPS: u32 = 1000;
@@ -99,10 +104,12 @@ impl Can for LoopbackCan {
 }
 
 /// (1) A stopped car (id 1) 60 m ahead broadcasts its state every period over CAN; the
-/// ego (id 2) starts at 15 m/s and knows it only from the frames it receives.
+/// ego (id 2) starts at 15 m/s and knows it only from the frames it receives. Both
+/// clocks read `start` at the first period.
 #[inline(never)]
 pub fn approach<const N: usize>(
     planner: &mut Planner<f32, N>,
+    start: Instant,
     now: &mut impl FnMut() -> u32,
     emit: &mut impl FnMut(&StepRecord),
 ) -> Option<Approach> {
@@ -123,7 +130,7 @@ pub fn approach<const N: usize>(
         rejected: 0,
     };
     for step in 0..APPROACH_STEPS {
-        let t = step as f32 * params.h();
+        let t = start.saturating_add(Duration::from_millis(10 * u64::from(step)));
         let leader = VehicleState {
             id: 1,
             x: 60.0f32,
@@ -145,7 +152,7 @@ pub fn approach<const N: usize>(
         }
         while let Ok(f) = can.receive() {
             out.frames += 1;
-            match rx.push::<f32, _>(&f) {
+            match rx.push::<f32, _>(&f, t) {
                 Ok(Some(Message::State(s))) => {
                     if world.update(&s, t).is_err() {
                         out.rejected += 1;

@@ -15,7 +15,7 @@ use can_gateway::codec::{encode_fd_secured, encode_secured, Verifier};
 use can_gateway::secoc::{FreshnessRx, Key, KeyStore};
 use can_gateway::{FdFrame, Message, PlainFrame, Reassembler};
 use embedded_can::Frame;
-use planner_core::VehicleState;
+use planner_core::{Duration, VehicleState};
 
 include!(concat!(env!("OUT_DIR"), "/secoc_key.rs"));
 
@@ -37,7 +37,8 @@ fn state(k: u32) -> Message<f32> {
         lane: 0,
         alpha: None,
         beta: None,
-        stamp: t,
+        stamp: crate::scenarios::CLOCK_START
+            .saturating_add(Duration::from_millis(10 * u64::from(k))),
         cooperative: true,
     })
 }
@@ -76,9 +77,9 @@ impl Receiver {
             let v = Verifier {
                 keys: &self.keys,
                 freshness: &mut self.fresh,
-                now_ms,
             };
-            done = matches!(self.rx.push_secured::<f32, _, 2, 4>(f, v), Ok(Some(_)));
+            let at = can_gateway::Instant::from_millis(now_ms);
+            done = matches!(self.rx.push_secured::<f32, _, 2, 4>(f, at, v), Ok(Some(_)));
         }
         done
     }
@@ -120,7 +121,7 @@ pub fn run(fd: bool, now: &mut dyn FnMut() -> u32, record: &mut dyn FnMut(usize,
         forged_accepted: 0,
     };
     for k in 0..MESSAGES as u32 {
-        let now_ms = u64::from(k) * 10;
+        let now_ms = crate::scenarios::CLOCK_START.as_millis() + u64::from(k) * 10;
         let counter = (k % 16) as u8;
         let msg = state(k);
         let ok = if fd {

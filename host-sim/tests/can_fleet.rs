@@ -7,11 +7,12 @@ mod common;
 use can_gateway::FdFrame;
 use common::{builtin, load as scenario, Failing};
 use embedded_can::{Frame, Id, StandardId};
-use host_sim::bus::Bus;
+use host_sim::bus::{Bus, Clock};
 use host_sim::fleet::can::{CanBus, CanPort, Hub, HubPort};
 use host_sim::fleet::{self, FleetError, FleetSummary, Medium, Node, RESOLUTION};
 use host_sim::world::summary::Summary;
 use host_sim::world::{SolverChoice, World};
+use planner_core::Instant;
 use std::collections::VecDeque;
 use std::io;
 use std::process::Command;
@@ -65,7 +66,10 @@ fn can_bus_behind_the_bus_trait_equals_the_fleet() {
     let sc = scenario("dead-end.toml");
     let ids: Vec<u16> = sc.vehicles.iter().map(|v| v.id).collect();
     let hub = Hub::new();
-    let bus = CanBus::new(&ids, &sc.network, |_| Ok(hub.port())).expect("ports");
+    let bus = CanBus::new(&ids, &sc.network, Clock::new(Instant::EPOCH, 0.01), |_| {
+        Ok(hub.port())
+    })
+    .expect("ports");
     let mut sim = World::<20, _>::with_bus(sc, SolverChoice::Ours, None, bus);
     sim.set_bus_resolution(RESOLUTION).expect("valid");
     let mut rows = Vec::new();
@@ -187,7 +191,10 @@ fn a_failing_node_ends_the_run_with_its_error() {
 fn can_bus_refuses_what_it_cannot_carry() {
     let hub = Hub::new();
     let road = host_sim::world::network::Network::road(1, None, 27.8);
-    let mut bus = CanBus::new(&[1, 2], &road, |_| Ok(hub.port())).expect("ports");
+    let mut bus = CanBus::new(&[1, 2], &road, Clock::new(Instant::EPOCH, 0.01), |_| {
+        Ok(hub.port())
+    })
+    .expect("ports");
     let report = planner_core::crossing::CrossingReport {
         id: 1,
         route: 0,
@@ -198,13 +205,13 @@ fn can_bus_refuses_what_it_cannot_carry() {
     // A road has no junction whose routes could carry a crossing report.
     let msg = host_sim::bus::Message::Crossing {
         report,
-        stamp: 0.0,
+        stamp: common::secs(0.0),
         junction: 0,
     };
     assert!(bus.send(1, &msg, 0.0).is_err());
     let left = host_sim::bus::Message::Left {
         id: 1,
-        at: 0.5,
+        at: common::secs(0.5),
         junction: 0,
     };
     assert!(bus.send(3, &left, 0.0).is_err());
@@ -214,7 +221,12 @@ fn can_bus_refuses_what_it_cannot_carry() {
     assert_eq!(out.len(), 1);
     assert_eq!(out[0].msg, left);
     // Ids that are not CAN source addresses are refused.
-    assert!(CanBus::new(&[0xF0], &road, |_| Ok(hub.port())).is_err());
+    assert!(
+        CanBus::new(&[0xF0], &road, Clock::new(Instant::EPOCH, 0.01), |_| Ok(
+            hub.port()
+        ))
+        .is_err()
+    );
 }
 
 fn bin() -> Command {

@@ -96,7 +96,7 @@ fn crossing_reports_map_onto_requests_and_back() {
     let map = WireMap::new(&sc.network);
     let report = |report: CrossingReport<f64>| Message::Crossing {
         report,
-        stamp: 0.0,
+        stamp: common::secs(0.0),
         junction: 0,
     };
     let mut pairs = Vec::new();
@@ -108,18 +108,18 @@ fn crossing_reports_map_onto_requests_and_back() {
             v: 9.87,
             length: LENGTH_M,
         };
-        let m = map.to_wire(&report(r), 3.25).expect("maps");
+        let m = map.to_wire(&report(r), common::secs(3.25)).expect("maps");
         let wire::Message::Request(q) = m else {
             panic!("a request: {m:?}")
         };
         pairs.push((q.inlet, q.outlet));
-        assert_eq!(q.arrival, 3.25);
+        assert_eq!(q.arrival, common::secs(3.25));
         // Through the codec: position and speed rounded, the route intact.
         let frames: Frames<PlainFrame> = encode(&m, 7, 0).expect("encodes");
         let mut rx = Reassembler::<4>::new();
         let mut got = None;
         for f in &frames {
-            got = rx.push::<f64, _>(f).expect("accepted");
+            got = rx.push::<f64, _>(f, common::secs(3.5)).expect("accepted");
         }
         let Some(Message::Crossing { report: back, .. }) = got.and_then(|g| map.from_wire(&g, 7))
         else {
@@ -138,13 +138,13 @@ fn crossing_reports_map_onto_requests_and_back() {
         v: 1.0,
         length: LENGTH_M,
     };
-    assert!(map.to_wire(&report(bad_route), 0.0).is_err());
+    assert!(map.to_wire(&report(bad_route), common::secs(0.0)).is_err());
     let long = CrossingReport {
         route: 0,
         length: LENGTH_M + 1.0,
         ..bad_route
     };
-    assert!(map.to_wire(&report(long), 0.0).is_err());
+    assert!(map.to_wire(&report(long), common::secs(0.0)).is_err());
     // A pair that is no route (straight on from the inner lane into the outer one).
     let mut q = wire::Request {
         id: 7,
@@ -156,7 +156,7 @@ fn crossing_reports_map_onto_requests_and_back() {
             heading: 0,
             lane: 1,
         },
-        arrival: 0.0,
+        arrival: common::secs(0.0),
         s: 1.0,
         v: 1.0,
     };
@@ -182,7 +182,7 @@ struct Forger {
 fn own_grant(sa: u8) -> wire::Message<f64> {
     wire::Message::Grant {
         id: u16::from(sa),
-        until: 1e5,
+        until: common::secs(1e5),
     }
 }
 
@@ -191,7 +191,7 @@ fn own_grant(sa: u8) -> wire::Message<f64> {
 fn exit_of_another(sa: u8) -> wire::Message<f64> {
     wire::Message::Exit {
         id: u16::from(sa) + 1,
-        at: 0.5,
+        at: common::secs(0.5),
     }
 }
 
@@ -361,7 +361,7 @@ impl CanPort for Impostor {
         }
         let grant = wire::Message::<f64>::Grant {
             id: u16::from(sa),
-            until: 1e5,
+            until: common::secs(1e5),
         };
         let manager = wire::MANAGER_ADDRESS;
         let frames: Vec<PlainFrame> = match &self.key {

@@ -168,7 +168,7 @@ fn a_vehicle_changing_into_an_outlets_lane_is_on_the_crossing_followers_path() {
         lane,
         alpha,
         beta: None,
-        stamp: 1.0,
+        stamp: common::secs(1.0),
         cooperative: true,
     };
     let mut view = View::new(99);

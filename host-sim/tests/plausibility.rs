@@ -28,7 +28,7 @@ fn hear(view: &mut View, net: &Network, s: VehicleState<f64>) -> Result<(), Reje
 
 fn others(view: &View, net: &Network, now: f64) -> Vec<planner_core::Other<f64>> {
     let mut out = heapless::Vec::new();
-    view.others_on(net, 0, now, 4.5, &mut out);
+    view.others_on(net, 0, common::secs(now), 4.5, &mut out);
     out.into_iter().collect()
 }
 
@@ -52,7 +52,10 @@ fn a_liar_is_refused_and_then_taken_at_its_last_trusted_state() {
     // last trusted state, nor its claim to have left the network.
     let later = state(7, 105.0 + 20.0 * 0.1, 20.0, 0.2);
     assert_eq!(hear(&mut view, &net, later), Err(Reject::Distrusted));
-    let gone = Message::Gone { id: 7, at: 0.3 };
+    let gone = Message::Gone {
+        id: 7,
+        at: common::secs(0.3),
+    };
     assert_eq!(view.take(&gone, &net, (0.0, 0.0)), Err(Reject::Distrusted));
     // The record is the last trusted one, now marked as not cooperating.
     let kept = view.records().to_vec();

@@ -9,6 +9,7 @@ use crate::intersection::{Layout, CONFLICT_SAMPLE_M};
 use crate::planner::ConfigError;
 use crate::real::Real;
 use crate::sensing::{still_unheard, Sensing};
+use crate::time::{Duration, Instant};
 use core::cmp::Ordering;
 use heapless::Vec;
 
@@ -123,18 +124,71 @@ pub struct Entry<F> {
     /// Route.
     pub route: u8,
     /// Arrival τ(c): when it entered A_C, by the intersection's clock.
-    pub tau: F,
+    pub tau: Instant,
     /// Distance of its centre past the A_S entry (negative before).
     pub progress: F,
     /// Distance from its front to the stop line (negative once inside).
     pub to_line: F,
     /// When it was first seen stopped at its stop line (All-Way STOP).
-    pub stopped_at: Option<F>,
+    pub stopped_at: Option<Instant>,
     /// It holds a permission.
     pub permitted: bool,
 }
 
+/// The terms of a manager's permissions (IC Protocol (iii)): every permission is a lease
+/// that the manager renews each period while it stands, and that lapses by itself.
+///
+/// Why leases: a manager that stops (power, software, its link) cannot withdraw what it
+/// granted; a lease ends anyway, so a vehicle that has not yet entered A_S when renewals
+/// stop halts at its stop line. The lease must outlive its own delivery and a few lost
+/// renewals, hence `length` is the bus's notification bound plus a margin.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Lease {
+    /// How long a grant stays valid after the manager sends it: its `until` minus the
+    /// time of sending ([`Manager::lease_until`]).
+    pub length: Duration,
+    /// Bound on how late a vehicle's report reaches the manager after the state it
+    /// reports: the bus's delay bound (at least one period) plus the clock error ε
+    /// ([`crate::time`]).
+    pub notify: Duration,
+}
+
+impl Default for Lease {
+    /// 0.1 s leases on a bus that delivers within one period h = 10 ms.
+    fn default() -> Self {
+        Self {
+            length: Duration::from_millis(100),
+            notify: Duration::from_millis(10),
+        }
+    }
+}
+
+impl Lease {
+    /// How long a manager that has just started grants nothing ([`Manager::update`]):
+    /// the longest an earlier incarnation's lease can still be acted on (`length`), then
+    /// until a vehicle that entered A_S on it at the last moment has been heard there
+    /// (a period and the notification bound: 2 · `notify` ≥ both).
+    pub const fn quiet(&self) -> Duration {
+        self.length
+            .saturating_add(self.notify)
+            .saturating_add(self.notify)
+    }
+}
+
 /// The intersection manager for up to `CAP` vehicles.
+///
+/// **Starting (and restarting) safely.** A manager cannot tell a first start from a
+/// restart after an outage: the grants of the incarnation before it may still be valid,
+/// and the vehicles holding them may enter A_S on them — about which the new manager,
+/// having heard nothing, knows nothing. So from its first [`Manager::update`] on, a
+/// manager grants nothing for [`Lease::quiet`]: by then every lease it may have sent
+/// before has lapsed, and every vehicle that entered A_S on one has reported itself
+/// inside A_S, where [`Manager::observe`] holds its route's conflict zones for it as a
+/// permission would. After that, every grant it makes is checked against everything an
+/// old lease could have let in. (A red team's 10 ms outage at a queued intersection
+/// caused collisions under every algorithm before this rule: the restarted manager
+/// granted a route crossing one whose vehicle entered A_S on its old lease.)
 #[derive(Debug, Clone)]
 pub struct Manager<F, const CAP: usize> {
     layout: Layout<F>,
@@ -143,6 +197,9 @@ pub struct Manager<F, const CAP: usize> {
     crossed: u32,
     /// Half the step to which reported positions were rounded (0: exact reports).
     half_step: F,
+    lease: Lease,
+    /// When its first update ran (its clock at start-up).
+    started: Option<Instant>,
 }
 
 /// `true` for a usable bus resolution: finite, non-negative, below 1 (m or m/s).
@@ -159,7 +216,36 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             entries: Vec::new(),
             crossed: 0,
             half_step: F::ZERO,
+            lease: Lease::default(),
+            started: None,
         }
+    }
+
+    /// Sets the terms of its leases (see [`Lease`]); a notification bound of zero is
+    /// refused (a report takes at least a period).
+    pub fn set_lease(&mut self, lease: Lease) -> Result<(), ConfigError> {
+        if lease.notify == Duration::ZERO || lease.length == Duration::ZERO {
+            return Err(ConfigError::InvalidLatency);
+        }
+        self.lease = lease;
+        Ok(())
+    }
+
+    /// The terms of its leases.
+    pub fn lease(&self) -> Lease {
+        self.lease
+    }
+
+    /// The end of a lease sent at `now`.
+    pub fn lease_until(&self, now: Instant) -> Instant {
+        now.saturating_add(self.lease.length)
+    }
+
+    /// `true` while it may not grant yet at `now`: within [`Lease::quiet`] of its first
+    /// update (before the first update, too).
+    pub fn quiet(&self, now: Instant) -> bool {
+        self.started
+            .is_none_or(|t0| now < t0.saturating_add(self.lease.quiet()))
     }
 
     /// Reports reach the manager with positions rounded to `position` (m), e.g. by a CAN
@@ -203,12 +289,12 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     /// Takes a vehicle's report at time `now`: registers it when it is first seen inside
     /// A_C (τ = now), tracks its progress, and removes it once it is on its outlet track
     /// (its rear past A_S). A bad report changes nothing.
-    pub fn observe(&mut self, r: &CrossingReport<F>, now: F) -> Result<(), ManagerError> {
+    pub fn observe(&mut self, r: &CrossingReport<F>, now: Instant) -> Result<(), ManagerError> {
         let route = self
             .layout
             .route(usize::from(r.route))
             .ok_or(ManagerError::UnknownRoute)?;
-        if !([r.s, r.v, r.length, now].iter().all(|x| x.is_finite())
+        if !([r.s, r.v, r.length].iter().all(|x| x.is_finite())
             && r.v >= F::ZERO
             && r.length > F::ZERO)
         {
@@ -240,6 +326,12 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 if stopped && e.stopped_at.is_none() {
                     e.stopped_at = Some(now);
                 }
+                // Inside A_S it is committed (it keeps going until it is out), whether
+                // this manager granted its entry or not — an earlier incarnation's lease
+                // may have: it holds its route's conflict zones as a permission would.
+                if to_line < F::ZERO {
+                    e.permitted = true;
+                }
             }
             None => {
                 // Only an unregistered vehicle needs its pose: is it inside A_C yet?
@@ -255,11 +347,11 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                         progress: s - entry,
                         to_line,
                         stopped_at: stopped.then_some(now),
-                        // First heard already inside A_S: a manager restarted mid-crossing
-                        // (issue 17), or a vehicle that entered without a permission.
-                        // Either way it occupies its route's conflict zones until it
-                        // leaves, so it holds them as a permission would: no conflicting
-                        // route is granted over it.
+                        // First heard already inside A_S: a manager restarted mid-crossing,
+                        // or a vehicle that entered without a permission. Either way it
+                        // occupies its route's conflict zones until it leaves, so it holds
+                        // them as a permission would: no conflicting route is granted over
+                        // it.
                         permitted: to_line < F::ZERO,
                     })
                     .map_err(|_| ManagerError::Full)?;
@@ -273,13 +365,18 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         self.entries.retain(|e| e.id != id);
     }
 
-    /// Recomputes the permissions by the algorithm.
+    /// Recomputes the permissions by the algorithm at `now`; nothing new is granted while
+    /// the manager is [`Manager::quiet`] (see the type's docs).
     ///
     /// Every algorithm but [`Algorithm::Concurrent`] (kept exactly as the paper writes
     /// it) orders vehicles consistently with their order on each inlet lane and gives
     /// up a permission that a vehicle cannot use; see [`Manager::priority`] and
     /// [`Manager::revoke_blocked`] for why both are needed for liveness.
-    pub fn update(&mut self) {
+    pub fn update(&mut self, now: Instant) {
+        let t0 = *self.started.get_or_insert(now);
+        if now < t0.saturating_add(self.lease.quiet()) {
+            return;
+        }
         let as_written = self.algorithm == Algorithm::Concurrent;
         if !as_written {
             self.revoke_blocked();
@@ -297,11 +394,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                     order
                         .iter()
                         .filter(|i| stopped(i).is_some())
-                        .min_by(|a, b| {
-                            stopped(a)
-                                .partial_cmp(&stopped(b))
-                                .unwrap_or(Ordering::Equal)
-                        })
+                        .min_by(|a, b| stopped(a).cmp(&stopped(b)))
                 } else {
                     order.first()
                 };
@@ -424,7 +517,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     /// [`Manager::revoke_blocked`]). When vehicles arrive one at a time, a follower
     /// always after its leader, both orders coincide.
     fn priority(&self, as_written: bool) -> Vec<usize, CAP> {
-        let mut key: Vec<F, CAP> = Vec::new();
+        let mut key: Vec<Instant, CAP> = Vec::new();
         for e in self.entries.iter() {
             let behind = self
                 .entries
@@ -446,7 +539,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             ) else {
                 return Ordering::Equal;
             };
-            let by_key = kx.partial_cmp(ky).unwrap_or(Ordering::Equal);
+            let by_key = kx.cmp(ky);
             if as_written {
                 return by_key.then(x.route.cmp(&y.route)).then(x.id.cmp(&y.id));
             }
@@ -519,7 +612,8 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     route: u8,
     id: u16,
     length: F,
-    lease_until: F,
+    /// The end of its lease (its manager's clock), if it was ever granted one.
+    lease_until: Option<Instant>,
     /// Step to which others' reported positions were rounded (0: exact).
     position_step: F,
     /// Bound on how long reports take to arrive (≥ h); see [`CrossingPlanner::set_notify_latency`].
@@ -528,7 +622,8 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     sensing: Option<Sensing<F>>,
     /// Steps planned so far (saturating).
     steps: u32,
-    others: Vec<(u16, u8, F, F), CAP>,
+    /// Reports heard: (id, route, s, stamp).
+    others: Vec<(u16, u8, F, Instant), CAP>,
     /// A report could not be kept (`CAP` vehicles already known): until the reports are
     /// cleared, some vehicle may be unknown, and the path is taken as blocked.
     overflowed: bool,
@@ -547,7 +642,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             route,
             id,
             length,
-            lease_until: F::from_f64(-1e30),
+            lease_until: None,
             position_step: F::ZERO,
             notify: planner.params().h(),
             sensing: None,
@@ -635,11 +730,15 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
 
     /// Takes another vehicle's report stamped `stamp`; older or duplicate reports and
     /// its own are ignored. `Err(Full)` if `CAP` vehicles are already known.
-    pub fn hear_report(&mut self, r: &CrossingReport<F>, stamp: F) -> Result<(), ManagerError> {
+    pub fn hear_report(
+        &mut self,
+        r: &CrossingReport<F>,
+        stamp: Instant,
+    ) -> Result<(), ManagerError> {
         if r.id == self.id {
             return Ok(());
         }
-        if !([r.s, stamp].iter().all(|x| x.is_finite())) {
+        if !r.s.is_finite() {
             return Err(ManagerError::BadValue);
         }
         match self.others.iter_mut().find(|o| o.0 == r.id) {
@@ -664,9 +763,9 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
     }
 
     /// Takes a permission lease addressed to anyone (only its own counts).
-    pub fn hear_grant(&mut self, id: u16, until: F) {
-        if id == self.id && until.is_finite() {
-            self.lease_until = self.lease_until.max(until);
+    pub fn hear_grant(&mut self, id: u16, until: Instant) {
+        if id == self.id {
+            self.lease_until = self.lease_until.max(Some(until));
         }
     }
 
@@ -676,11 +775,11 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
     }
 
     /// `true` if, at `now` and position `s`, the vehicle may be in A_S.
-    pub fn permitted(&self, layout: &Layout<F>, s: F, now: F) -> bool {
+    pub fn permitted(&self, layout: &Layout<F>, s: F, now: Instant) -> bool {
         let entry = layout
             .route(usize::from(self.route))
             .map_or(F::ZERO, |r| r.path.entry());
-        s + F::HALF * self.length > entry || self.lease_until >= now
+        s + F::HALF * self.length > entry || self.lease_until.is_some_and(|u| u >= now)
     }
 
     /// One planning step at `now`, at path position `s` with v_{t−h} = `v_prev`.
@@ -689,7 +788,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         layout: &Layout<F>,
         s: F,
         v_prev: F,
-        now: F,
+        now: Instant,
     ) -> Result<crate::planner::Command<F>, crate::planner::InputError> {
         let Some(route) = layout.route(usize::from(self.route)) else {
             return Err(crate::planner::InputError::NotFinite);
@@ -706,7 +805,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             let (oe, ox) = (other.path.entry(), other.path.exit());
             // How far it may have gone since its report: reports older than the bound may
             // not show it on my outlet yet.
-            let age = (now - stamp).max(F::ZERO);
+            let age: F = now.since(stamp).as_secs();
             let reach = if age > self.notify {
                 p.v_max() * age
             } else {
@@ -789,6 +888,11 @@ mod tests {
     use crate::mpc::CostWeights;
     use crate::planner::Planner;
     use crate::Params;
+
+    /// `s` seconds after the epoch.
+    fn at(s: f64) -> Instant {
+        Instant::from_micros((s * 1e6).round() as u64)
+    }
 
     type Car = CrossingPlanner<f64, 20, 2>;
     type Car8 = CrossingPlanner<f64, 20, 8>;
@@ -874,56 +978,61 @@ mod tests {
     fn reports_keep_the_newest_per_vehicle_and_never_the_own() {
         let mut c: Car = car(1, 5);
         assert_eq!(c.route(), 5);
-        c.hear_report(&report(1, 10.0), 0.0).expect("own");
+        c.hear_report(&report(1, 10.0), at(0.0)).expect("own");
         assert!(c.others.is_empty(), "its own report is not an obstacle");
-        c.hear_report(&report(2, 10.0), 1.0).expect("first");
-        c.hear_report(&report(2, 8.0), 0.5).expect("older");
-        assert_eq!(c.others.as_slice(), &[(2, 3, 10.0, 1.0)], "older ignored");
-        c.hear_report(&report(2, 11.0), 1.0).expect("duplicate");
+        c.hear_report(&report(2, 10.0), at(1.0)).expect("first");
+        c.hear_report(&report(2, 8.0), at(0.5)).expect("older");
         assert_eq!(
             c.others.as_slice(),
-            &[(2, 3, 10.0, 1.0)],
+            &[(2, 3, 10.0, at(1.0))],
+            "older ignored"
+        );
+        c.hear_report(&report(2, 11.0), at(1.0)).expect("duplicate");
+        assert_eq!(
+            c.others.as_slice(),
+            &[(2, 3, 10.0, at(1.0))],
             "same stamp ignored"
         );
-        c.hear_report(&report(2, 12.0), 1.5).expect("newer");
-        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, 1.5)]);
+        c.hear_report(&report(2, 12.0), at(1.5)).expect("newer");
+        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, at(1.5))]);
         assert_eq!(
-            c.hear_report(&report(3, f64::NAN), 2.0),
+            c.hear_report(&report(3, f64::NAN), at(2.0)),
             Err(ManagerError::BadValue)
         );
-        c.hear_report(&report(3, 1.0), 2.0).expect("second");
+        c.hear_report(&report(3, 1.0), at(2.0)).expect("second");
         assert!(!c.overflowed);
-        assert_eq!(c.hear_report(&report(4, 1.0), 2.0), Err(ManagerError::Full));
+        assert_eq!(
+            c.hear_report(&report(4, 1.0), at(2.0)),
+            Err(ManagerError::Full)
+        );
         assert!(c.overflowed, "an unknown vehicle may be anywhere");
         c.hear_left(3);
-        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, 1.5)], "only 3 left");
+        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, at(1.5))], "only 3 left");
         c.clear_reports();
         assert!(c.others.is_empty() && !c.overflowed);
     }
 
     #[test]
-    fn only_its_own_finite_grants_extend_the_lease_and_none_shortens_it() {
+    fn only_its_own_grants_extend_the_lease_and_none_shortens_it() {
         let l = spec8();
         let entry = l.route(0).expect("route 0").path.entry();
         let before = entry - 10.0;
         let mut c: Car = car(1, 0);
-        assert!(!c.permitted(&l, before, 0.0));
-        c.hear_grant(2, 5.0);
-        assert!(!c.permitted(&l, before, 0.0), "another vehicle's grant");
-        c.hear_grant(1, f64::NAN);
-        assert!(!c.permitted(&l, before, 0.0));
-        c.hear_grant(1, 5.0);
-        assert!(c.permitted(&l, before, 5.0), "up to the lease's end");
-        assert!(!c.permitted(&l, before, 5.01), "not after it");
-        c.hear_grant(1, 3.0);
+        assert!(!c.permitted(&l, before, at(0.0)));
+        c.hear_grant(2, at(5.0));
+        assert!(!c.permitted(&l, before, at(0.0)), "another vehicle's grant");
+        c.hear_grant(1, at(5.0));
+        assert!(c.permitted(&l, before, at(5.0)), "up to the lease's end");
+        assert!(!c.permitted(&l, before, at(5.01)), "not after it");
+        c.hear_grant(1, at(3.0));
         assert!(
-            c.permitted(&l, before, 5.0),
+            c.permitted(&l, before, at(5.0)),
             "an older lease does not shorten it"
         );
         // Without a lease, a vehicle whose front is past the line is inside A_S (it
         // entered when it held one) and keeps going.
-        assert!(c.permitted(&l, entry - 2.25 + 0.01, 9.0));
-        assert!(!c.permitted(&l, entry - 2.25 - 0.01, 9.0));
+        assert!(c.permitted(&l, entry - 2.25 + 0.01, at(9.0)));
+        assert!(!c.permitted(&l, entry - 2.25 - 0.01, at(9.0)));
         // Front exactly on the line: not yet inside (it needs a lease to go on).
         let on_line = [
             entry - 2.25,
@@ -933,7 +1042,7 @@ mod tests {
         .into_iter()
         .find(|s| s + 2.25 == entry)
         .expect("a centre whose front is exactly on the line");
-        assert!(!c.permitted(&l, on_line, 9.0));
+        assert!(!c.permitted(&l, on_line, at(9.0)));
     }
 
     /// Another route's vehicle about to reach this one's outlet: it is an obstacle on
@@ -961,10 +1070,10 @@ mod tests {
                     v: 5.0,
                     length: 4.5,
                 },
-                stamp,
+                at(stamp),
             )
             .expect("kept");
-            c.step(&l, mine.path.entry() - 60.0, 5.0, now)
+            c.step(&l, mine.path.entry() - 60.0, 5.0, at(now))
                 .expect("step");
             let at = exit + (x - ox);
             c.obstacles.iter().any(|o| (o.x - at).abs() < 1e-9)
@@ -994,9 +1103,9 @@ mod tests {
             v: 5.0,
             length: 4.5,
         };
-        c.hear_report(&r, 0.0).expect("kept");
+        c.hear_report(&r, at(0.0)).expect("kept");
         let s = l.route(0).expect("route 0").path.entry() - 60.0;
-        c.step(l, s, 5.0, 0.0).expect("step");
+        c.step(l, s, 5.0, at(0.0)).expect("step");
         c.obstacles.iter().map(|o| (o.x, o.length)).collect()
     }
 
@@ -1052,7 +1161,7 @@ mod tests {
         let mut c = new(true);
         c.hear_sensed(&[s + 30.0]).expect("one");
         c.hear_mapped(&[s + 40.0]).expect("one");
-        c.step(&l, s, 5.0, 0.0).expect("step");
+        c.step(&l, s, 5.0, at(0.0)).expect("step");
         assert!(has(&c, s + 30.0 - 0.1, 4.5), "sensed: its error closer");
         assert!(has(&c, s + 40.0, 4.6), "mapped: one bus step longer");
         assert!(
@@ -1061,7 +1170,7 @@ mod tests {
         );
         let mut c = new(false);
         c.set_notify_latency(0.5).expect("bound");
-        c.step(&l, s, 5.0, 0.0).expect("step");
+        c.step(&l, s, 5.0, at(0.0)).expect("step");
         assert!(
             has(&c, s + 1e-3, 4.5),
             "blind until reports can have arrived"
@@ -1080,13 +1189,13 @@ mod tests {
             let mut c: Car = car(1, 0);
             c.set_sensing(Some(Sensing::radar())).expect("radar");
             if lease {
-                c.hear_grant(1, 100.0);
+                c.hear_grant(1, at(100.0));
             }
             let h = c.planner.params().h();
             let (mut s, mut v) = (front - 2.25, 5.0);
             for k in 0..(8.0 / h) as u32 {
                 let now = f64::from(k) * h;
-                let next = c.step(&l, s, v, now).expect("step").v;
+                let next = c.step(&l, s, v, at(now)).expect("step").v;
                 s += 0.5 * (v + next) * h;
                 v = next;
             }
@@ -1130,9 +1239,9 @@ mod tests {
                 CrossingPlanner::<f64, 20, 2>::new(Planner::new(p, w).expect("planner"), 1, 0, 4.5);
             c.set_sensing(Some(Sensing::radar())).expect("radar");
             if lease {
-                c.hear_grant(1, 100.0);
+                c.hear_grant(1, at(100.0));
             }
-            let got = c.step(&l, s, 6.0, 0.0).expect("step").v;
+            let got = c.step(&l, s, 6.0, at(0.0)).expect("step").v;
             let unknown = [crate::planner::Vehicle {
                 x: s + 2.25 + 150.0 + 2.25,
                 length: 4.5,

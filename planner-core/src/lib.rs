@@ -55,6 +55,7 @@ pub mod safety;
 pub mod sensing;
 pub mod slot;
 pub mod solver;
+pub mod time;
 pub mod unicycle;
 pub mod world;
 
@@ -72,5 +73,6 @@ pub use reuse::ReusePolicy;
 pub use sensing::Sensing;
 pub use slot::{LanePlannerSlot, PlannerSlot, Slot};
 pub use solver::{IpmSolver, Method, MpcSolver, Settings, Solution, SolveError};
+pub use time::{Duration, Instant};
 pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};

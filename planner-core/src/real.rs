@@ -76,6 +76,9 @@ pub trait Real:
     fn from_f64(x: f64) -> Self;
     /// Converts from a small count (horizon index).
     fn from_usize(n: usize) -> Self;
+    /// Converts from a count (rounding to nearest): microseconds of a
+    /// [`crate::time::Duration`].
+    fn from_u64(n: u64) -> Self;
     /// Converts to `f64` (exact).
     fn to_f64(self) -> f64;
     /// Square root (NaN for negative input).
@@ -143,6 +146,10 @@ impl Real for f32 {
     }
     #[inline]
     fn from_usize(n: usize) -> Self {
+        n as f32
+    }
+    #[inline]
+    fn from_u64(n: u64) -> Self {
         n as f32
     }
     #[inline]
@@ -230,6 +237,10 @@ impl Real for f64 {
     }
     #[inline]
     fn from_usize(n: usize) -> Self {
+        n as f64
+    }
+    #[inline]
+    fn from_u64(n: u64) -> Self {
         n as f64
     }
     #[inline]

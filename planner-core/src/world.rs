@@ -7,6 +7,7 @@
 use crate::lanes::Other;
 use crate::planner::Vehicle;
 use crate::real::Real;
+use crate::time::{Duration, Instant};
 use heapless::Vec;
 
 /// A vehicle-state message (V2V): what each vehicle broadcasts every period.
@@ -32,8 +33,8 @@ pub struct VehicleState<F> {
     pub alpha: Option<u8>,
     /// Intended lane β, before a change.
     pub beta: Option<u8>,
-    /// Time the state was measured, by the sender's clock (s).
-    pub stamp: F,
+    /// When the state was measured, by the sender's clock ([`crate::time`]).
+    pub stamp: Instant,
     /// The sender follows the protocols (see [`Other::cooperative`]); a scripted or
     /// legacy vehicle says it does not.
     pub cooperative: bool,
@@ -61,8 +62,8 @@ pub enum WorldError {
 pub struct Known<F> {
     /// Latest state.
     pub state: VehicleState<F>,
-    /// Receive time by the receiver's clock (s).
-    pub received: F,
+    /// When it was received, by the receiver's clock.
+    pub received: Instant,
 }
 
 /// The latest known state of up to `CAP` other vehicles.
@@ -83,11 +84,11 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
 
     /// Takes in a message received at `now`. Invalid, own, stale or duplicate messages
     /// are rejected with a typed error and change nothing.
-    pub fn update(&mut self, msg: &VehicleState<F>, now: F) -> Result<(), WorldError> {
+    pub fn update(&mut self, msg: &VehicleState<F>, now: Instant) -> Result<(), WorldError> {
         if msg.id == self.own_id {
             return Err(WorldError::OwnMessage);
         }
-        let fields = [msg.x, msg.y, msg.theta, msg.v, msg.omega, msg.stamp, now];
+        let fields = [msg.x, msg.y, msg.theta, msg.v, msg.omega];
         if !fields.iter().all(|f| f.is_finite()) {
             return Err(WorldError::NotFinite);
         }
@@ -96,7 +97,7 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
         }
         match self.known.iter_mut().find(|k| k.state.id == msg.id) {
             Some(k) => {
-                if !(msg.stamp > k.state.stamp) {
+                if msg.stamp <= k.state.stamp {
                     return Err(WorldError::Stale);
                 }
                 *k = Known {
@@ -116,8 +117,8 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
     }
 
     /// Forgets vehicles whose latest state is older than `max_age` at `now` (by stamp).
-    pub fn forget_older_than(&mut self, now: F, max_age: F) {
-        self.known.retain(|k| !(now - k.state.stamp > max_age));
+    pub fn forget_older_than(&mut self, now: Instant, max_age: Duration) {
+        self.known.retain(|k| now.since(k.state.stamp) <= max_age);
     }
 
     /// Every tracked vehicle.
@@ -138,7 +139,7 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
     /// Every tracked vehicle as the multi-lane planner wants it (all assumed `length`
     /// long), with the age of its data at `now` (by its stamp), into `out` (cleared
     /// first; at most `CAP`).
-    pub fn others(&self, now: F, length: F, out: &mut Vec<Other<F>, CAP>) {
+    pub fn others(&self, now: Instant, length: F, out: &mut Vec<Other<F>, CAP>) {
         out.clear();
         for k in self.known.iter() {
             let s = &k.state;
@@ -147,7 +148,7 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
                 alpha: s.alpha,
                 beta: s.beta,
                 cooperative: s.cooperative,
-                ..Other::v2v(s.id, s.x, s.v, length, s.lane, (now - s.stamp).max(F::ZERO))
+                ..Other::v2v(s.id, s.x, s.v, length, s.lane, now.since(s.stamp).as_secs())
             });
         }
     }
@@ -170,7 +171,7 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
 mod tests {
     use super::*;
 
-    fn msg(id: u16, x: f64, stamp: f64) -> VehicleState<f64> {
+    fn msg(id: u16, x: f64, stamp_ms: u64) -> VehicleState<f64> {
         VehicleState {
             id,
             x,
@@ -181,38 +182,94 @@ mod tests {
             lane: 0,
             alpha: None,
             beta: None,
-            stamp,
+            stamp: Instant::from_millis(stamp_ms),
             cooperative: true,
         }
     }
 
     #[test]
     fn keeps_latest_and_rejects_bad_messages() {
+        let ms = Instant::from_millis;
         let mut w = WorldView::<f64, 2>::new(7);
-        assert_eq!(w.update(&msg(1, 10.0, 0.0), 0.0), Ok(()));
-        assert_eq!(w.update(&msg(1, 11.0, 0.01), 0.01), Ok(()));
-        assert_eq!(w.update(&msg(1, 9.0, 0.01), 0.02), Err(WorldError::Stale));
-        assert_eq!(w.update(&msg(1, 9.0, 0.005), 0.02), Err(WorldError::Stale));
+        assert_eq!(w.update(&msg(1, 10.0, 0), ms(0)), Ok(()));
+        assert_eq!(w.update(&msg(1, 11.0, 10), ms(10)), Ok(()));
+        assert_eq!(w.update(&msg(1, 9.0, 10), ms(20)), Err(WorldError::Stale));
+        assert_eq!(w.update(&msg(1, 9.0, 5), ms(20)), Err(WorldError::Stale));
         assert_eq!(
-            w.update(&msg(7, 9.0, 1.0), 1.0),
+            w.update(&msg(7, 9.0, 1000), ms(1000)),
             Err(WorldError::OwnMessage)
         );
         assert_eq!(
-            w.update(&msg(2, f64::NAN, 1.0), 1.0),
+            w.update(&msg(2, f64::NAN, 1000), ms(1000)),
             Err(WorldError::NotFinite)
         );
-        let mut neg = msg(2, 0.0, 1.0);
+        let mut neg = msg(2, 0.0, 1000);
         neg.v = -1.0;
-        assert_eq!(w.update(&neg, 1.0), Err(WorldError::NegativeSpeed));
-        assert_eq!(w.update(&msg(2, 20.0, 1.0), 1.0), Ok(()));
-        assert_eq!(w.update(&msg(3, 30.0, 1.0), 1.0), Err(WorldError::Full));
+        assert_eq!(w.update(&neg, ms(1000)), Err(WorldError::NegativeSpeed));
+        assert_eq!(w.update(&msg(2, 20.0, 1000), ms(1000)), Ok(()));
+        assert_eq!(
+            w.update(&msg(3, 30.0, 1000), ms(1000)),
+            Err(WorldError::Full)
+        );
         assert_eq!(w.len(), 2);
         let x1 = w.iter().find(|k| k.state.id == 1).map(|k| k.state.x);
         assert_eq!(x1, Some(11.0));
-        w.forget_older_than(1.0, 0.5);
+        w.forget_older_than(ms(1000), Duration::from_millis(500));
         assert_eq!(w.len(), 1);
         let mut lane = Vec::new();
         w.lane_vehicles(0, 4.5, &mut lane);
         assert_eq!(lane.len(), 1);
+    }
+
+    /// A vehicle whose clock has run 60 days, or runs across 2³² ms, takes every fresh
+    /// state and sees the same ages, to the bit, as one whose clock starts at zero.
+    #[test]
+    fn long_uptimes_take_every_fresh_state_with_the_same_ages() {
+        fn ages<F: Real>(base: Instant) -> ([F; 100], usize) {
+            let mut w = WorldView::<F, 4>::new(9);
+            let mut taken = 0;
+            let mut out = [F::ZERO; 100];
+            let mut others = Vec::<Other<F>, 4>::new();
+            for k in 0..100u64 {
+                let stamp = base.saturating_add(Duration::from_millis(10 * k));
+                let now = stamp.saturating_add(Duration::from_millis(3 + k % 7));
+                let s = VehicleState {
+                    id: 1,
+                    x: F::from_f64(10.0),
+                    y: F::ZERO,
+                    theta: F::ZERO,
+                    v: F::ONE,
+                    omega: F::ZERO,
+                    lane: 0,
+                    alpha: None,
+                    beta: None,
+                    stamp,
+                    cooperative: true,
+                };
+                taken += usize::from(w.update(&s, now).is_ok());
+                w.others(now, F::from_f64(4.5), &mut others);
+                out[k as usize] = others.first().map_or(F::ZERO, |o| o.age);
+            }
+            (out, taken)
+        }
+        let zero32 = ages::<f32>(Instant::EPOCH);
+        let zero64 = ages::<f64>(Instant::EPOCH);
+        assert_eq!(zero32.1, 100);
+        for base in [
+            Instant::from_secs(60 * 86_400),
+            Instant::from_millis((1 << 32) - 500),
+        ] {
+            let (a32, n32) = ages::<f32>(base);
+            let (a64, n64) = ages::<f64>(base);
+            assert_eq!((n32, n64), (100, 100));
+            assert!(a32
+                .iter()
+                .zip(zero32.0)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+            assert!(a64
+                .iter()
+                .zip(zero64.0)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
     }
 }

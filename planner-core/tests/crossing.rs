@@ -4,7 +4,19 @@
 
 use planner_core::crossing::{Algorithm, CrossingReport, Manager};
 use planner_core::intersection::{Layout, LayoutSpec, ROUTES};
-use planner_core::Params;
+use planner_core::{Instant, Params};
+
+/// `t` seconds into a test, 1,000 s after the managers' start (past their quiet time).
+fn secs(t: f64) -> Instant {
+    Instant::from_micros(((1000.0 + t) * 1e6).round() as u64)
+}
+
+/// A manager that started at the epoch: its start-up quiet time is over by [`secs`]`(0)`.
+fn manager<const CAP: usize>(l: &Layout<f64>, alg: Algorithm) -> Manager<f64, CAP> {
+    let mut m = Manager::new(l.clone(), alg);
+    m.update(Instant::EPOCH);
+    m
+}
 
 fn layout() -> Layout<f64> {
     let p = Params::<f64>::table_i();
@@ -55,7 +67,7 @@ fn report(l: &Layout<f64>, id: u16, route: u8, at: At) -> CrossingReport<f64> {
 fn starve(algorithm: Algorithm) -> Option<u32> {
     let l = layout();
     let (a, x, y) = starving_triple(&l);
-    let mut m = Manager::<f64, 64>::new(l.clone(), algorithm);
+    let mut m = manager::<64>(&l, algorithm);
     // Vehicle ids: a = 1; stream vehicles 100.. alternate routes x, y.
     let mut stream: Vec<(u16, u8)> = Vec::new();
     let mut next_id = 100u16;
@@ -78,7 +90,8 @@ fn starve(algorithm: Algorithm) -> Option<u32> {
                 Some(_) => At::Inside,
                 None => At::Waiting,
             };
-            m.observe(&report(&l, id, r, at), f64::from(t)).unwrap();
+            m.observe(&report(&l, id, r, at), secs(f64::from(t)))
+                .unwrap();
         }
         stream.retain(|(id, _)| inside_since.get(id).is_none_or(|&s| t < s + 2));
         if cycle >= 1 {
@@ -87,9 +100,10 @@ fn starve(algorithm: Algorithm) -> Option<u32> {
                 Some(p) if t < p + 2 => At::Inside,
                 Some(_) => At::Gone,
             };
-            m.observe(&report(&l, 1, a, at), f64::from(t)).unwrap();
+            m.observe(&report(&l, 1, a, at), secs(f64::from(t)))
+                .unwrap();
         }
-        m.update();
+        m.update(secs(100.0));
         // Invariant of every algorithm: permitted routes are pairwise compatible, except
         // the pipelined algorithm's followers on one route.
         let held: Vec<_> = m.entries().iter().filter(|e| e.permitted).collect();
@@ -139,12 +153,12 @@ fn the_fair_variant_bounds_the_wait() {
 fn fifo_and_stop_permit_one_at_a_time_and_bad_reports_change_nothing() {
     let l = layout();
     for alg in [Algorithm::Fifo, Algorithm::AllWayStop] {
-        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+        let mut m = manager::<8>(&l, alg);
         for (id, r) in [(1u16, 0u8), (2, 8), (3, 5)] {
-            m.observe(&report(&l, id, r, At::Waiting), f64::from(id))
+            m.observe(&report(&l, id, r, At::Waiting), secs(f64::from(id)))
                 .unwrap();
         }
-        m.update();
+        m.update(secs(100.0));
         let held: Vec<_> = m
             .entries()
             .iter()
@@ -152,33 +166,34 @@ fn fifo_and_stop_permit_one_at_a_time_and_bad_reports_change_nothing() {
             .map(|e| e.id)
             .collect();
         assert_eq!(held, vec![1], "{alg:?}");
-        m.update();
+        m.update(secs(100.0));
         assert_eq!(m.entries().iter().filter(|e| e.permitted).count(), 1);
         // Vehicle 1 leaves: the next in order is served.
-        m.observe(&report(&l, 1, 0, At::Gone), 9.0).unwrap();
-        m.update();
+        m.observe(&report(&l, 1, 0, At::Gone), secs(9.0)).unwrap();
+        m.update(secs(100.0));
         assert!(m.permitted(2) && !m.permitted(3), "{alg:?}");
         assert_eq!(m.crossed(), 1);
         let before = m.entries().to_vec();
         let mut bad = report(&l, 3, 5, At::Waiting);
         bad.s = f64::NAN;
-        assert!(m.observe(&bad, 10.0).is_err());
+        assert!(m.observe(&bad, secs(10.0)).is_err());
         bad = report(&l, 3, 5, At::Waiting);
         bad.route = 200;
-        assert!(m.observe(&bad, 10.0).is_err());
+        assert!(m.observe(&bad, secs(10.0)).is_err());
         bad = report(&l, 3, 6, At::Waiting);
-        assert!(m.observe(&bad, 10.0).is_err(), "route change");
+        assert!(m.observe(&bad, secs(10.0)).is_err(), "route change");
         assert_eq!(m.entries(), &before[..]);
     }
     // All-Way STOP serves only vehicles that have stopped at their line.
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::AllWayStop);
+    let mut m = manager::<8>(&l, Algorithm::AllWayStop);
     let mut moving = report(&l, 1, 0, At::Waiting);
     moving.v = 5.0;
-    m.observe(&moving, 0.0).unwrap();
-    m.update();
+    m.observe(&moving, secs(0.0)).unwrap();
+    m.update(secs(100.0));
     assert!(!m.permitted(1));
-    m.observe(&report(&l, 1, 0, At::Waiting), 1.0).unwrap();
-    m.update();
+    m.observe(&report(&l, 1, 0, At::Waiting), secs(1.0))
+        .unwrap();
+    m.update(secs(100.0));
     assert!(m.permitted(1));
 }
 
@@ -189,27 +204,27 @@ fn position_resolution_keeps_a_vehicle_until_it_has_surely_left() {
     let l = layout();
     let exit = l.route(0).unwrap().path.exit();
     let mut almost = report(&l, 1, 0, At::Inside);
-    let mut exact = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
-    let mut rounded = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    let mut exact = manager::<8>(&l, Algorithm::Fifo);
+    let mut rounded = manager::<8>(&l, Algorithm::Fifo);
     assert!(rounded.set_position_resolution(-0.01).is_err());
     assert!(rounded.set_position_resolution(f64::NAN).is_err());
     assert!(rounded.set_position_resolution(1.0).is_err());
     rounded.set_position_resolution(0.01).unwrap();
     for m in [&mut exact, &mut rounded] {
-        m.observe(&almost, 1.0).unwrap();
-        m.update();
+        m.observe(&almost, secs(1.0)).unwrap();
+        m.update(secs(100.0));
         assert!(m.permitted(1));
     }
     // Reported rear 3 mm past the exit: it may still be 2 mm inside.
     almost.s = exit + 0.5 * almost.length + 0.003;
-    exact.observe(&almost, 2.0).unwrap();
-    rounded.observe(&almost, 2.0).unwrap();
+    exact.observe(&almost, secs(2.0)).unwrap();
+    rounded.observe(&almost, secs(2.0)).unwrap();
     assert_eq!((exact.crossed(), exact.entries().len()), (1, 0));
     assert_eq!((rounded.crossed(), rounded.entries().len()), (0, 1));
     assert!(rounded.permitted(1));
     // 6 mm past: surely out.
     almost.s += 0.003;
-    rounded.observe(&almost, 3.0).unwrap();
+    rounded.observe(&almost, secs(3.0)).unwrap();
     assert_eq!((rounded.crossed(), rounded.entries().len()), (1, 0));
 }
 
@@ -226,7 +241,7 @@ fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
         let planner = Planner::<f64, 20>::new(p, CostWeights::default()).unwrap();
         let mut c = CrossingPlanner::<f64, 20, 8>::new(planner, 1, 0, 4.5);
         c.set_bus_resolution(res).unwrap();
-        c.hear_grant(1, 10.0);
+        c.hear_grant(1, secs(10.0));
         let ahead = CrossingReport {
             id: 2,
             route: 0,
@@ -234,8 +249,8 @@ fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
             v: 5.0,
             length: 4.5,
         };
-        c.hear_report(&ahead, 0.0).unwrap();
-        c.step(&l, entry - 40.0, 5.0, 0.0).unwrap().gap
+        c.hear_report(&ahead, secs(0.0)).unwrap();
+        c.step(&l, entry - 40.0, 5.0, secs(0.0)).unwrap().gap
     };
     let (exact, rounded) = (gap(0.0), gap(0.01));
     assert!(
@@ -275,20 +290,20 @@ fn vehicles_arriving_together_are_served_in_lane_order() {
         Algorithm::ConcurrentFair,
         Algorithm::Pipelined,
     ] {
-        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
-        m.observe(&follower, 0.0).unwrap();
-        m.observe(&leader, 0.0).unwrap();
-        m.update();
+        let mut m = manager::<8>(&l, alg);
+        m.observe(&follower, secs(0.0)).unwrap();
+        m.observe(&leader, secs(0.0)).unwrap();
+        m.update(secs(100.0));
         assert!(m.permitted(1), "{alg:?}: the leader is served first");
         assert!(!m.permitted(2), "{alg:?}: not the follower ahead of it");
     }
     // The paper's algorithm as written keeps Ψ: the follower is permitted, the leader
     // (sharing its inlet, hence conflicting) is not — the deadlock it cannot leave.
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Concurrent);
-    m.observe(&follower, 0.0).unwrap();
-    m.observe(&leader, 0.0).unwrap();
+    let mut m = manager::<8>(&l, Algorithm::Concurrent);
+    m.observe(&follower, secs(0.0)).unwrap();
+    m.observe(&leader, secs(0.0)).unwrap();
     for _ in 0..3 {
-        m.update();
+        m.update(secs(100.0));
         assert!(m.permitted(2) && !m.permitted(1));
     }
 }
@@ -300,11 +315,95 @@ fn vehicles_arriving_together_are_served_in_lane_order() {
 fn a_permission_blocked_by_an_unpermitted_leader_is_withdrawn() {
     let l = layout();
     let (leader, follower) = queue(&l);
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
-    m.observe(&follower, 0.0).unwrap();
-    m.update();
+    let mut m = manager::<8>(&l, Algorithm::Fifo);
+    m.observe(&follower, secs(0.0)).unwrap();
+    m.update(secs(100.0));
     assert!(m.permitted(2));
-    m.observe(&leader, 1.0).unwrap();
-    m.update();
+    m.observe(&leader, secs(1.0)).unwrap();
+    m.update(secs(100.0));
     assert!(m.permitted(1) && !m.permitted(2));
+}
+
+/// A manager that restarts while a lease it gave before is still valid: the vehicle
+/// holding that lease enters A_S on it, so nothing crossing its route may be granted
+/// until that vehicle has been heard inside A_S (then it holds its zones) — whatever the
+/// algorithm. The quiet time at start-up is what guarantees it; without it the restarted
+/// manager would grant the crossing route at once.
+#[test]
+fn a_restarted_manager_grants_nothing_an_old_lease_could_conflict_with() {
+    use planner_core::crossing::Lease;
+    use planner_core::Duration;
+    let l = layout();
+    let (ra, rb, _) = starving_triple(&l);
+    assert!(l.conflict(usize::from(ra), usize::from(rb)));
+    let lease = Lease::default();
+    let ms = |k: u64| secs(0.0).saturating_add(Duration::from_millis(k));
+    for alg in Algorithm::ALL {
+        // The old manager granted `a` at 0 ms (lease until 100 ms); it went down at 5 ms
+        // and a new one starts at 10 ms. It hears `b` waiting at its line at once, `a`
+        // (its reports delayed) from 20 ms on: by arrival, `b` comes first.
+        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
+        m.set_lease(lease).unwrap();
+        let waiting = |id, r| report(&l, id, r, At::Waiting);
+        let mut t = 10;
+        let mut granted_b_at = None;
+        while t <= 400 {
+            // `a` enters A_S at 90 ms on its old lease and leaves at 300 ms.
+            let a_at = match t {
+                ..90 => At::Waiting,
+                90..300 => At::Inside,
+                _ => At::Gone,
+            };
+            if t >= 20 {
+                m.observe(&report(&l, 1, ra, a_at), ms(t)).unwrap();
+            }
+            m.observe(&waiting(2, rb), ms(t)).unwrap();
+            m.update(ms(t));
+            if m.permitted(2) && granted_b_at.is_none() {
+                granted_b_at = Some(t);
+            }
+            if (90..300).contains(&t) {
+                assert!(
+                    !m.permitted(2),
+                    "{alg:?}: b granted at {t} ms while a is in A_S"
+                );
+            }
+            t += 10;
+        }
+        let quiet_end = 10 + lease.quiet().as_micros() / 1000;
+        assert!(
+            granted_b_at.is_none_or(|g| g >= 300),
+            "{alg:?}: b granted at {granted_b_at:?} ms (quiet until {quiet_end} ms)"
+        );
+    }
+}
+
+/// The quiet time is the lease, then twice the notification bound; before a manager's
+/// first update it is quiet too.
+#[test]
+fn quiet_time_follows_the_lease() {
+    use planner_core::crossing::Lease;
+    use planner_core::Duration;
+    let l = layout();
+    let mut m = Manager::<f64, 8>::new(l, Algorithm::Fifo);
+    let lease = Lease {
+        length: Duration::from_millis(150),
+        notify: Duration::from_millis(40),
+    };
+    assert_eq!(lease.quiet(), Duration::from_millis(230));
+    m.set_lease(lease).unwrap();
+    assert!(m.quiet(Instant::from_secs(5)));
+    m.update(Instant::from_secs(5));
+    assert!(m.quiet(Instant::from_millis(5_229)));
+    assert!(!m.quiet(Instant::from_millis(5_230)));
+    assert_eq!(
+        m.lease_until(Instant::from_secs(7)),
+        Instant::from_millis(7_150)
+    );
+    assert!(m
+        .set_lease(Lease {
+            length: Duration::ZERO,
+            ..lease
+        })
+        .is_err());
 }

@@ -10,7 +10,19 @@ use planner_core::crossing::{
     Algorithm, CrossingReport, Manager, ManagerError, REQUEST_DISTANCE_M,
 };
 use planner_core::intersection::{Layout, LayoutSpec, Movement, CONFLICT_SAMPLE_M, ROUTES};
-use planner_core::Params;
+use planner_core::{Instant, Params};
+
+/// `t` seconds into a test, 1,000 s after the managers' start (past their quiet time).
+fn secs(t: f64) -> Instant {
+    Instant::from_micros(((1000.0 + t) * 1e6).round() as u64)
+}
+
+/// A manager that started at the epoch: its start-up quiet time is over by [`secs`]`(0)`.
+fn manager(l: &Layout<f64>, alg: Algorithm) -> Manager<f64, 8> {
+    let mut m = Manager::new(l.clone(), alg);
+    m.update(Instant::EPOCH);
+    m
+}
 
 const LENGTH: f64 = 4.5;
 const HALF: f64 = LENGTH / 2.0;
@@ -47,10 +59,10 @@ fn entry(m: &Manager<f64, 8>, id: u16) -> planner_core::crossing::Entry<f64> {
 /// A manager under `alg` whose vehicle `id` on `route` was granted at its line at t = 0
 /// and reports itself 3 m inside A_S at t = 1 (a holder); nothing is decided yet at t = 1.
 fn with_holder(l: &Layout<f64>, alg: Algorithm, id: u16, route: usize) -> Manager<f64, 8> {
-    let mut m = Manager::<f64, 8>::new(l.clone(), alg);
-    m.observe(&at(l, id, route, 0.5, 0.0), 0.0).unwrap();
-    m.update();
-    m.observe(&at(l, id, route, -3.0, 5.0), 1.0).unwrap();
+    let mut m = manager(l, alg);
+    m.observe(&at(l, id, route, 0.5, 0.0), secs(0.0)).unwrap();
+    m.update(secs(100.0));
+    m.observe(&at(l, id, route, -3.0, 5.0), secs(1.0)).unwrap();
     m
 }
 
@@ -64,46 +76,52 @@ fn algorithm_names_are_the_ones_outputs_and_the_cli_use() {
 fn a_report_sets_the_distance_to_the_line_the_progress_and_the_stop() {
     let l = layout();
     let r = route(&l, 0, Movement::Straight);
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::AllWayStop);
+    let mut m = manager(&l, Algorithm::AllWayStop);
     // Stopped 10 m before the line: registered, not "stopped at the line".
-    m.observe(&at(&l, 1, r, 10.0, 0.0), 1.0).unwrap();
+    m.observe(&at(&l, 1, r, 10.0, 0.0), secs(1.0)).unwrap();
     let e = entry(&m, 1);
     assert!((e.to_line - 10.0).abs() < 1e-9, "{}", e.to_line);
     assert!((e.progress - (-10.0 - HALF)).abs() < 1e-9, "{}", e.progress);
     assert_eq!(e.stopped_at, None);
     // Rolling 1 m before the line: not stopped either.
-    m.observe(&at(&l, 1, r, 1.0, 3.0), 2.0).unwrap();
+    m.observe(&at(&l, 1, r, 1.0, 3.0), secs(2.0)).unwrap();
     let e = entry(&m, 1);
     assert_eq!(e.stopped_at, None);
     assert!((e.progress - (-1.0 - HALF)).abs() < 1e-9, "{}", e.progress);
     // Standing within the stop-line zone: stopped, from now on.
-    m.observe(&at(&l, 1, r, 0.5, 0.0), 3.0).unwrap();
-    m.observe(&at(&l, 1, r, 0.4, 0.0), 4.0).unwrap();
+    m.observe(&at(&l, 1, r, 0.5, 0.0), secs(3.0)).unwrap();
+    m.observe(&at(&l, 1, r, 0.4, 0.0), secs(4.0)).unwrap();
     let e = entry(&m, 1);
-    assert_eq!(e.stopped_at, Some(3.0));
+    assert_eq!(e.stopped_at, Some(secs(3.0)));
     assert!((e.to_line - 0.4).abs() < 1e-9);
-    assert_eq!(e.tau, 1.0, "τ is the first report inside A_C");
+    assert_eq!(e.tau, secs(1.0), "τ is the first report inside A_C");
 }
 
 #[test]
 fn a_vehicle_of_no_length_is_refused_and_changes_nothing() {
     let l = layout();
     let r = route(&l, 0, Movement::Straight);
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
+    let mut m = manager(&l, Algorithm::Fifo);
     let mut bad = at(&l, 1, r, 5.0, 0.0);
     bad.length = 0.0;
-    assert_eq!(m.observe(&bad, 0.0), Err(ManagerError::BadValue));
+    assert_eq!(m.observe(&bad, secs(0.0)), Err(ManagerError::BadValue));
     assert!(m.entries().is_empty());
 }
 
 #[test]
 fn forget_drops_that_vehicle_only() {
     let l = layout();
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
-    m.observe(&at(&l, 1, route(&l, 0, Movement::Straight), 5.0, 0.0), 0.0)
-        .unwrap();
-    m.observe(&at(&l, 2, route(&l, 1, Movement::Straight), 5.0, 0.0), 0.0)
-        .unwrap();
+    let mut m = manager(&l, Algorithm::Fifo);
+    m.observe(
+        &at(&l, 1, route(&l, 0, Movement::Straight), 5.0, 0.0),
+        secs(0.0),
+    )
+    .unwrap();
+    m.observe(
+        &at(&l, 2, route(&l, 1, Movement::Straight), 5.0, 0.0),
+        secs(0.0),
+    )
+    .unwrap();
     m.forget(1);
     let ids: Vec<u16> = m.entries().iter().map(|e| e.id).collect();
     assert_eq!(ids, [2]);
@@ -125,13 +143,13 @@ fn only_the_pipelined_manager_holds_back_a_vehicle_far_from_its_line() {
         (Algorithm::Concurrent, true),
         (Algorithm::Pipelined, false),
     ] {
-        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
-        m.observe(&at(&l, 1, r, far, 8.0), 0.0).unwrap();
-        m.update();
+        let mut m = manager(&l, alg);
+        m.observe(&at(&l, 1, r, far, 8.0), secs(0.0)).unwrap();
+        m.update(secs(100.0));
         assert_eq!(m.permitted(1), expected, "{alg:?}");
-        m.observe(&at(&l, 1, r, REQUEST_DISTANCE_M - 5.0, 8.0), 0.5)
+        m.observe(&at(&l, 1, r, REQUEST_DISTANCE_M - 5.0, 8.0), secs(0.5))
             .unwrap();
-        m.update();
+        m.update(secs(100.0));
         assert!(m.permitted(1), "{alg:?}: within the request distance");
     }
 }
@@ -167,9 +185,9 @@ fn no_later_vehicle_overtakes_a_waiting_conflicting_one_under_the_fair_variant()
         ] {
             let mut m = with_holder(&l, alg, 10, x);
             assert!(m.permitted(10));
-            m.observe(&at(&l, 11, a, 0.5, 0.0), 1.0).unwrap();
-            m.observe(&at(&l, 12, y, 0.5, 0.0), 2.0).unwrap();
-            m.update();
+            m.observe(&at(&l, 11, a, 0.5, 0.0), secs(1.0)).unwrap();
+            m.observe(&at(&l, 12, y, 0.5, 0.0), secs(2.0)).unwrap();
+            m.update(secs(100.0));
             assert!(m.permitted(10) && !m.permitted(11), "{alg:?} {a} {x} {y}");
             assert_eq!(m.permitted(12), y_permitted, "{alg:?} routes {a} {x} {y}");
         }
@@ -196,10 +214,10 @@ fn two_inlets(l: &Layout<f64>) -> (usize, usize) {
 fn ties_across_lanes_go_by_lane_order_not_by_position() {
     let l = layout();
     let (first, second) = two_inlets(&l);
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
-    m.observe(&at(&l, 1, first, 20.0, 5.0), 0.0).unwrap();
-    m.observe(&at(&l, 2, second, 0.5, 0.0), 0.0).unwrap();
-    m.update();
+    let mut m = manager(&l, Algorithm::Fifo);
+    m.observe(&at(&l, 1, first, 20.0, 5.0), secs(0.0)).unwrap();
+    m.observe(&at(&l, 2, second, 0.5, 0.0), secs(0.0)).unwrap();
+    m.update(secs(100.0));
     assert!(m.permitted(1) && !m.permitted(2));
 }
 
@@ -212,13 +230,13 @@ fn a_vehicle_on_another_lane_does_not_withdraw_a_permission() {
         let (p, q) = two_inlets(&l);
         (q, p)
     }] {
-        let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
-        m.observe(&at(&l, 1, held, 20.0, 5.0), 0.0).unwrap();
-        m.update();
+        let mut m = manager(&l, Algorithm::Fifo);
+        m.observe(&at(&l, 1, held, 20.0, 5.0), secs(0.0)).unwrap();
+        m.update(secs(100.0));
         assert!(m.permitted(1));
-        m.observe(&at(&l, 1, held, 15.0, 5.0), 1.0).unwrap();
-        m.observe(&at(&l, 2, other, 0.5, 0.0), 1.0).unwrap();
-        m.update();
+        m.observe(&at(&l, 1, held, 15.0, 5.0), secs(1.0)).unwrap();
+        m.observe(&at(&l, 2, other, 0.5, 0.0), secs(1.0)).unwrap();
+        m.update(secs(100.0));
         assert!(
             m.permitted(1) && !m.permitted(2),
             "held {held}, other {other}"
@@ -235,15 +253,15 @@ fn a_vehicle_inside_keeps_its_permission_against_an_earlier_arrival() {
     let x = (0..ROUTES)
         .find(|&x| l.conflict(a, x) && inlet(&l, x) != inlet(&l, a))
         .unwrap();
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Pipelined);
-    m.observe(&at(&l, 1, a, REQUEST_DISTANCE_M + 5.0, 8.0), 0.0)
+    let mut m = manager(&l, Algorithm::Pipelined);
+    m.observe(&at(&l, 1, a, REQUEST_DISTANCE_M + 5.0, 8.0), secs(0.0))
         .unwrap();
-    m.observe(&at(&l, 2, x, 1.0, 2.0), 1.0).unwrap();
-    m.update();
+    m.observe(&at(&l, 2, x, 1.0, 2.0), secs(1.0)).unwrap();
+    m.update(secs(100.0));
     assert!(m.permitted(2) && !m.permitted(1));
-    m.observe(&at(&l, 2, x, -3.0, 5.0), 2.0).unwrap();
-    m.observe(&at(&l, 1, a, 10.0, 8.0), 2.0).unwrap();
-    m.update();
+    m.observe(&at(&l, 2, x, -3.0, 5.0), secs(2.0)).unwrap();
+    m.observe(&at(&l, 1, a, 10.0, 8.0), secs(2.0)).unwrap();
+    m.update(secs(100.0));
     assert!(m.permitted(2), "inside A_S: its permission stays");
     assert!(!m.permitted(1), "conflicting with a holder");
 }
@@ -258,8 +276,8 @@ fn pipelined_grants_a_follower_on_the_holders_route() {
         (Algorithm::ConcurrentFair, false),
     ] {
         let mut m = with_holder(&l, alg, 1, r);
-        m.observe(&at(&l, 2, r, 0.5, 0.0), 1.0).unwrap();
-        m.update();
+        m.observe(&at(&l, 2, r, 0.5, 0.0), secs(1.0)).unwrap();
+        m.update(secs(100.0));
         assert!(m.permitted(1));
         assert_eq!(m.permitted(2), follower, "{alg:?}");
     }
@@ -283,16 +301,16 @@ fn pipelined_grants_a_conflicting_route_only_past_the_conflict_zone() {
                 continue;
             }
             for (past, granted) in [(0.1, true), (-0.1, false)] {
-                let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Pipelined);
-                m.observe(&at(&l, 1, h, 0.5, 0.0), 0.0).unwrap();
-                m.update();
+                let mut m = manager(&l, Algorithm::Pipelined);
+                m.observe(&at(&l, 1, h, 0.5, 0.0), secs(0.0)).unwrap();
+                m.update(secs(100.0));
                 assert!(m.permitted(1));
                 // progress = s − entry = −HALF − to_line.
                 let progress = end + CONFLICT_SAMPLE_M + past;
-                m.observe(&at(&l, 1, h, -HALF - progress, 8.0), 1.0)
+                m.observe(&at(&l, 1, h, -HALF - progress, 8.0), secs(1.0))
                     .unwrap();
-                m.observe(&at(&l, 2, c, 0.5, 0.0), 1.0).unwrap();
-                m.update();
+                m.observe(&at(&l, 2, c, 0.5, 0.0), secs(1.0)).unwrap();
+                m.update(secs(100.0));
                 assert_eq!(m.permitted(2), granted, "holder {h}, c {c}, {past:+}");
             }
             checked += 1;
@@ -337,10 +355,10 @@ fn pipelined_lets_only_a_lanes_head_hold_back_other_routes() {
             (Algorithm::ConcurrentFair, false),
         ] {
             let mut m = with_holder(&l, alg, 10, x);
-            m.observe(&at(&l, 11, a, 0.5, 0.0), 1.0).unwrap();
-            m.observe(&at(&l, 12, f, 8.0, 0.0), 1.0).unwrap();
-            m.observe(&at(&l, 13, y, 0.5, 0.0), 2.0).unwrap();
-            m.update();
+            m.observe(&at(&l, 11, a, 0.5, 0.0), secs(1.0)).unwrap();
+            m.observe(&at(&l, 12, f, 8.0, 0.0), secs(1.0)).unwrap();
+            m.observe(&at(&l, 13, y, 0.5, 0.0), secs(2.0)).unwrap();
+            m.update(secs(100.0));
             let what = format!("{alg:?} routes x {x} a {a} f {f} y {y}");
             assert!(m.permitted(10) && !m.permitted(11), "{what}");
             assert_eq!(m.permitted(13), y_permitted, "{what}");
@@ -357,10 +375,10 @@ fn pipelined_lets_only_a_lanes_head_hold_back_other_routes() {
 fn pipelined_grants_a_head_and_its_follower_in_one_scan() {
     let l = layout();
     let r = route(&l, 0, Movement::Straight);
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Pipelined);
-    m.observe(&at(&l, 1, r, 0.5, 0.0), 0.0).unwrap();
-    m.observe(&at(&l, 2, r, 8.0, 0.0), 0.0).unwrap();
-    m.update();
+    let mut m = manager(&l, Algorithm::Pipelined);
+    m.observe(&at(&l, 1, r, 0.5, 0.0), secs(0.0)).unwrap();
+    m.observe(&at(&l, 2, r, 8.0, 0.0), secs(0.0)).unwrap();
+    m.update(secs(100.0));
     assert!(m.permitted(1) && m.permitted(2));
 }
 
@@ -376,10 +394,10 @@ fn a_vehicle_first_heard_inside_a_s_holds_its_route_after_a_restart() {
         .find(|&x| l.conflict(a, x) && inlet(&l, x) != inlet(&l, a))
         .unwrap();
     for alg in Algorithm::ALL {
-        let mut m = Manager::<f64, 8>::new(l.clone(), alg);
-        m.observe(&at(&l, 2, x, 0.5, 0.0), 10.0).unwrap();
-        m.observe(&at(&l, 1, a, -3.0, 5.0), 10.0).unwrap();
-        m.update();
+        let mut m = manager(&l, alg);
+        m.observe(&at(&l, 2, x, 0.5, 0.0), secs(10.0)).unwrap();
+        m.observe(&at(&l, 1, a, -3.0, 5.0), secs(10.0)).unwrap();
+        m.update(secs(100.0));
         assert!(
             entry(&m, 1).permitted,
             "{alg:?}: inside A_S when first heard"
@@ -394,17 +412,17 @@ fn a_vehicle_first_heard_inside_a_s_holds_its_route_after_a_restart() {
             s: exit + HALF + 1.0,
             ..at(&l, 1, a, 0.0, 5.0)
         };
-        m.observe(&gone, 11.0).unwrap();
-        m.update();
+        m.observe(&gone, secs(11.0)).unwrap();
+        m.update(secs(100.0));
         assert!(m.entries().iter().all(|e| e.id != 1), "{alg:?}");
         if alg == Algorithm::AllWayStop {
-            m.observe(&at(&l, 2, x, 0.5, 0.0), 11.5).unwrap();
-            m.update();
+            m.observe(&at(&l, 2, x, 0.5, 0.0), secs(11.5)).unwrap();
+            m.update(secs(100.0));
         }
         assert!(m.permitted(2), "{alg:?}: granted once the zone is clear");
     }
     // Heard before its line (the normal case): registered without a permission.
-    let mut m = Manager::<f64, 8>::new(l.clone(), Algorithm::Fifo);
-    m.observe(&at(&l, 1, a, 0.0, 5.0), 0.0).unwrap();
+    let mut m = manager(&l, Algorithm::Fifo);
+    m.observe(&at(&l, 1, a, 0.0, 5.0), secs(0.0)).unwrap();
     assert!(!entry(&m, 1).permitted);
 }

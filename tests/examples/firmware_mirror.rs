@@ -34,7 +34,7 @@ fn run<const N: usize>() -> bool {
     ) else {
         return false;
     };
-    let a = scenarios::approach::<N>(planner, &mut now, &mut emit);
+    let a = scenarios::approach::<N>(planner, scenarios::CLOCK_START, &mut now, &mut emit);
     let l = scenarios::lane_change::<N>(lane_planner, &mut now, &mut emit);
     a.is_some() && l.is_some()
 }

@@ -12,6 +12,7 @@ use can_gateway::codec::{encode_fd_secured, encode_secured, SecuredFrames, Verif
 use can_gateway::secoc::{derive_key, FreshnessRx, Key, KeyStore};
 use can_gateway::{FdFrame, Message, PlainFrame, Reassembler};
 use libfuzzer_sys::fuzz_target;
+use can_gateway::Instant;
 
 #[path = "frames.rs"]
 mod frames;
@@ -27,7 +28,10 @@ fuzz_target!(|bytes: &[u8]| {
     let mut r = Reassembler::<8>::new();
     let mut now: u64 = 1_000;
     let mut received: Vec<FdFrame> = Vec::new();
-    let m = Message::<f64>::Grant { id: 2, until: 3.0 };
+    let m = Message::<f64>::Grant {
+        id: 2,
+        until: Instant::from_millis(3_000),
+    };
     let key = derive_key(&MASTER, 0xF1);
     match bytes.first().map(|b| b & 3) {
         Some(1) => {
@@ -35,7 +39,7 @@ fuzz_target!(|bytes: &[u8]| {
             received.extend(signed.into_iter().map(FdFrame::from));
         }
         Some(3) => {
-            let at = bytes.get(1).map_or(1.0, |b| f64::from(*b));
+            let at = Instant::from_millis(bytes.get(1).map_or(1_000, |b| u64::from(*b) * 1_000));
             let exit = Message::Exit { id: 1, at };
             received.push(encode_fd_secured(&exit, 1, 2, &derive_key(&MASTER, 1), now).unwrap());
             received.push(encode_fd_secured(&m, 0xF1, 1, &key, now).unwrap());
@@ -57,9 +61,8 @@ fuzz_target!(|bytes: &[u8]| {
         let v = Verifier {
             keys: &keys,
             freshness: &mut fresh,
-            now_ms: now,
         };
-        match r.push_secured::<f64, _, 4, 8>(frame, v) {
+        match r.push_secured::<f64, _, 4, 8>(frame, Instant::from_millis(now), v) {
             Err(_) => assert_eq!(
                 before,
                 format!("{r:?} {fresh:?}"),

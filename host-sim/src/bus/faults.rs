@@ -74,11 +74,13 @@ pub struct Liar {
 }
 
 impl Liar {
-    /// `true` if `msg` is one of its lies (a state or report it sent from `from_s` on).
-    pub fn lied(&self, msg: &Message) -> bool {
+    /// `true` if `msg` is one of its lies (a state or report it sent from `from_s` on,
+    /// by the world's `clock`).
+    pub fn lied(&self, msg: &Message, clock: &super::Clock) -> bool {
+        let lying = |id: u16, stamp| id == self.id && clock.world_secs(stamp) >= self.from_s;
         match *msg {
-            Message::State { state, .. } => state.id == self.id && state.stamp >= self.from_s,
-            Message::Crossing { report, stamp, .. } => report.id == self.id && stamp >= self.from_s,
+            Message::State { state, .. } => lying(state.id, state.stamp),
+            Message::Crossing { report, stamp, .. } => lying(report.id, stamp),
             _ => false,
         }
     }

@@ -14,7 +14,7 @@ pub struct InProcessBus {
     /// Per node, pending deliveries sorted by time (ties in send order).
     queues: Vec<Vec<Received>>,
     /// Per node, newest stamp delivered per (sender, subject).
-    newest: Vec<HashMap<(u16, u16), f64>>,
+    newest: Vec<HashMap<(u16, u16), planner_core::Instant>>,
     faults: Faults,
     rng: ChaCha8Rng,
     /// Period h, for duplicate spacing.
@@ -148,7 +148,7 @@ impl Bus for InProcessBus {
             let (subject, stamp) = r.msg.subject();
             let sender = r.msg.sender();
             match newest.get(&(sender, subject)) {
-                Some(&last) if !(stamp > last) => self.stats.dropped_old += 1,
+                Some(&last) if stamp <= last => self.stats.dropped_old += 1,
                 _ => {
                     newest.insert((sender, subject), stamp);
                     out.push(r);

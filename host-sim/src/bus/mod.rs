@@ -20,8 +20,51 @@ pub mod inprocess;
 pub use faults::{FaultStats, Faults, Liar, ManagerDown, Silent, LOSS_PERIODS};
 pub use inprocess::InProcessBus;
 use planner_core::crossing::CrossingReport;
-use planner_core::VehicleState;
+use planner_core::{Instant, VehicleState};
 use std::fmt;
+
+/// Every node's clock in a simulated world ([`planner_core::time`]): the same for all
+/// nodes (their clock error ε is zero), starting at `start` (`host-sim run
+/// --clock-start`: an uptime of days, or one just before the wire's 32-bit milliseconds
+/// wrap) and advancing by the period h each step. The world's own time — what traces,
+/// plots and fault schedules are written in — is seconds since the run began; a node's
+/// clock is that plus `start`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Clock {
+    /// What every clock reads when the run begins.
+    pub start: Instant,
+    /// The period h (µs).
+    pub period_us: u64,
+}
+
+impl Clock {
+    /// Clocks starting at `start`, with period `h` (s).
+    pub fn new(start: Instant, h: f64) -> Self {
+        Self {
+            start,
+            period_us: (h * 1e6).round() as u64,
+        }
+    }
+
+    /// The clocks' reading after `steps` periods.
+    pub fn at_step(&self, steps: u64) -> Instant {
+        self.start
+            .saturating_add(planner_core::Duration::from_micros(
+                steps.saturating_mul(self.period_us),
+            ))
+    }
+
+    /// The world's time (s since the run began) of a clock reading.
+    pub fn world_secs(&self, t: Instant) -> f64 {
+        t.since(self.start).as_secs::<f64>()
+    }
+
+    /// The clock reading at world time `t` (s since the run began), to the microsecond.
+    pub fn at_secs(&self, t: f64) -> Instant {
+        self.start
+            .saturating_add(planner_core::Duration::from_secs_real(t.max(0.0)).unwrap_or_default())
+    }
+}
 
 /// The bus node of junction `j`'s manager (vehicle ids stay below it).
 pub fn manager_node(j: usize) -> u16 {
@@ -43,8 +86,8 @@ pub enum Message {
     Crossing {
         /// The report.
         report: CrossingReport<f64>,
-        /// Sender's time stamp (s).
-        stamp: f64,
+        /// Sender's time stamp.
+        stamp: Instant,
         /// The junction (index).
         junction: usize,
     },
@@ -53,8 +96,8 @@ pub enum Message {
     Left {
         /// The vehicle.
         id: u16,
-        /// When (sender's clock, s).
-        at: f64,
+        /// When (sender's clock).
+        at: Instant,
         /// The junction (index).
         junction: usize,
     },
@@ -63,8 +106,8 @@ pub enum Message {
     Gone {
         /// The vehicle.
         id: u16,
-        /// When (sender's clock, s).
-        at: f64,
+        /// When (sender's clock).
+        at: Instant,
     },
     /// I2V: vehicle `id` may enter junction `junction`'s A_S until `until` (a lease,
     /// renewed while held).
@@ -73,15 +116,15 @@ pub enum Message {
         junction: usize,
         /// The permitted vehicle.
         id: u16,
-        /// Lease end (intersection clock, s).
-        until: f64,
+        /// Lease end (intersection clock).
+        until: Instant,
     },
 }
 
 impl Message {
     /// What a vehicle `id` says at `at` when it leaves junction `from`, or the network
     /// (`None`).
-    pub fn departure(id: u16, at: f64, from: Option<usize>) -> Message {
+    pub fn departure(id: u16, at: Instant, from: Option<usize>) -> Message {
         match from {
             Some(junction) => Message::Left { id, at, junction },
             None => Message::Gone { id, at },
@@ -90,7 +133,7 @@ impl Message {
 
     /// The vehicle the message is about, and its time stamp (sender's clock; a grant's
     /// is its lease end, which grows with every renewal).
-    pub fn subject(&self) -> (u16, f64) {
+    pub fn subject(&self) -> (u16, Instant) {
         match *self {
             Message::State { state, .. } => (state.id, state.stamp),
             Message::Crossing { report, stamp, .. } => (report.id, stamp),
@@ -109,12 +152,13 @@ impl Message {
     }
 }
 
-/// A delivered message and its receive time (receiver's clock, s).
+/// A delivered message and when the medium delivers it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Received {
     /// The message.
     pub msg: Message,
-    /// Receive time (s).
+    /// Delivery time, in the world's time (s since the run began): the medium's
+    /// bookkeeping, not a node's clock.
     pub at: f64,
 }
 

@@ -132,6 +132,7 @@ pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> World
         arrivals: Arrivals::Poisson(entries),
         deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
         finish: Finish::Duration,
+        clock_start: planner_core::Instant::EPOCH,
     }
 }
 

@@ -76,6 +76,7 @@ pub fn closed_world(algorithm: Algorithm, seed: u64, duration: f64, faults: Faul
         arrivals: Arrivals::Closed,
         deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
         finish: Finish::Duration,
+        clock_start: planner_core::Instant::EPOCH,
     }
 }
 

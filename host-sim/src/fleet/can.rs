@@ -17,7 +17,7 @@
 //! the place: `Located` (a state and its segment), `JunctionRequest` and `JunctionExit`
 //! (with their junction), and grants from each junction manager's own address.
 
-use crate::bus::{Bus, BusError, Message, Received};
+use crate::bus::{Bus, BusError, Clock, Message, Received};
 use crate::world::network::Network;
 use crate::world::LENGTH_M;
 use can_gateway::codec::{
@@ -28,6 +28,7 @@ use can_gateway::wire::{self, CLOCK_ADDRESS};
 use can_gateway::{encode, encode_fd, FdFrame, Frames, PlainFrame, Reassembler};
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::Track;
+use planner_core::Instant;
 use serde::Serialize;
 use socketcan::{
     CanAnyFrame, CanFdFrame, CanFdSocket, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions,
@@ -36,7 +37,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::io;
 use std::sync::{Arc, Condvar, Mutex};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant as WallClock, SystemTime};
 
 /// The junction number of a `JunctionExit` that says its vehicle left the network at an
 /// exit (no junction has it: a network has at most 64).
@@ -348,7 +349,7 @@ impl CanPort for HubPort {
 
     fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         let (lock, cv) = &*self.hub;
-        let deadline = Instant::now() + timeout;
+        let deadline = WallClock::now() + timeout;
         let mut queues = lock.lock().map_err(poisoned)?;
         loop {
             let q = queues
@@ -357,7 +358,7 @@ impl CanPort for HubPort {
             if let Some(f) = q.pop_front() {
                 return Ok(Some(f));
             }
-            let left = deadline.saturating_duration_since(Instant::now());
+            let left = deadline.saturating_duration_since(WallClock::now());
             if left.is_zero() {
                 return Ok(None);
             }
@@ -500,9 +501,9 @@ pub struct CanNode<P> {
     reassembler: Box<Reassembler<REASSEMBLY_SLOTS>>,
     stats: CanStats,
     security: Option<Box<Security>>,
-    /// The node's time on the fleet's clock (ms): freshness of what it sends, and the
-    /// centre of its acceptance window.
-    now_ms: u64,
+    /// The node's clock: freshness of what it sends, the centre of its acceptance window,
+    /// and the reference from which the wire's 32-bit times are restored.
+    now: Instant,
     /// It sends each message as one CAN FD frame.
     fd: bool,
     /// The attack experiment's oracle: what it sends is recorded there, and what it
@@ -529,7 +530,7 @@ impl<P: CanPort> CanNode<P> {
             reassembler: Box::default(),
             stats: CanStats::default(),
             security: None,
-            now_ms: 0,
+            now: Instant::EPOCH,
             fd: false,
             ledger: None,
         }
@@ -558,9 +559,9 @@ impl<P: CanPort> CanNode<P> {
         self
     }
 
-    /// Sets the node's clock to `t` s of the fleet's time.
-    pub fn set_time(&mut self, t: f64) {
-        self.now_ms = (t.max(0.0) * 1000.0).round() as u64;
+    /// Sets the node's clock.
+    pub fn set_time(&mut self, now: Instant) {
+        self.now = now;
     }
 
     /// The node of vehicle `id` (its CAN source address is its id).
@@ -590,7 +591,7 @@ impl<P: CanPort> CanNode<P> {
             }
             Some(s) => {
                 let key = *s.keys.get(sa).ok_or(CanError::NoKey(sa))?;
-                let fv = s.tx.next(msg.kind() as u8, self.now_ms);
+                let fv = s.tx.next(msg.kind() as u8, self.now.as_millis());
                 if fd {
                     let frame: FdFrame =
                         encode_fd_secured(msg, sa, counter, &key, fv).map_err(CanError::Encode)?;
@@ -623,7 +624,12 @@ impl<P: CanPort> CanNode<P> {
 
     /// Transmits one of the simulator's messages, mapped by `map` (a crossing report
     /// with the vehicle's `arrival` in A_C).
-    pub fn send(&mut self, msg: &Message, map: &WireMap<'_>, arrival: f64) -> Result<(), CanError> {
+    pub fn send(
+        &mut self,
+        msg: &Message,
+        map: &WireMap<'_>,
+        arrival: Instant,
+    ) -> Result<(), CanError> {
         self.send_wire(&map.to_wire(msg, arrival)?)
     }
 
@@ -647,14 +653,13 @@ impl<P: CanPort> CanNode<P> {
         };
         self.stats.frames_received += 1;
         let pushed = match &mut self.security {
-            None => self.reassembler.push::<f64, _>(&frame),
+            None => self.reassembler.push::<f64, _>(&frame, self.now),
             Some(s) => {
                 let v = Verifier {
                     keys: &s.keys,
                     freshness: &mut s.rx,
-                    now_ms: self.now_ms,
                 };
-                self.reassembler.push_secured(&frame, v)
+                self.reassembler.push_secured(&frame, self.now, v)
             }
         };
         match pushed {
@@ -722,7 +727,7 @@ impl<'a> WireMap<'a> {
     /// either way, so no vehicle can move itself up the queue). The length is not carried
     /// (nor is it in a state message): every vehicle on this bus is of the class length
     /// [`LENGTH_M`], and a report of another length is refused.
-    pub fn to_wire(&self, msg: &Message, arrival: f64) -> Result<wire::Message<f64>, CanError> {
+    pub fn to_wire(&self, msg: &Message, arrival: Instant) -> Result<wire::Message<f64>, CanError> {
         let junction = |j: usize| {
             u8::try_from(j).map_err(|_| CanError::Unmapped("a junction index above 255"))
         };
@@ -775,7 +780,7 @@ impl<'a> WireMap<'a> {
     fn request(
         &self,
         r: &CrossingReport<f64>,
-        arrival: f64,
+        arrival: Instant,
         j: usize,
     ) -> Result<wire::Request<f64>, CanError> {
         let layout = &self
@@ -807,18 +812,18 @@ impl<'a> WireMap<'a> {
     }
 
     /// can-gateway's message from source address `sa`, heard in the period that began at
-    /// `t`, as the simulator's, if it is one the vehicles and managers act on (a grant's
-    /// junction is its sender's). A request carries no send time of its own: in the
-    /// lock-step fleet every message of a period is sent at its start, so that is its
-    /// stamp.
-    pub fn heard(&self, msg: &wire::Message<f64>, sa: u8, t: f64) -> Option<Message> {
+    /// `now` (the receiver's clock), as the simulator's, if it is one the vehicles and
+    /// managers act on (a grant's junction is its sender's). A request carries no send
+    /// time of its own: in the lock-step fleet every message of a period is sent at its
+    /// start, so that is its stamp.
+    pub fn heard(&self, msg: &wire::Message<f64>, sa: u8, now: Instant) -> Option<Message> {
         let m = self.from_wire(msg, sa)?;
         Some(match m {
             Message::Crossing {
                 report, junction, ..
             } => Message::Crossing {
                 report,
-                stamp: t,
+                stamp: now,
                 junction,
             },
             other => other,
@@ -880,7 +885,7 @@ impl<'a> WireMap<'a> {
                 v: q.v,
                 length: LENGTH_M,
             },
-            stamp: q.arrival.max(0.0),
+            stamp: q.arrival,
             junction: j,
         })
     }
@@ -899,15 +904,18 @@ pub const DRAIN_LIMIT: usize = 4 * 3 * crate::scenario::road::MAX_VEHICLES;
 pub struct CanBus<P> {
     nodes: Vec<(u16, CanNode<P>)>,
     net: Network,
+    /// Every node's clock (the bus is driven in the world's time).
+    clock: Clock,
 }
 
 impl<P: CanPort> CanBus<P> {
     /// A bus for the world on `net` with a node for each of `ids` (vehicles; and
     /// managers, whose nodes are `world::junction::manager_node(j)`), on the port `open`
-    /// gives it.
+    /// gives it; the nodes' clocks read `clock`.
     pub fn new(
         ids: &[u16],
         net: &Network,
+        clock: Clock,
         mut open: impl FnMut(u16) -> io::Result<P>,
     ) -> Result<Self, CanError> {
         let map = WireMap::new(net);
@@ -923,6 +931,7 @@ impl<P: CanPort> CanBus<P> {
         Ok(Self {
             nodes,
             net: net.clone(),
+            clock,
         })
     }
 
@@ -939,8 +948,10 @@ impl<P: CanPort> CanBus<P> {
 impl<P: CanPort> Bus for CanBus<P> {
     fn send(&mut self, from: u16, msg: &Message, now: f64) -> Result<(), BusError> {
         let map = WireMap::new(&self.net);
+        let at = self.clock.at_secs(now);
         let node = node_mut(&mut self.nodes, from)?;
-        Ok(node.send(msg, &map, now)?)
+        node.set_time(at);
+        Ok(node.send(msg, &map, at)?)
     }
 
     fn attach(&mut self, node: u16) -> Result<(), BusError> {
@@ -955,8 +966,11 @@ impl<P: CanPort> Bus for CanBus<P> {
 
     fn receive(&mut self, node: u16, now: f64, out: &mut Vec<Received>) -> Result<(), BusError> {
         let map = WireMap::new(&self.net);
-        node_mut(&mut self.nodes, node)?.drain(|m, sa| {
-            if let Some(msg) = map.heard(&m, sa, now) {
+        let at = self.clock.at_secs(now);
+        let node = node_mut(&mut self.nodes, node)?;
+        node.set_time(at);
+        node.drain(|m, sa| {
+            if let Some(msg) = map.heard(&m, sa, at) {
                 out.push(Received { msg, at: now });
             }
         })?;

@@ -159,11 +159,12 @@ impl<P: CanPort> Intruder<P> {
         self.attempts
     }
 
-    /// Period `k` (time `t` of period `h`): it reads what the bus carried, then attacks
-    /// (`present`: the vehicles as it sees them; `junctions`: how many managers).
+    /// Period `k` (its clock reading `now`, period `h` s): it reads what the bus carried,
+    /// then attacks (`present`: the vehicles as it sees them; `junctions`: how many
+    /// managers).
     pub fn act(
         &mut self,
-        (k, t, h): (u64, f64, f64),
+        (k, now, h): (u64, planner_core::Instant, f64),
         present: &[VehicleTruth],
         map: &WireMap<'_>,
         junctions: usize,
@@ -172,7 +173,10 @@ impl<P: CanPort> Intruder<P> {
         if k < self.from {
             return Ok(());
         }
-        let now_ms = (t * 1000.0).round() as u64;
+        let now_ms = now.as_millis();
+        let later = |s: f64| {
+            now.saturating_add(planner_core::Duration::from_secs_real(s).unwrap_or_default())
+        };
         match self.attack {
             Attack::ForgedGrant => {
                 for j in 0..junctions.max(1) {
@@ -180,7 +184,7 @@ impl<P: CanPort> Intruder<P> {
                     for v in present {
                         let grant = wire::Message::Grant {
                             id: v.id,
-                            until: t + 5.0,
+                            until: later(5.0),
                         };
                         self.write(&grant, sa, now_ms)?;
                     }
@@ -189,8 +193,8 @@ impl<P: CanPort> Intruder<P> {
             Attack::ReplayedGrant | Attack::ReplayedState => self.replay(k)?,
             Attack::SpoofedId => {
                 for v in present {
-                    let claimed = announce(v.id, ahead(v.at), (v.v, 0.0), true, t + h / 2.0);
-                    let msg = map.to_wire(&claimed, t)?;
+                    let claimed = announce(v.id, ahead(v.at), (v.v, 0.0), true, later(h / 2.0));
+                    let msg = map.to_wire(&claimed, now)?;
                     self.write(&msg, vehicle_address(v.id)?, now_ms)?;
                 }
             }

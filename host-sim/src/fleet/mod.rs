@@ -29,7 +29,7 @@ pub mod intruder;
 pub mod ledger;
 pub mod throughput;
 
-use crate::bus::{Faults, Message, Received};
+use crate::bus::{Clock, Faults, Message, Received};
 use crate::monitor::liveness::DeadlockDetector;
 use crate::monitor::Limits;
 use crate::world::junction::ManagerNode;
@@ -616,6 +616,7 @@ impl<const N: usize> Harness<N> {
             with_managers: !managers.is_empty(),
             lim: self.lim,
             faults: self.spec.faults,
+            clock: Clock::new(self.spec.clock_start, self.lim.h),
         };
         let (n, m) = (vehicles.len(), managers.len());
         let (ran, master) = std::thread::scope(|sc| {
@@ -675,7 +676,10 @@ impl<const N: usize> Harness<N> {
             .junctions
             .iter()
             .enumerate()
-            .map(|(j, jn)| ManagerNode::new(j, jn.layout.clone(), jn.algorithm))
+            .map(|(j, jn)| {
+                let lease = crate::world::junction::lease(self.setup().notify, self.lim.h);
+                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, lease)
+            })
             .collect();
         for m in &mut managers {
             m.set_position_resolution(RESOLUTION.0)
@@ -984,7 +988,7 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
     /// Period k: the vehicles' reports, the monitors, the managers' turn, the sensor
     /// returns and the planning tick. `Ok(true)` when the run is over.
     fn period(&mut self, k: u64, trace: &mut dyn FnMut(&TraceRow)) -> Result<bool, FleetError> {
-        self.clock.set_time(k as f64 * self.ctx.lim.h);
+        self.clock.set_time(self.ctx.clock.at_step(k));
         let Truths { truths, rows } = self.vehicle_reports(k)?;
         let present: Vec<VehicleTruth> = truths.iter().flatten().copied().collect();
         if k > 0 {
@@ -1006,7 +1010,7 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
         if let Some(i) = &mut self.intruder {
             let (ctx, h) = (self.ctx, self.ctx.lim.h);
             let junctions = ctx.net.junctions.len();
-            i.act((k, k as f64 * h, h), &present, ctx.map, junctions)?;
+            i.act((k, ctx.clock.at_step(k), h), &present, ctx.map, junctions)?;
         }
         // Sensor returns from ground truth at kh, as in the in-process world.
         let h = self.harness;
@@ -1190,6 +1194,8 @@ struct TaskCtx<'a> {
     lim: Limits,
     /// The nodes' own faults: a silent vehicle, a liar, a manager's outage.
     faults: Faults,
+    /// Every node's clock.
+    clock: Clock,
 }
 
 /// One vehicle: publish, report, wait for SYNC, plan, move — until the last SYNC.
@@ -1219,19 +1225,21 @@ fn vehicle_task<const N: usize, P: CanPort>(
     let mut departing: Option<(Option<usize>, f64)> = None;
     for k in 0..=ctx.total {
         let t = k as f64 * h;
-        node.set_time(t);
+        let now = ctx.clock.at_step(k);
+        node.set_time(now);
         let published = SystemTime::now();
         let mut exit = false;
         if let Some((j, at)) =
             departing.filter(|&(_, at)| t < at + crate::world::junction::LEFT_REPEAT_S)
         {
+            let at = ctx.clock.at_secs(at);
             node.send(&Message::departure(id, at, j), ctx.map, at)
                 .map_err(|e| fail(e.to_string()))?;
             exit = true;
         }
         let in_world = car.log.left_at.is_none();
         let kind = if in_world {
-            publish(&car, &mut node, ctx, t, &mut msgs).map_err(|e| fail(e.to_string()))?
+            publish(&car, &mut node, ctx, k, &mut msgs).map_err(|e| fail(e.to_string()))?
         } else {
             None
         };
@@ -1251,7 +1259,7 @@ fn vehicle_task<const N: usize, P: CanPort>(
         let plan = if ctx.with_managers { 2 * k + 1 } else { k };
         inbox.clear();
         let Some(at) =
-            await_tick(&mut node, plan, ctx.map, t, &mut inbox, &mut heard).map_err(fail)?
+            await_tick(&mut node, plan, ctx.map, (t, now), &mut inbox, &mut heard).map_err(fail)?
         else {
             break;
         };
@@ -1265,6 +1273,8 @@ fn vehicle_task<const N: usize, P: CanPort>(
         let received = in_order(&mut inbox, ctx.order, t);
         let step = StepCtx {
             t,
+            now,
+            clock: ctx.clock,
             steps_done: k,
             net: ctx.net,
             lim: ctx.lim,
@@ -1286,16 +1296,17 @@ fn vehicle_task<const N: usize, P: CanPort>(
     Ok((car, counters, node.stats().clone(), msgs))
 }
 
-/// Vehicle `car`'s message for the period at `t` — unless its transmitter is silent, and
-/// as a liar tells it — counted in `msgs`; its kind, if sent.
+/// Vehicle `car`'s message for period `k` — unless its transmitter is silent, and as a
+/// liar tells it — counted in `msgs`; its kind, if sent.
 fn publish<const N: usize, P: CanPort>(
     car: &Vehicle<N>,
     node: &mut CanNode<P>,
     ctx: &TaskCtx<'_>,
-    t: f64,
+    k: u64,
     msgs: &mut Messages,
 ) -> Result<Option<Kind>, CanError> {
     let id = car.id;
+    let (t, now) = (k as f64 * ctx.lim.h, ctx.clock.at_step(k));
     if ctx
         .faults
         .silent
@@ -1303,8 +1314,9 @@ fn publish<const N: usize, P: CanPort>(
     {
         return Ok(None);
     }
-    let m = ctx.faults.told(id, car.message(t), t);
-    node.send(&m, ctx.map, car.log.arrived_at.unwrap_or(t))?;
+    let m = ctx.faults.told(id, car.message(now), t);
+    let arrival = car.log.arrived_at.map_or(now, |a| ctx.clock.at_secs(a));
+    node.send(&m, ctx.map, arrival)?;
     let kind = kind_of(&m);
     match kind {
         Kind::State => msgs.states += 1,
@@ -1333,23 +1345,25 @@ fn manager_task<P: CanPort>(
     let mut heard = Vec::new();
     for k in 0..=ctx.total {
         let t = k as f64 * ctx.lim.h;
-        node.set_time(t);
+        let now = ctx.clock.at_step(k);
+        node.set_time(now);
         inbox.clear();
-        let Some(sync_rx) =
-            await_tick(&mut node, 2 * k, ctx.map, t, &mut inbox, &mut heard).map_err(fail)?
+        let Some(sync_rx) = await_tick(&mut node, 2 * k, ctx.map, (t, now), &mut inbox, &mut heard)
+            .map_err(fail)?
         else {
             break;
         };
         let received = in_order(&mut inbox, ctx.order, t);
         let granted = if mgr.is_up(&ctx.faults, t) {
-            mgr.manage(&received, t)
+            mgr.manage(&received, now)
         } else {
             Vec::new()
         };
         let published = SystemTime::now();
         for &id in &granted {
-            let g = mgr.grant(id, t, ctx.lim.h, ctx.lim.h);
-            node.send(&g, ctx.map, t).map_err(|e| fail(e.to_string()))?;
+            let g = mgr.grant(id, now);
+            node.send(&g, ctx.map, now)
+                .map_err(|e| fail(e.to_string()))?;
         }
         let holders = crate::world::wait::holders(std::slice::from_ref(&mgr), j);
         let report = Report::Manager {
@@ -1369,13 +1383,13 @@ fn manager_task<P: CanPort>(
 }
 
 /// Reads frames until SYNC(`tick`), keeping every message before it (sent in the period
-/// that began at `t`, with its sender's address) and what was heard when; `None` on the
-/// last SYNC.
+/// that began at world time `t`, node time `now`, with its sender's address) and what
+/// was heard when; `None` on the last SYNC.
 fn await_tick<P: CanPort>(
     node: &mut CanNode<P>,
     tick: u64,
     map: &WireMap<'_>,
-    t: f64,
+    (t, now): (f64, planner_core::Instant),
     inbox: &mut Vec<(Received, u8)>,
     heard: &mut Vec<(Kind, u16, SystemTime)>,
 ) -> Result<Option<SystemTime>, String> {
@@ -1401,9 +1415,9 @@ fn await_tick<P: CanPort>(
                 }
             }
             Polled::Message(m, at, sa) => {
-                if let Some(msg) = map.heard(&m, sa, t) {
+                if let Some(msg) = map.heard(&m, sa, now) {
                     heard.push((kind_of(&msg), msg.sender(), at));
-                    inbox.push((Received { msg, at: 0.0 }, sa));
+                    inbox.push((Received { msg, at: t }, sa));
                 }
             }
         }

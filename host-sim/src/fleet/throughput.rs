@@ -7,7 +7,7 @@
 use super::can::{simulation_keys, CanError, CanNode, Hub, HubPort, Keys};
 use can_gateway::secoc::Key;
 use can_gateway::wire;
-use planner_core::VehicleState;
+use planner_core::{Instant as At, VehicleState};
 use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
@@ -34,10 +34,11 @@ pub struct Throughput {
 /// Vehicles on the bus, each sending one state per period.
 pub const SENDERS: u8 = 40;
 
-/// Vehicle `sa`'s state on a two-lane road at time `t` (a State names its sender; every
+/// Vehicle `sa`'s state on a two-lane road at `now` (a State names its sender; every
 /// field within its wire range and changing from period to period as a real stream does).
-fn state(sa: u8, t: f64) -> wire::Message<f64> {
+fn state(sa: u8, now: At) -> wire::Message<f64> {
     let i = f64::from(sa);
+    let t = now.as_micros() as f64 * 1e-6;
     wire::Message::State(VehicleState {
         id: u16::from(sa),
         x: 10.0 * i + 20.0 * t,
@@ -48,7 +49,7 @@ fn state(sa: u8, t: f64) -> wire::Message<f64> {
         lane: sa % 2,
         alpha: None,
         beta: None,
-        stamp: t,
+        stamp: now,
         cooperative: true,
     })
 }
@@ -76,12 +77,12 @@ pub fn measure(messages: u64, fd: bool, secured: bool) -> Result<Throughput, Can
     let mut received = 0;
     let start = Instant::now();
     for k in 0..messages {
-        let t = 0.01 * (k / u64::from(SENDERS)) as f64;
+        let now = At::from_millis(10 * (k / u64::from(SENDERS)));
         let i = (k % u64::from(SENDERS)) as usize;
-        rx.set_time(t);
+        rx.set_time(now);
         if let Some(n) = tx.get_mut(i) {
-            n.set_time(t);
-            n.send_wire(&state(i as u8 + 1, t))?;
+            n.set_time(now);
+            n.send_wire(&state(i as u8 + 1, now))?;
         }
         rx.drain(|_, _| received += 1)?;
     }

@@ -419,6 +419,7 @@ impl JunctionScenario {
             arrivals: Arrivals::None,
             deadlock_window_s: self.header.deadlock_window_s,
             finish: Finish::Duration,
+            clock_start: planner_core::Instant::EPOCH,
         }
     }
 

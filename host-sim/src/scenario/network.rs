@@ -330,6 +330,7 @@ impl NetworkScenario {
             arrivals,
             deadlock_window_s: self.header.deadlock_window_s,
             finish: Finish::Duration,
+            clock_start: planner_core::Instant::EPOCH,
         }
     }
 }

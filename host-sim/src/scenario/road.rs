@@ -240,6 +240,7 @@ impl RoadScenario {
             arrivals: Arrivals::None,
             deadlock_window_s: self.header.deadlock_window_s,
             finish: Finish::Duration,
+            clock_start: planner_core::Instant::EPOCH,
         }
     }
 

@@ -19,7 +19,7 @@ use super::network::Network;
 use super::plausible::{Bounds, Implausible};
 use crate::bus::Message;
 use planner_core::crossing::CrossingReport;
-use planner_core::{Other, VehicleState};
+use planner_core::{Instant, Other, VehicleState};
 
 /// Vehicles one view holds: more than fit near one vehicle at any density (within
 /// 100 m of road in every direction a few lanes hold fewer than 200).
@@ -41,8 +41,8 @@ pub enum Record {
         report: CrossingReport<f64>,
         /// Its junction.
         junction: usize,
-        /// Sender's time stamp (s).
-        stamp: f64,
+        /// Sender's time stamp.
+        stamp: Instant,
     },
 }
 
@@ -85,7 +85,7 @@ impl Record {
         self
     }
 
-    fn id_stamp(&self) -> (u16, f64) {
+    fn id_stamp(&self) -> (u16, Instant) {
         match *self {
             Record::Lane { state, .. } => (state.id, state.stamp),
             Record::Crossing { report, stamp, .. } => (report.id, stamp),
@@ -172,14 +172,7 @@ impl View {
         }
         let rec = match *msg {
             Message::State { state, segment } => {
-                let f = [
-                    state.x,
-                    state.y,
-                    state.theta,
-                    state.v,
-                    state.omega,
-                    state.stamp,
-                ];
+                let f = [state.x, state.y, state.theta, state.v, state.omega];
                 if !f.iter().all(|x| x.is_finite()) || state.v < 0.0 {
                     return Err(Reject::Invalid);
                 }
@@ -190,7 +183,7 @@ impl View {
                 stamp,
                 junction,
             } => {
-                if !(report.s.is_finite() && report.v >= 0.0 && stamp.is_finite()) {
+                if !(report.s.is_finite() && report.v >= 0.0) {
                     return Err(Reject::Invalid);
                 }
                 Record::Crossing {
@@ -222,7 +215,7 @@ impl View {
         let full = self.records.len() >= VIEW_CAP;
         let held = self.records.iter().position(|r| r.id_stamp().0 == id);
         let last = held.and_then(|i| self.records.get(i));
-        if last.is_some_and(|r| !(stamp > r.id_stamp().1)) {
+        if last.is_some_and(|r| stamp <= r.id_stamp().1) {
             return Err(Reject::Stale);
         }
         if let Err(why) = rec.plausible(last, &self.bounds) {
@@ -298,7 +291,7 @@ impl View {
         &self,
         net: &Network,
         seg: usize,
-        now: f64,
+        now: Instant,
         length: f64,
         out: &mut heapless::Vec<Other<f64>, VIEW_CAP>,
     ) {
@@ -309,7 +302,7 @@ impl View {
                     alpha: s.alpha,
                     beta: s.beta,
                     cooperative: s.cooperative,
-                    ..Other::v2v(s.id, s.x, s.v, length, s.lane, (now - s.stamp).max(0.0))
+                    ..Other::v2v(s.id, s.x, s.v, length, s.lane, now.since(s.stamp).as_secs())
                 },
                 Record::Crossing {
                     report,
@@ -317,7 +310,8 @@ impl View {
                     stamp,
                 } => match net.on_segment(junction, report.route, report.s) {
                     Some((sg, x, lane)) if sg == seg => {
-                        Other::v2v(report.id, x, report.v, length, lane, (now - stamp).max(0.0))
+                        let age = now.since(stamp).as_secs();
+                        Other::v2v(report.id, x, report.v, length, lane, age)
                     }
                     _ => continue,
                 },
@@ -329,7 +323,10 @@ impl View {
     }
 
     /// The crossing reports at junction `j`, with their stamps, in the order first heard.
-    pub fn reports_at(&self, j: usize) -> impl Iterator<Item = (CrossingReport<f64>, f64)> + '_ {
+    pub fn reports_at(
+        &self,
+        j: usize,
+    ) -> impl Iterator<Item = (CrossingReport<f64>, Instant)> + '_ {
         self.records.iter().filter_map(move |r| match *r {
             Record::Crossing {
                 report,

@@ -3,9 +3,9 @@
 //! a permission with a lease.
 
 use crate::bus::{Faults, Message, Received};
-use planner_core::crossing::Manager;
+use planner_core::crossing::{Lease, Manager};
 use planner_core::intersection::Layout;
-use planner_core::ConfigError;
+use planner_core::{ConfigError, Duration, Instant};
 
 /// Vehicles one manager can track.
 pub const MANAGER_CAP: usize = 128;
@@ -13,6 +13,18 @@ pub const MANAGER_CAP: usize = 128;
 /// while held; 0.1 s lets a few messages go missing before a vehicle that has not yet
 /// entered A_S must stop. A lease must outlive its own delivery, hence the bound.
 pub const LEASE_S: f64 = 0.1;
+
+/// The leases of a manager on a bus whose notification bound is `notify` (s) over a
+/// period `h` (s): valid [`LEASE_S`] past their delivery at the latest, so
+/// `LEASE_S + notify − h` after they are sent (planner-core's [`Lease`]; its quiet time
+/// at start-up follows from it).
+pub fn lease(notify: f64, h: f64) -> Lease {
+    let d = |s: f64| Duration::from_secs_real(s).unwrap_or(Duration::ZERO);
+    Lease {
+        length: d(LEASE_S + (notify - h).max(0.0)),
+        notify: d(notify.max(h)),
+    }
+}
 /// How long a vehicle that has left a junction repeats its `Left` message (s): 50
 /// periods, so that even at 20 % loss every receiver has it (0.2^50) and drops its last
 /// report.
@@ -35,15 +47,20 @@ pub struct ManagerNode {
 }
 
 impl ManagerNode {
-    /// The manager of junction `junction` with `layout`, running `algorithm`.
+    /// The manager of junction `junction` with `layout`, running `algorithm`, granting
+    /// leases on the terms `lease` (see [`lease`]).
     pub fn new(
         junction: usize,
         layout: Layout<f64>,
         algorithm: planner_core::crossing::Algorithm,
+        lease: Lease,
     ) -> Self {
+        let mut manager = Manager::new(layout, algorithm);
+        // A zero notification bound or length is refused: keep the defaults then.
+        let _ = manager.set_lease(lease);
         Self {
             junction,
-            manager: Manager::new(layout, algorithm),
+            manager,
             restarted: false,
             resolution: 0.0,
         }
@@ -57,14 +74,17 @@ impl ManagerNode {
         Ok(())
     }
 
-    /// A restart: a new manager of the same junction and algorithm, remembering nothing.
-    /// It rebuilds its state from the reports it hears (every vehicle repeats its report
-    /// every period); a vehicle first heard inside A_S holds its zones as a permission
-    /// would (planner-core's `Manager::observe`), so nothing conflicting is granted over it.
+    /// A restart: a new manager of the same junction and algorithm, remembering nothing
+    /// but its configuration. It rebuilds its state from the reports it hears (every
+    /// vehicle repeats its report every period) and grants nothing until every lease its
+    /// predecessor may have given has lapsed (planner-core's `Manager` quiet time); a
+    /// vehicle heard inside A_S holds its zones as a permission would.
     pub fn restart(&mut self) {
+        let lease = self.manager.lease();
         self.manager = Manager::new(self.manager.layout().clone(), self.manager.algorithm());
-        // The resolution was accepted when it was set: it cannot be refused now.
+        // Both were accepted when they were set: they cannot be refused now.
         let _ = self.manager.set_position_resolution(self.resolution);
+        let _ = self.manager.set_lease(lease);
         self.restarted = true;
     }
 
@@ -87,16 +107,16 @@ impl ManagerNode {
         manager_node(self.junction)
     }
 
-    /// The manager's part of a period at `t`: takes the reports and departures it heard
-    /// for its junction, decides, and returns the vehicles that hold a permission now
-    /// (each is to be sent a lease).
-    pub fn manage(&mut self, heard: &[Received], t: f64) -> Vec<u16> {
+    /// The manager's part of a period at `now` (its clock): takes the reports and
+    /// departures it heard for its junction, decides, and returns the vehicles that hold
+    /// a permission now (each is to be sent a lease).
+    pub fn manage(&mut self, heard: &[Received], now: Instant) -> Vec<u16> {
         for r in heard {
             match r.msg {
                 Message::Crossing {
                     report, junction, ..
                 } if junction == self.junction => {
-                    let _ = self.manager.observe(&report, t);
+                    let _ = self.manager.observe(&report, now);
                 }
                 Message::Left { id, junction, .. } if junction == self.junction => {
                     self.manager.forget(id)
@@ -104,7 +124,7 @@ impl ManagerNode {
                 _ => {}
             }
         }
-        self.manager.update();
+        self.manager.update(now);
         self.manager
             .entries()
             .iter()
@@ -113,13 +133,12 @@ impl ManagerNode {
             .collect()
     }
 
-    /// The grant of a lease to `id` at `t` on a bus whose notification bound is `notify`
-    /// over a period `h`.
-    pub fn grant(&self, id: u16, t: f64, notify: f64, h: f64) -> Message {
+    /// The grant of a lease to `id` sent at `now` (its clock).
+    pub fn grant(&self, id: u16, now: Instant) -> Message {
         Message::Grant {
             junction: self.junction,
             id,
-            until: t + LEASE_S + (notify - h),
+            until: self.manager.lease_until(now),
         }
     }
 }

@@ -229,6 +229,9 @@ pub struct WorldSpec {
     pub deadlock_window_s: f64,
     /// When the run ends before its duration.
     pub finish: Finish,
+    /// What every node's clock reads when the run begins ([`crate::bus::Clock`]; `host-sim
+    /// run --clock-start`): the epoch unless an uptime is to be tried.
+    pub clock_start: planner_core::Instant,
 }
 
 /// When a run ends before its duration (besides a deadlock, which always ends it).
@@ -285,6 +288,8 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     bus: B,
     lim: Limits,
     setup: PlannerSetup,
+    /// Every node's clock.
+    clock: crate::bus::Clock,
     t: f64,
     steps_done: u64,
     total_steps: u64,
@@ -341,7 +346,10 @@ impl<const N: usize, B: Bus> World<N, B> {
             .junctions
             .iter()
             .enumerate()
-            .map(|(j, jn)| ManagerNode::new(j, jn.layout.clone(), jn.algorithm))
+            .map(|(j, jn)| {
+                let lease = junction::lease(setup.notify, lim.h);
+                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, lease)
+            })
             .collect();
         let mut rng = Box::new(crate::reference::instances::rng(seed ^ 0x1c));
         let streams = match &spec.arrivals {
@@ -352,6 +360,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             _ => Vec::new(),
         };
         let next_id = spec.vehicles.iter().map(|v| v.id).max().unwrap_or(0) + 1;
+        let clock = crate::bus::Clock::new(spec.clock_start, lim.h);
         Self {
             total_steps: (spec.duration_s / lim.h).round() as u64,
             detector: DeadlockDetector::new(spec.deadlock_window_s),
@@ -364,6 +373,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             bus,
             lim,
             setup,
+            clock,
             t: 0.0,
             steps_done: 0,
             departing: Vec::new(),

@@ -20,7 +20,7 @@
 //! "few metres" of a lie that matters.
 
 use planner_core::crossing::CrossingReport;
-use planner_core::{Params, VehicleState};
+use planner_core::{Instant, Params, VehicleState};
 
 /// Slack (m) on position jumps, forward, backward and across.
 pub const POSITION_MARGIN_M: f64 = 0.5;
@@ -95,7 +95,7 @@ impl Bounds {
         let Some(last) = last else {
             return self.speed(new.v, new.v, 0.0);
         };
-        let dt = new.stamp - last.stamp;
+        let dt = new.stamp.since(last.stamp).as_secs();
         self.speed(last.v, new.v, dt)?;
         self.moved(new.x - last.x, new.y - last.y, dt)?;
         let declared = last.alpha == Some(new.lane);
@@ -109,9 +109,9 @@ impl Bounds {
     /// (`last`, with its stamp).
     pub fn report(
         &self,
-        last: Option<(&CrossingReport<f64>, f64)>,
+        last: Option<(&CrossingReport<f64>, Instant)>,
         new: &CrossingReport<f64>,
-        stamp: f64,
+        stamp: Instant,
     ) -> Result<(), Implausible> {
         let Some((last, at)) = last else {
             return self.speed(new.v, new.v, 0.0);
@@ -119,7 +119,7 @@ impl Bounds {
         if new.route != last.route {
             return Err(Implausible::Jump);
         }
-        let dt = stamp - at;
+        let dt = stamp.since(at).as_secs();
         self.speed(last.v, new.v, dt)?;
         self.moved(new.s - last.s, 0.0, dt)
     }
@@ -129,7 +129,13 @@ impl Bounds {
 mod tests {
     use super::*;
 
+    /// `s` seconds after the epoch.
+    fn secs(s: f64) -> Instant {
+        Instant::from_micros((s * 1e6).round() as u64)
+    }
+
     fn state(x: f64, v: f64, lane: u8, stamp: f64) -> VehicleState<f64> {
+        let stamp = secs(stamp);
         VehicleState {
             id: 7,
             x,
@@ -216,21 +222,24 @@ mod tests {
             length: 4.5,
         };
         let last = r(2, 10.0, 10.0);
-        assert_eq!(b.report(Some((&last, 1.0)), &r(2, 11.0, 10.0), 1.1), Ok(()));
         assert_eq!(
-            b.report(Some((&last, 1.0)), &r(3, 11.0, 10.0), 1.1),
+            b.report(Some((&last, secs(1.0))), &r(2, 11.0, 10.0), secs(1.1)),
+            Ok(())
+        );
+        assert_eq!(
+            b.report(Some((&last, secs(1.0))), &r(3, 11.0, 10.0), secs(1.1)),
             Err(Implausible::Jump)
         );
         assert_eq!(
-            b.report(Some((&last, 1.0)), &r(2, 14.0, 10.0), 1.1),
+            b.report(Some((&last, secs(1.0))), &r(2, 14.0, 10.0), secs(1.1)),
             Err(Implausible::Jump)
         );
         assert_eq!(
-            b.report(Some((&last, 1.0)), &r(2, 11.0, 12.0), 1.1),
+            b.report(Some((&last, secs(1.0))), &r(2, 11.0, 12.0), secs(1.1)),
             Err(Implausible::Acceleration)
         );
         assert_eq!(
-            b.report(None, &r(2, 11.0, 30.0), 1.1),
+            b.report(None, &r(2, 11.0, 30.0), secs(1.1)),
             Err(Implausible::Speed)
         );
     }

@@ -276,6 +276,8 @@ impl<const N: usize, B: Bus> World<N, B> {
             let empty = Sensed::default();
             let ctx = StepCtx {
                 t,
+                now: self.clock.at_step(self.steps_done),
+                clock: self.clock,
                 steps_done: self.steps_done,
                 net: &self.net,
                 lim: self.lim,
@@ -321,10 +323,12 @@ impl<const N: usize, B: Bus> World<N, B> {
             keep
         });
         for &(id, from, at) in &self.departing {
+            let at = self.clock.at_secs(at);
             self.bus.send(id, &Message::departure(id, at, from), t)?;
         }
+        let now = self.clock.at_step(self.steps_done);
         for v in &self.vehicles {
-            let msg = self.spec.faults.told(v.id, v.message(t), t);
+            let msg = self.spec.faults.told(v.id, v.message(now), t);
             self.bus.send(v.id, &msg, t)?;
         }
         self.messages_sent += self.vehicles.len() as u64;
@@ -334,16 +338,17 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// Phase 2: every manager hears its junction's reports, decides, and grants leases.
     fn manage(&mut self, t: f64) -> Result<(), BusError> {
         let mut inbox = Vec::new();
+        let now = self.clock.at_step(self.steps_done);
         for m in &mut self.managers {
             inbox.clear();
             self.bus.receive(m.node(), t, &mut inbox)?;
             if !m.is_up(&self.spec.faults, t) {
                 continue;
             }
-            let granted = m.manage(&inbox, t);
+            let granted = m.manage(&inbox, now);
             self.monitor.granted(m.junction, &granted);
             for id in granted {
-                let g = m.grant(id, t, self.setup.notify, self.lim.h);
+                let g = m.grant(id, now);
                 self.bus.send(m.node(), &g, t)?;
             }
         }
@@ -394,8 +399,9 @@ impl<const N: usize, B: Bus> World<N, B> {
                 Moved::Stays => {}
                 Moved::LeftJunction(j) if v.log.left_at.is_none() => {
                     let id = v.id;
+                    let at = self.clock.at_step(self.steps_done);
                     self.bus
-                        .send(id, &Message::departure(id, now, Some(j)), now)?;
+                        .send(id, &Message::departure(id, at, Some(j)), now)?;
                     self.departing.push((id, Some(j), now));
                 }
                 Moved::LeftJunction(j) => leaving.push((i, Some(j))),
@@ -408,8 +414,9 @@ impl<const N: usize, B: Bus> World<N, B> {
             // It says it left (a junction, or the network at an exit) and repeats it for
             // LEFT_REPEAT_S; then it leaves the bus.
             let id = v.id;
+            let at = self.clock.at_step(self.steps_done);
             self.bus
-                .send(id, &Message::departure(id, now, junction), now)?;
+                .send(id, &Message::departure(id, at, junction), now)?;
             self.departing.push((id, junction, now));
             if let Some(j) = junction {
                 if self.spec.arrivals == Arrivals::Closed {

@@ -15,15 +15,16 @@ use super::network::{End, Network, Place};
 use super::sensor::Sensed;
 use super::Phase;
 use super::{AnySolver, Mode, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M};
-use crate::bus::{Message, Received};
+use crate::bus::{Clock, Message, Received};
 use crate::monitor::Limits;
 use crate::reference::ClarabelSolver;
 use planner_core::crossing::{CrossingPlanner, CrossingReport};
 use planner_core::intersection::Movement;
 use planner_core::lane_change::LaneEvent;
 use planner_core::{
-    CostWeights, FallbackReason, IpmSolver, LaneObservation, LanePlanner, Method, Other, Params,
-    ParamsSpec, Planner, Pose, ReusePolicy, Road, Sensing, Settings, StepStatus, VehicleState,
+    CostWeights, FallbackReason, Instant, IpmSolver, LaneObservation, LanePlanner, Method, Other,
+    Params, ParamsSpec, Planner, Pose, ReusePolicy, Road, Sensing, Settings, StepStatus,
+    VehicleState,
 };
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -228,9 +229,15 @@ pub struct VehicleTruth {
     pub target_lane: u8,
 }
 
-/// What vehicle `id` at `at`, moving at (v, ω) = `vw`, broadcasts at `t`: its state on a
-/// segment, its crossing report in a junction.
-pub fn announce(id: u16, at: At, (v, omega): (f64, f64), cooperative: bool, t: f64) -> Message {
+/// What vehicle `id` at `at`, moving at (v, ω) = `vw`, broadcasts at `now` (its clock):
+/// its state on a segment, its crossing report in a junction.
+pub fn announce(
+    id: u16,
+    at: At,
+    (v, omega): (f64, f64),
+    cooperative: bool,
+    now: Instant,
+) -> Message {
     match at {
         At::Lane {
             seg,
@@ -251,7 +258,7 @@ pub fn announce(id: u16, at: At, (v, omega): (f64, f64), cooperative: bool, t: f
                 lane,
                 alpha,
                 beta,
-                stamp: t,
+                stamp: now,
                 cooperative,
             },
             segment: seg,
@@ -266,7 +273,7 @@ pub fn announce(id: u16, at: At, (v, omega): (f64, f64), cooperative: bool, t: f
                 v,
                 length: LENGTH_M,
             },
-            stamp: t,
+            stamp: now,
             junction,
         },
     }
@@ -274,8 +281,12 @@ pub fn announce(id: u16, at: At, (v, omega): (f64, f64), cooperative: bool, t: f
 
 /// What a vehicle's decision at time t needs besides its own state and inbox.
 pub struct StepCtx<'a> {
-    /// Now (s).
+    /// The world's time (s since the run began): logs, scripts and fault schedules.
     pub t: f64,
+    /// The vehicle's clock now: what its planners compare stamps and leases with.
+    pub now: Instant,
+    /// Every node's clock (to read a stamp in the world's time).
+    pub clock: Clock,
     /// Steps done.
     pub steps_done: u64,
     /// The network.
@@ -466,11 +477,17 @@ impl<const N: usize> Vehicle<N> {
         }
     }
 
-    /// What it broadcasts about itself at `t`: its state on a segment, its crossing
-    /// report in a junction.
-    pub fn message(&self, t: f64) -> Message {
+    /// What it broadcasts about itself at `now` (its clock): its state on a segment, its
+    /// crossing report in a junction.
+    pub fn message(&self, now: Instant) -> Message {
         // Scripted and random drivers neither hear intentions nor yield.
-        announce(self.id, self.at, (self.v, self.omega), self.cooperative, t)
+        announce(
+            self.id,
+            self.at,
+            (self.v, self.omega),
+            self.cooperative,
+            now,
+        )
     }
 
     /// Takes the messages the bus delivered into its view (counting those rejected), and
@@ -484,7 +501,7 @@ impl<const N: usize> Vehicle<N> {
         let mut whole = true;
         for r in inbox {
             let taken = b.view.take(&r.msg, net, me);
-            if ctx.liar.is_some_and(|l| l.lied(&r.msg)) {
+            if ctx.liar.is_some_and(|l| l.lied(&r.msg, &ctx.clock)) {
                 counters.lies_heard += 1;
                 counters.lies_taken += u64::from(taken.is_ok());
             }
@@ -696,7 +713,7 @@ impl<const N: usize> Vehicle<N> {
             b.lane = Some(b.lane_planner(lane, v_max));
         }
         b.view
-            .others_on(ctx.net, seg, ctx.t, LENGTH_M, &mut b.others);
+            .others_on(ctx.net, seg, ctx.now, LENGTH_M, &mut b.others);
         for r in &ctx.returns.others {
             let _ = b.others.push(*r);
         }
@@ -822,10 +839,10 @@ impl<const N: usize> Vehicle<N> {
         }
         let _ = c.hear_sensed(&ctx.returns.on_path);
         let _ = c.hear_mapped(&mapped);
-        let permitted = c.permitted(layout, s, ctx.t);
+        let permitted = c.permitted(layout, s, ctx.now);
         self.granted = Some(permitted);
         counters.planner_steps += 1;
-        let (v, why) = match c.step(layout, s, self.v, ctx.t) {
+        let (v, why) = match c.step(layout, s, self.v, ctx.now) {
             Ok(cmd) => {
                 self.last_status = Some(cmd.status);
                 match cmd.status {

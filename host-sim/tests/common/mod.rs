@@ -11,7 +11,11 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, SystemTime};
 
-/// A scenario file shipped in `scenarios/`.
+/// `s` seconds after the epoch, to the microsecond.
+pub fn secs(s: f64) -> planner_core::Instant {
+    planner_core::Instant::from_micros((s * 1e6).round() as u64)
+}
+
 /// A cooperative vehicle's state in lane 0 of a road's first segment (y = 1.8 m, heading
 /// along the road, not turning, no lane change).
 pub fn lane_state(id: u16, x: f64, v: f64, stamp: f64) -> planner_core::VehicleState<f64> {
@@ -25,11 +29,12 @@ pub fn lane_state(id: u16, x: f64, v: f64, stamp: f64) -> planner_core::VehicleS
         lane: 0,
         alpha: None,
         beta: None,
-        stamp,
+        stamp: secs(stamp),
         cooperative: true,
     }
 }
 
+/// A scenario file shipped in `scenarios/`.
 pub fn builtin(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../scenarios")
