@@ -184,6 +184,23 @@ fn bad_input_exits_2_and_runs_nothing() {
         .output()
         .expect("runs");
     assert_eq!(out.status.code(), Some(2));
+    // A clock that cannot start there; f32 with a solver the MCU does not have.
+    for args in [
+        vec!["--clock-start", "-1"],
+        vec!["--clock-start", "NaN"],
+        vec!["--clock-start", "2e9"],
+        vec!["--precision", "f32", "--solver", "clarabel"],
+        vec!["--precision", "f16"],
+    ] {
+        let out = bin()
+            .arg("run")
+            .arg(scenario("road-end.toml"))
+            .args(&args)
+            .output()
+            .expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(out.stdout.is_empty(), "{args:?}");
+    }
 }
 
 #[test]

@@ -54,6 +54,24 @@ impl SolverArg {
     }
 }
 
+/// The planners' precision.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum PrecisionArg {
+    /// As on a host.
+    F64,
+    /// As on the Cortex-M4F.
+    F32,
+}
+
+impl PrecisionArg {
+    pub(crate) fn precision(self) -> host_sim::world::precision::Precision {
+        match self {
+            PrecisionArg::F64 => host_sim::world::precision::Precision::F64,
+            PrecisionArg::F32 => host_sim::world::precision::Precision::F32,
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// The main job: runs a scenario file — a road, an intersection or a network of
@@ -103,6 +121,15 @@ enum Command {
         /// (vcan: `ip link set vcan0 mtu 72`).
         #[arg(long)]
         can_fd: bool,
+        /// Every planner, manager and codec in this precision: `f32` as on the Cortex-M4F
+        /// (planner-core's solver), `f64` as on a host.
+        #[arg(long, value_enum, default_value = "f64")]
+        precision: PrecisionArg,
+        /// Every node's clock starts at this uptime (s; 0 to 1e9): 5184000 is 60 days,
+        /// 4294967.0 a moment before the wire's 32-bit milliseconds wrap. A run ends as it
+        /// does from 0.
+        #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+        clock_start: f64,
     },
     /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
     Platoons(sweep::PlatoonsArgs),
@@ -190,6 +217,8 @@ fn dispatch(command: Command) -> ExitCode {
             auth,
             keys,
             can_fd,
+            precision,
+            clock_start,
         } => run::run(run::RunArgs {
             file,
             seed,
@@ -202,6 +231,8 @@ fn dispatch(command: Command) -> ExitCode {
             auth: auth || keys.is_some(),
             keys,
             can_fd,
+            precision: precision.precision(),
+            clock_start,
         }),
         Command::Platoons(a) => sweep::platoons(a),
         Command::Traffic(a) => sweep::traffic(a),

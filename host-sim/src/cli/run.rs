@@ -36,6 +36,10 @@ pub struct RunArgs {
     pub keys: Option<PathBuf>,
     /// One CAN FD frame per message.
     pub can_fd: bool,
+    /// Every planner, manager and codec in this precision.
+    pub precision: host_sim::world::precision::Precision,
+    /// Every node's clock at the start (s).
+    pub clock_start: f64,
 }
 
 /// Where a run's rows go, and the staged files they end in (nothing is written to an
@@ -87,7 +91,22 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
             )));
         }
     }
-    let spec = host_sim::scenario::load(&a.file).map_err(bad_input)?;
+    let start = planner_core::Duration::from_secs_real(a.clock_start).ok_or_else(|| {
+        bad_input(format!(
+            "--clock-start must be in [0, 1e9] s, got {}",
+            a.clock_start
+        ))
+    })?;
+    let f32_clarabel = a.precision == host_sim::world::precision::Precision::F32
+        && a.solver == SolverChoice::Clarabel;
+    if f32_clarabel {
+        return Err(bad_input(
+            "--precision f32 plans with planner-core's solver, as the MCU does: drop --solver clarabel",
+        ));
+    }
+    let mut spec = host_sim::scenario::load(&a.file).map_err(bad_input)?;
+    spec.clock_start = planner_core::Instant::EPOCH.saturating_add(start);
+    spec.precision = a.precision;
     if a.bus != "in-process" {
         super::fleet::fits_the_bus(&a.file, &spec)?;
     }

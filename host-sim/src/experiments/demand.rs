@@ -133,6 +133,7 @@ pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> World
         deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
         finish: Finish::Duration,
         clock_start: planner_core::Instant::EPOCH,
+        precision: crate::world::precision::Precision::F64,
     }
 }
 

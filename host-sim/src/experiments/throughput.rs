@@ -77,6 +77,7 @@ pub fn closed_world(algorithm: Algorithm, seed: u64, duration: f64, faults: Faul
         deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
         finish: Finish::Duration,
         clock_start: planner_core::Instant::EPOCH,
+        precision: crate::world::precision::Precision::F64,
     }
 }
 

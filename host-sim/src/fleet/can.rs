@@ -506,6 +506,8 @@ pub struct CanNode<P> {
     now: Instant,
     /// It sends each message as one CAN FD frame.
     fd: bool,
+    /// It encodes and decodes in `f32` (as the MCU does), else `f64`.
+    f32: bool,
     /// The attack experiment's oracle: what it sends is recorded there, and what it
     /// accepts is checked against it (never by the node itself).
     ledger: Option<Arc<super::ledger::Ledger>>,
@@ -532,6 +534,7 @@ impl<P: CanPort> CanNode<P> {
             security: None,
             now: Instant::EPOCH,
             fd: false,
+            f32: false,
             ledger: None,
         }
     }
@@ -546,6 +549,14 @@ impl<P: CanPort> CanNode<P> {
     /// frame; it receives both kinds.
     pub fn with_fd(mut self) -> Self {
         self.fd = true;
+        self
+    }
+
+    /// This node, encoding and decoding in `precision` (`f32`: as the MCU does; the
+    /// simulator's messages are rounded to `f32` before encoding and widened after
+    /// decoding).
+    pub fn with_precision(mut self, precision: crate::world::precision::Precision) -> Self {
+        self.f32 = precision == crate::world::precision::Precision::F32;
         self
     }
 
@@ -574,8 +585,17 @@ impl<P: CanPort> CanNode<P> {
         &self.stats
     }
 
-    /// Encodes and transmits `msg` (one alive counter per kind, mod 16).
+    /// Encodes and transmits `msg` (one alive counter per kind, mod 16), in the node's
+    /// precision.
     pub fn send_wire(&mut self, msg: &wire::Message<f64>) -> Result<(), CanError> {
+        if self.f32 {
+            self.send_as(&wire32(msg))
+        } else {
+            self.send_as(msg)
+        }
+    }
+
+    fn send_as<F: planner_core::Real>(&mut self, msg: &wire::Message<F>) -> Result<(), CanError> {
         let k = msg.kind() as usize;
         let counter = self.counters.get(k).copied().unwrap_or(0);
         let (sa, fd) = (self.sa, self.fd);
@@ -652,15 +672,10 @@ impl<P: CanPort> CanNode<P> {
             return Ok(Polled::Nothing);
         };
         self.stats.frames_received += 1;
-        let pushed = match &mut self.security {
-            None => self.reassembler.push::<f64, _>(&frame, self.now),
-            Some(s) => {
-                let v = Verifier {
-                    keys: &s.keys,
-                    freshness: &mut s.rx,
-                };
-                self.reassembler.push_secured(&frame, self.now, v)
-            }
+        let pushed = if self.f32 {
+            self.push_as::<f32>(&frame).map(|m| m.map(|m| wire64(&m)))
+        } else {
+            self.push_as::<f64>(&frame)
         };
         match pushed {
             Ok(Some(m)) => {
@@ -681,6 +696,97 @@ impl<P: CanPort> CanNode<P> {
             }
         }
     }
+}
+
+impl<P> CanNode<P> {
+    /// Pushes `frame` into the reassembler, decoding in `F`.
+    fn push_as<F: planner_core::Real>(
+        &mut self,
+        frame: &FdFrame,
+    ) -> Result<Option<wire::Message<F>>, DecodeError> {
+        match &mut self.security {
+            None => self.reassembler.push::<F, _>(frame, self.now),
+            Some(s) => {
+                let v = Verifier {
+                    keys: &s.keys,
+                    freshness: &mut s.rx,
+                };
+                self.reassembler.push_secured(frame, self.now, v)
+            }
+        }
+    }
+}
+
+/// A state's numbers converted by `f`.
+fn state_as<A: Copy, B>(
+    s: &planner_core::VehicleState<A>,
+    f: impl Fn(A) -> B,
+) -> planner_core::VehicleState<B> {
+    planner_core::VehicleState {
+        id: s.id,
+        x: f(s.x),
+        y: f(s.y),
+        theta: f(s.theta),
+        v: f(s.v),
+        omega: f(s.omega),
+        lane: s.lane,
+        alpha: s.alpha,
+        beta: s.beta,
+        stamp: s.stamp,
+        cooperative: s.cooperative,
+    }
+}
+
+/// A message's numbers converted by `f`.
+fn message_as<A: Copy, B>(m: &wire::Message<A>, f: impl Fn(A) -> B) -> wire::Message<B> {
+    let request = |q: &wire::Request<A>| wire::Request {
+        id: q.id,
+        inlet: q.inlet,
+        outlet: q.outlet,
+        arrival: q.arrival,
+        s: f(q.s),
+        v: f(q.v),
+    };
+    match m {
+        wire::Message::State(st) => wire::Message::State(state_as(st, &f)),
+        wire::Message::Located { segment, state } => wire::Message::Located {
+            segment: *segment,
+            state: state_as(state, &f),
+        },
+        wire::Message::Request(q) => wire::Message::Request(request(q)),
+        wire::Message::JunctionRequest {
+            junction,
+            request: q,
+        } => wire::Message::JunctionRequest {
+            junction: *junction,
+            request: request(q),
+        },
+        wire::Message::Grant { id, until } => wire::Message::Grant {
+            id: *id,
+            until: *until,
+        },
+        wire::Message::Revoke { id, at } => wire::Message::Revoke { id: *id, at: *at },
+        wire::Message::Exit { id, at } => wire::Message::Exit { id: *id, at: *at },
+        wire::Message::JunctionExit { junction, id, at } => wire::Message::JunctionExit {
+            junction: *junction,
+            id: *id,
+            at: *at,
+        },
+        wire::Message::Sync { period, last } => wire::Message::Sync {
+            period: *period,
+            last: *last,
+        },
+    }
+}
+
+/// A message rounded to `f32` (what an MCU's codec is handed).
+pub fn wire32(m: &wire::Message<f64>) -> wire::Message<f32> {
+    message_as(m, |x| x as f32)
+}
+
+/// A message widened to `f64` (exact).
+pub fn wire64(m: &wire::Message<f32>) -> wire::Message<f64> {
+    message_as(m, f64::from)
 }
 
 fn reason(e: DecodeError) -> String {

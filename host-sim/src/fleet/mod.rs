@@ -572,6 +572,7 @@ impl<const N: usize> Harness<N> {
             resolution: RESOLUTION,
             sensing: self.spec.sensing,
             reuse: None,
+            precision: self.spec.precision,
         }
     }
 
@@ -599,6 +600,7 @@ impl<const N: usize> Harness<N> {
         if self.fd {
             nodes = nodes.with_fd();
         }
+        nodes = nodes.with_precision(self.spec.precision);
         let ledger = self.attack.map(|_| Arc::new(Ledger::new()));
         if let Some(l) = &ledger {
             nodes = nodes.with_ledger(l);
@@ -677,8 +679,9 @@ impl<const N: usize> Harness<N> {
             .iter()
             .enumerate()
             .map(|(j, jn)| {
-                let lease = crate::world::junction::lease(self.setup().notify, self.lim.h);
-                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, lease)
+                let setup = self.setup();
+                let lease = crate::world::junction::lease(setup.notify, self.lim.h);
+                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision))
             })
             .collect();
         for m in &mut managers {
@@ -802,6 +805,17 @@ impl<P: CanPort> Nodes<P> {
             clock: self.clock.with_fd(),
             vehicles: fd(self.vehicles),
             managers: fd(self.managers),
+        }
+    }
+
+    /// Every node coding in `precision`.
+    fn with_precision(self, precision: crate::world::precision::Precision) -> Self {
+        let coded =
+            |v: Vec<CanNode<P>>| v.into_iter().map(|n| n.with_precision(precision)).collect();
+        Self {
+            clock: self.clock.with_precision(precision),
+            vehicles: coded(self.vehicles),
+            managers: coded(self.managers),
         }
     }
 

@@ -420,6 +420,7 @@ impl JunctionScenario {
             deadlock_window_s: self.header.deadlock_window_s,
             finish: Finish::Duration,
             clock_start: planner_core::Instant::EPOCH,
+            precision: crate::world::precision::Precision::F64,
         }
     }
 

@@ -2,8 +2,9 @@
 //! reports for its junction, decides by its algorithm, and answers every vehicle holding
 //! a permission with a lease.
 
+use super::precision::{AnyManager, Precision};
 use crate::bus::{Faults, Message, Received};
-use planner_core::crossing::{Lease, Manager};
+use planner_core::crossing::Lease;
 use planner_core::intersection::Layout;
 use planner_core::{ConfigError, Duration, Instant};
 
@@ -38,7 +39,9 @@ pub struct ManagerNode {
     /// The junction (index).
     pub junction: usize,
     /// The manager.
-    pub manager: Manager<f64, MANAGER_CAP>,
+    pub manager: AnyManager<MANAGER_CAP>,
+    /// Its layout (a restart builds the new manager on it).
+    layout: Layout<f64>,
     /// It has been restarted (after an outage).
     pub restarted: bool,
     /// The bus's position resolution it was given (m): a restart keeps it, the bus being
@@ -47,20 +50,21 @@ pub struct ManagerNode {
 }
 
 impl ManagerNode {
-    /// The manager of junction `junction` with `layout`, running `algorithm`, granting
-    /// leases on the terms `lease` (see [`lease`]).
+    /// The manager of junction `junction` with `layout`, running `algorithm` in
+    /// `precision`, granting leases on the terms `lease` (see [`lease`]).
     pub fn new(
         junction: usize,
         layout: Layout<f64>,
         algorithm: planner_core::crossing::Algorithm,
-        lease: Lease,
+        (lease, precision): (Lease, Precision),
     ) -> Self {
-        let mut manager = Manager::new(layout, algorithm);
+        let mut manager = AnyManager::new(&layout, algorithm, precision);
         // A zero notification bound or length is refused: keep the defaults then.
         let _ = manager.set_lease(lease);
         Self {
             junction,
             manager,
+            layout,
             restarted: false,
             resolution: 0.0,
         }
@@ -81,7 +85,8 @@ impl ManagerNode {
     /// vehicle heard inside A_S holds its zones as a permission would.
     pub fn restart(&mut self) {
         let lease = self.manager.lease();
-        self.manager = Manager::new(self.manager.layout().clone(), self.manager.algorithm());
+        let (algorithm, precision) = (self.manager.algorithm(), self.manager.precision());
+        self.manager = AnyManager::new(&self.layout, algorithm, precision);
         // Both were accepted when they were set: they cannot be refused now.
         let _ = self.manager.set_position_resolution(self.resolution);
         let _ = self.manager.set_lease(lease);
@@ -126,10 +131,9 @@ impl ManagerNode {
         }
         self.manager.update(now);
         self.manager
-            .entries()
-            .iter()
-            .filter(|e| e.permitted)
-            .map(|e| e.id)
+            .holders()
+            .into_iter()
+            .map(|(id, _)| id)
             .collect()
     }
 

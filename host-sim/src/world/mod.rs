@@ -22,6 +22,7 @@ pub mod heard;
 pub mod junction;
 pub mod network;
 pub mod plausible;
+pub mod precision;
 pub mod sensor;
 pub mod spawn;
 pub mod step;
@@ -232,6 +233,9 @@ pub struct WorldSpec {
     /// What every node's clock reads when the run begins ([`crate::bus::Clock`]; `host-sim
     /// run --clock-start`): the epoch unless an uptime is to be tried.
     pub clock_start: planner_core::Instant,
+    /// The precision of every planner, manager and codec ([`precision`]; `host-sim run
+    /// --precision`).
+    pub precision: precision::Precision,
 }
 
 /// When a run ends before its duration (besides a deadlock, which always ends it).
@@ -335,6 +339,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             resolution: (0.0, 0.0),
             sensing: spec.sensing,
             reuse: None,
+            precision: spec.precision,
         };
         let net = spec.network.clone();
         let vehicles = spec
@@ -348,7 +353,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             .enumerate()
             .map(|(j, jn)| {
                 let lease = junction::lease(setup.notify, lim.h);
-                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, lease)
+                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision))
             })
             .collect();
         let mut rng = Box::new(crate::reference::instances::rng(seed ^ 0x1c));

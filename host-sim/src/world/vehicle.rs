@@ -12,6 +12,7 @@
 
 use super::heard::{Reject, View, VIEW_CAP};
 use super::network::{End, Network, Place};
+use super::precision::{params32, sensing32, CrossingF32, LaneF32, Precision};
 use super::sensor::Sensed;
 use super::Phase;
 use super::{AnySolver, Mode, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M};
@@ -19,12 +20,13 @@ use crate::bus::{Clock, Message, Received};
 use crate::monitor::Limits;
 use crate::reference::ClarabelSolver;
 use planner_core::crossing::{CrossingPlanner, CrossingReport};
+use planner_core::intersection::Layout;
 use planner_core::intersection::Movement;
-use planner_core::lane_change::LaneEvent;
+use planner_core::lane_change::{LaneEvent, StartBlock};
 use planner_core::{
-    CostWeights, FallbackReason, Instant, IpmSolver, LaneObservation, LanePlanner, Method, Other,
-    Params, ParamsSpec, Planner, Pose, ReusePolicy, Road, Sensing, Settings, StepStatus,
-    VehicleState,
+    Command, CostWeights, FallbackReason, InputError, Instant, IpmSolver, LaneCommand,
+    LaneInputError, LaneObservation, LanePlanner, Method, Other, Params, ParamsSpec, Planner, Pose,
+    ReusePolicy, Road, Sensing, Settings, StepStatus, VehicleState,
 };
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -71,12 +73,111 @@ pub struct PlannerSetup {
     pub sensing: Option<Sensing<f64>>,
     /// Certified plan reuse in the multi-lane planners, if any (`None`: solve every step).
     pub reuse: Option<ReusePolicy<f64>>,
+    /// The planners' precision (`f32` as on the MCU: ours alone, no reuse).
+    pub precision: Precision,
+}
+
+/// A vehicle's multi-lane planner, in the setup's precision.
+pub enum LaneBrain<const N: usize> {
+    /// In `f64`, with the chosen solver.
+    F64(Box<LanePlanner<f64, N, AnySolver<N>>>),
+    /// In `f32`, with planner-core's solver, as on the MCU.
+    F32(Box<LaneF32<N>>),
+}
+
+impl<const N: usize> LaneBrain<N> {
+    fn step(&mut self, obs: &LaneObservation<'_, f64>) -> Result<LaneCommand<f64>, LaneInputError> {
+        match self {
+            Self::F64(p) => p.step(obs),
+            Self::F32(p) => p.step(obs),
+        }
+    }
+
+    fn beta(&self) -> Option<u8> {
+        match self {
+            Self::F64(p) => p.beta(),
+            Self::F32(p) => p.beta(),
+        }
+    }
+
+    fn start_check(&mut self, obs: &LaneObservation<'_, f64>, m: u8) -> Result<(), StartBlock> {
+        match self {
+            Self::F64(p) => p.start_check(obs, m),
+            Self::F32(p) => p.start_check(obs, m),
+        }
+    }
+
+    fn braking_command(&self, theta: f64, v_prev: f64) -> (f64, f64) {
+        match self {
+            Self::F64(p) => p.braking_command(theta, v_prev),
+            Self::F32(p) => p.braking_command(theta, v_prev),
+        }
+    }
+}
+
+/// A vehicle's crossing planner, in the setup's precision.
+pub enum CrossingBrain {
+    /// In `f64`.
+    F64(Box<CrossingPlanner<f64, CROSS_HORIZON, VIEW_CAP>>),
+    /// In `f32`, on its junction's layout in `f32`.
+    F32(Box<CrossingF32>),
+}
+
+impl CrossingBrain {
+    fn clear_reports(&mut self) {
+        match self {
+            Self::F64(c) => c.clear_reports(),
+            Self::F32(c) => c.clear_reports(),
+        }
+    }
+
+    fn hear_report(&mut self, r: &CrossingReport<f64>, stamp: Instant) {
+        // An overflow makes the planner take its path as blocked.
+        let _ = match self {
+            Self::F64(c) => c.hear_report(r, stamp),
+            Self::F32(c) => c.hear_report(r, stamp),
+        };
+    }
+
+    fn hear_paths(&mut self, sensed: &[f64], mapped: &[f64]) {
+        // Past the view's capacity the planner takes its path as blocked.
+        let _ = match self {
+            Self::F64(c) => c.hear_sensed(sensed).and(c.hear_mapped(mapped)),
+            Self::F32(c) => c.hear_sensed(sensed).and(c.hear_mapped(mapped)),
+        };
+    }
+
+    fn hear_grant(&mut self, id: u16, until: Instant) {
+        match self {
+            Self::F64(c) => c.hear_grant(id, until),
+            Self::F32(c) => c.hear_grant(id, until),
+        }
+    }
+
+    fn permitted(&self, layout: &Layout<f64>, s: f64, now: Instant) -> bool {
+        match self {
+            Self::F64(c) => c.permitted(layout, s, now),
+            Self::F32(c) => c.permitted(s, now),
+        }
+    }
+
+    fn step(
+        &mut self,
+        layout: &Layout<f64>,
+        (s, v_prev): (f64, f64),
+        now: Instant,
+    ) -> Result<Command<f64>, InputError> {
+        match self {
+            Self::F64(c) => c.step(layout, s, v_prev, now),
+            Self::F32(c) => c.step(s, v_prev, now),
+        }
+    }
 }
 
 /// The planners of a planner-driven vehicle and what it heard.
 pub struct Brain<const N: usize> {
-    lane: Option<Box<LanePlanner<f64, N, AnySolver<N>>>>,
-    crossing: Option<Box<CrossingPlanner<f64, CROSS_HORIZON, VIEW_CAP>>>,
+    lane: Option<LaneBrain<N>>,
+    crossing: Option<CrossingBrain>,
     view: View,
     others: Box<heapless::Vec<Other<f64>, VIEW_CAP>>,
     setup: PlannerSetup,
@@ -389,7 +490,10 @@ impl<const N: usize> Brain<N> {
     }
 
     /// A multi-lane planner in `lane` of a segment with speed limit `v_max`.
-    fn lane_planner(&self, lane: u8, v_max: f64) -> Box<LanePlanner<f64, N, AnySolver<N>>> {
+    fn lane_planner(&self, lane: u8, v_max: f64) -> LaneBrain<N> {
+        if self.setup.precision == Precision::F32 {
+            return LaneBrain::F32(Box::new(self.lane_planner32(lane, v_max)));
+        }
         let s = match self.setup.solver {
             SolverChoice::Ours => AnySolver::Ours(IpmSolver::default()),
             SolverChoice::OursInteriorPoint => {
@@ -408,23 +512,43 @@ impl<const N: usize> Brain<N> {
         let _ = p.set_bus_resolution(pos, speed);
         let _ = p.set_sensing(self.setup.sensing);
         let _ = p.set_reuse(self.setup.reuse);
-        Box::new(p)
+        LaneBrain::F64(Box::new(p))
     }
 
-    /// A crossing planner for vehicle `id` on `route` with speed limit `v_limit`.
-    fn crossing_planner(
-        &self,
-        id: u16,
-        route: u8,
-        v_limit: f64,
-    ) -> Box<CrossingPlanner<f64, CROSS_HORIZON, VIEW_CAP>> {
+    /// The multi-lane planner in `f32`: planner-core's solver, the setup rounded.
+    fn lane_planner32(&self, lane: u8, v_max: f64) -> LaneF32<N> {
+        let mut p = LanePlanner::new(params32(v_max), CostWeights::default(), lane)
+            .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
+        let _ = p.set_notify_latency(self.setup.notify as f32);
+        let (pos, speed) = self.setup.resolution;
+        let _ = p.set_bus_resolution(pos as f32, speed as f32);
+        let _ = p.set_sensing(self.setup.sensing.map(sensing32));
+        LaneF32::new(p)
+    }
+
+    /// A crossing planner for vehicle `id` on `route` of `layout`.
+    fn crossing_planner(&self, id: u16, route: u8, layout: &Layout<f64>) -> CrossingBrain {
+        let v_limit = layout.spec.v_limit;
+        if self.setup.precision == Precision::F32 {
+            let w = CostWeights {
+                target_position: 1e-3,
+                ..CostWeights::default()
+            };
+            let planner = Planner::new(params32(v_limit), w)
+                .unwrap_or_else(|_| unreachable!("the weights are valid"));
+            let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M as f32);
+            let _ = c.set_notify_latency(self.setup.notify as f32);
+            let _ = c.set_bus_resolution(self.setup.resolution.0 as f32);
+            let _ = c.set_sensing(self.setup.sensing.map(sensing32));
+            return CrossingBrain::F32(Box::new(CrossingF32::new(c, layout)));
+        }
         let planner = Planner::new(params(v_limit), crossing_weights())
             .unwrap_or_else(|_| unreachable!("the weights are valid"));
         let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M);
         let _ = c.set_notify_latency(self.setup.notify);
         let _ = c.set_bus_resolution(self.setup.resolution.0);
         let _ = c.set_sensing(self.setup.sensing);
-        Box::new(c)
+        CrossingBrain::F64(Box::new(c))
     }
 }
 
@@ -825,7 +949,7 @@ impl<const N: usize> Vehicle<N> {
             return (0.0, 0.0);
         };
         if b.crossing.is_none() {
-            b.crossing = Some(b.crossing_planner(self.id, route, v_limit));
+            b.crossing = Some(b.crossing_planner(self.id, route, layout));
         }
         let mapped = b.view.on_path(ctx.net, junction, route);
         let Some(c) = b.crossing.as_mut() else {
@@ -834,15 +958,13 @@ impl<const N: usize> Vehicle<N> {
         // Its view of the junction, as it stands this period.
         c.clear_reports();
         for (report, stamp) in b.view.reports_at(junction) {
-            // An overflow makes the planner take its path as blocked.
-            let _ = c.hear_report(&report, stamp);
+            c.hear_report(&report, stamp);
         }
-        let _ = c.hear_sensed(&ctx.returns.on_path);
-        let _ = c.hear_mapped(&mapped);
+        c.hear_paths(&ctx.returns.on_path, &mapped);
         let permitted = c.permitted(layout, s, ctx.now);
         self.granted = Some(permitted);
         counters.planner_steps += 1;
-        let (v, why) = match c.step(layout, s, self.v, ctx.now) {
+        let (v, why) = match c.step(layout, (s, self.v), ctx.now) {
             Ok(cmd) => {
                 self.last_status = Some(cmd.status);
                 match cmd.status {

@@ -16,9 +16,7 @@ pub fn holders(managers: &[ManagerNode], j: usize) -> Vec<(u16, u8)> {
     managers
         .iter()
         .filter(|m| m.junction == j)
-        .flat_map(|m| m.manager.entries().iter())
-        .filter(|e| e.permitted)
-        .map(|e| (e.id, e.route))
+        .flat_map(|m| m.manager.holders())
         .collect()
 }
 
