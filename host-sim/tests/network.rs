@@ -197,3 +197,58 @@ fn a_vehicle_changing_into_an_outlets_lane_is_on_the_crossing_followers_path() {
     heard(&mut view, state(9, 1, None));
     assert_eq!(view.on_path(&net, j, route).len(), 2, "and one in lane 1");
 }
+
+/// Layouts that cannot be run safely are refused at load, naming the line: two
+/// intersections at one place (or with overlapping communication regions), a segment
+/// through a third intersection, roads that cross outside any intersection, an exit
+/// that reaches beyond the coordinate range.
+#[test]
+fn layouts_that_cannot_work_are_refused_with_their_line() {
+    let header = "name = \"bad\"\nduration_s = 10.0\n[arrivals]\nrate_vph = 100.0\n";
+    let cases: [(&str, &str, &str); 4] = [
+        (
+            "[[intersection]]\nid = 1\nx = 0.0\ny = 0.0\n\
+             [[intersection]]\nid = 2\nx = 0.0\ny = 0.0\n\
+             [[segment]]\nid = 10\nto = 1\nheading = \"east\"\nlength = 200.0\n\
+             [[segment]]\nid = 11\nfrom = 1\nheading = \"east\"\nlength = 200.0\n",
+            "bad.toml:9:",
+            "communication region overlaps",
+        ),
+        (
+            "[[intersection]]\nid = 1\nx = 0.0\ny = 0.0\n\
+             [[intersection]]\nid = 2\nx = 500.0\ny = 0.0\n\
+             [[intersection]]\nid = 3\nx = 1000.0\ny = 0.0\n\
+             [[segment]]\nid = 10\nto = 1\nheading = \"east\"\nlength = 200.0\n\
+             [[segment]]\nid = 11\nfrom = 1\nto = 3\n\
+             [[segment]]\nid = 12\nfrom = 3\nheading = \"east\"\nlength = 200.0\n",
+            "bad.toml:",
+            "passes through the communication region of intersection 2",
+        ),
+        (
+            "[[intersection]]\nid = 1\nx = 0.0\ny = 0.0\n\
+             [[segment]]\nid = 10\nto = 1\nheading = \"east\"\nlength = 200.0\n\
+             [[segment]]\nid = 11\nfrom = 1\nheading = \"east\"\nlength = 200.0\n\
+             [[intersection]]\nid = 2\nx = 150.0\ny = 300.0\n\
+             [[segment]]\nid = 20\nto = 2\nheading = \"south\"\nlength = 200.0\n\
+             [[segment]]\nid = 21\nfrom = 2\nheading = \"south\"\nlength = 600.0\n",
+            "bad.toml:",
+            "crosses segment",
+        ),
+        (
+            "[[intersection]]\nid = 1\nx = 0.0\ny = 0.0\n\
+             [[segment]]\nid = 10\nto = 1\nheading = \"east\"\nlength = 200.0\n\
+             [[segment]]\nid = 11\nfrom = 1\nheading = \"east\"\nlength = 1000000.0\n",
+            "bad.toml:",
+            "reaches beyond",
+        ),
+    ];
+    for (body, at, why) in cases {
+        let err = host_sim::scenario::network::NetworkScenario::parse(
+            &format!("{header}{body}"),
+            std::path::Path::new("bad.toml"),
+        )
+        .expect_err(why)
+        .to_string();
+        assert!(err.contains(at) && err.contains(why), "{err}");
+    }
+}

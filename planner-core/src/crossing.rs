@@ -6,8 +6,10 @@
 //! which vehicles hold a permission; it tracks at most `CAP` vehicles.
 
 use crate::intersection::{Layout, CONFLICT_SAMPLE_M};
+use crate::params::Params;
 use crate::planner::ConfigError;
 use crate::real::Real;
+use crate::safety;
 use crate::sensing::{still_unheard, Sensing};
 use crate::time::{Duration, Instant};
 use core::cmp::Ordering;
@@ -113,7 +115,18 @@ pub enum ManagerError {
     Full,
     /// The vehicle changed its route after registering (the IC Protocol forbids it).
     RouteChanged,
+    /// The report is physically impossible after the last one accepted from the same
+    /// vehicle (see [`Manager::observe`]): the vehicle is a suspect from now on.
+    Implausible,
+    /// From a suspect: nothing it reports is taken any more.
+    Distrusted,
 }
+
+/// Slack (m) on a report's move since the last one accepted from the same vehicle,
+/// forward and back: far above a bus's rounding (0.01 m), far below a lie that matters.
+pub const PLAUSIBLE_POSITION_M: f64 = 0.5;
+/// Slack (m/s) on a reported speed above vmax.
+pub const PLAUSIBLE_SPEED_MPS: f64 = 0.5;
 
 /// A registered vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -129,10 +142,22 @@ pub struct Entry<F> {
     pub progress: F,
     /// Distance from its front to the stop line (negative once inside).
     pub to_line: F,
+    /// Its last reported speed (m/s).
+    pub v: F,
     /// When it was first seen stopped at its stop line (All-Way STOP).
     pub stopped_at: Option<Instant>,
-    /// It holds a permission.
+    /// This manager grants it a permission (a lease is sent to it each period).
     pub permitted: bool,
+    /// It can no longer stop before its line, or is inside A_S (see
+    /// [`Manager::observe`]): it holds its zones whatever the algorithm decides, with a
+    /// permission or not.
+    pub committed: bool,
+    /// When its last report was accepted (the manager's clock).
+    pub heard_at: Instant,
+    /// It sent a physically impossible report: its record is frozen at its last trusted
+    /// report, it is never granted again, and if it held a permission or was committed
+    /// then, it holds its zones for good ([`Manager::observe`]).
+    pub suspect: bool,
 }
 
 /// The terms of a manager's permissions (IC Protocol (iii)): every permission is a lease
@@ -176,6 +201,14 @@ impl Lease {
     }
 }
 
+impl<F> Entry<F> {
+    /// It holds its route's conflict zones: this manager permits it, or it is committed
+    /// (it will be in A_S whatever is decided).
+    pub fn holds(&self) -> bool {
+        self.permitted || self.committed
+    }
+}
+
 /// The intersection manager for up to `CAP` vehicles.
 ///
 /// **Starting (and restarting) safely.** A manager cannot tell a first start from a
@@ -200,6 +233,11 @@ pub struct Manager<F, const CAP: usize> {
     lease: Lease,
     /// When its first update ran (its clock at start-up).
     started: Option<Instant>,
+    /// Half the step to which reported speeds were rounded (0: exact reports).
+    half_speed_step: F,
+    /// The limits it assumes of every vehicle (the weakest brakes among them): which
+    /// vehicles can no longer stop before their stop line ([`Manager::observe`]).
+    vehicles: Params<F>,
 }
 
 /// `true` for a usable bus resolution: finite, non-negative, below 1 (m or m/s).
@@ -218,7 +256,26 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             half_step: F::ZERO,
             lease: Lease::default(),
             started: None,
+            half_speed_step: F::ZERO,
+            vehicles: Params::table_i(),
         }
+    }
+
+    /// Reports reach the manager with speeds rounded to `speed` (m/s): a vehicle may be up
+    /// to half a step faster than reported, and is taken so when the manager judges
+    /// whether it can still stop before its line. Zero (the default) takes them as exact.
+    pub fn set_speed_resolution(&mut self, speed: F) -> Result<(), ConfigError> {
+        if !valid_resolution(speed) {
+            return Err(ConfigError::InvalidResolution);
+        }
+        self.half_speed_step = F::HALF * speed;
+        Ok(())
+    }
+
+    /// The kinematic limits it assumes of every vehicle it manages — for mixed traffic,
+    /// those of the weakest brakes (default: Table I).
+    pub fn set_vehicle_params(&mut self, p: Params<F>) {
+        self.vehicles = p;
     }
 
     /// Sets the terms of its leases (see [`Lease`]); a notification bound of zero is
@@ -286,9 +343,25 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         self.entries.iter().any(|e| e.id == id && e.permitted)
     }
 
+    /// `true` if vehicle `id` holds its route's conflict zones: it is permitted, or
+    /// committed ([`Entry::holds`]).
+    pub fn holds(&self, id: u16) -> bool {
+        self.entries.iter().any(|e| e.id == id && e.holds())
+    }
+
     /// Takes a vehicle's report at time `now`: registers it when it is first seen inside
     /// A_C (τ = now), tracks its progress, and removes it once it is on its outlet track
     /// (its rear past A_S). A bad report changes nothing.
+    ///
+    /// **Committed vehicles hold their zones.** A vehicle inside A_S, or one that can no
+    /// longer stop before its stop line — its front within dS(v) (8) of the line, taken as
+    /// far forward and as fast as the reports' rounding allows — is committed: it will be
+    /// in A_S, with a permission from this manager or not. Every other vehicle stops
+    /// before the line without a permission (IC Protocol (ii): its planner keeps the
+    /// invariant toward the line, and its certified fallback brakes at once), so only
+    /// these can enter without one: a lease granted by an earlier incarnation of this
+    /// manager, or one that lapsed (lost renewals) while its holder was already too close
+    /// to stop. Each holds its route's conflict zones as a permission would.
     pub fn observe(&mut self, r: &CrossingReport<F>, now: Instant) -> Result<(), ManagerError> {
         let route = self
             .layout
@@ -305,6 +378,21 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         // The furthest back the vehicle can be, given the reports' rounding.
         let s = r.s - self.half_step;
         let idx = self.entries.iter().position(|e| e.id == r.id);
+        if let Some(e) = idx.and_then(|i| self.entries.get_mut(i)) {
+            if e.suspect {
+                return Err(ManagerError::Distrusted);
+            }
+            if e.route != r.route {
+                return Err(ManagerError::RouteChanged);
+            }
+            if !plausible(&self.vehicles, self.lease.notify, e, s - entry, r.v, now) {
+                // Frozen where it was last trusted. Not granted again; one that could
+                // already be in A_S holds its zones for good (see the type's docs).
+                e.suspect = true;
+                e.committed = e.committed || e.permitted;
+                return Err(ManagerError::Implausible);
+            }
+        }
         if s - half >= exit {
             // On its outlet track: no longer in C^I_t (25).
             if let Some(i) = idx {
@@ -314,30 +402,32 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             return Ok(());
         }
         let to_line = entry - (s + half);
+        // As far forward and as fast as the rounding allows: can it still stop before the
+        // line (its front not past it)?
+        let front_gap = entry - (r.s + self.half_step + half);
+        let v_hi = r.v + self.half_speed_step;
+        let committed = to_line < F::ZERO || front_gap < safety::d_s(&self.vehicles, v_hi);
         let stopped =
             r.v == F::ZERO && to_line >= F::ZERO && to_line <= F::from_f64(STOP_LINE_ZONE_M);
         match idx.and_then(|i| self.entries.get_mut(i)) {
             Some(e) => {
-                if e.route != r.route {
-                    return Err(ManagerError::RouteChanged);
-                }
                 e.progress = s - entry;
                 e.to_line = to_line;
+                e.v = r.v;
+                e.heard_at = now;
                 if stopped && e.stopped_at.is_none() {
                     e.stopped_at = Some(now);
                 }
-                // Inside A_S it is committed (it keeps going until it is out), whether
-                // this manager granted its entry or not — an earlier incarnation's lease
-                // may have: it holds its route's conflict zones as a permission would.
-                if to_line < F::ZERO {
-                    e.permitted = true;
-                }
+                e.committed = committed;
             }
             None => {
                 // Only an unregistered vehicle needs its pose: is it inside A_C yet?
                 let pose = route.path.pose_at(s);
                 if !self.layout.in_comm_region(pose.x, pose.y) {
                     return Ok(());
+                }
+                if r.v > self.vehicles.v_max() + F::from_f64(PLAUSIBLE_SPEED_MPS) {
+                    return Err(ManagerError::Implausible);
                 }
                 self.entries
                     .push(Entry {
@@ -346,13 +436,14 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                         tau: now,
                         progress: s - entry,
                         to_line,
+                        v: r.v,
                         stopped_at: stopped.then_some(now),
-                        // First heard already inside A_S: a manager restarted mid-crossing,
-                        // or a vehicle that entered without a permission. Either way it
-                        // occupies its route's conflict zones until it leaves, so it holds
-                        // them as a permission would: no conflicting route is granted over
-                        // it.
-                        permitted: to_line < F::ZERO,
+                        permitted: false,
+                        // First heard committed (see above): a manager restarted while
+                        // the vehicle crossed or was about to.
+                        committed,
+                        heard_at: now,
+                        suspect: false,
                     })
                     .map_err(|_| ManagerError::Full)?;
             }
@@ -360,9 +451,11 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         Ok(())
     }
 
-    /// Forgets vehicle `id` (e.g. its messages stopped: its permission lapses).
+    /// Forgets vehicle `id` (e.g. its messages stopped: its permission lapses) — unless
+    /// it is a suspect holding its zones: its word that it left is not taken.
     pub fn forget(&mut self, id: u16) {
-        self.entries.retain(|e| e.id != id);
+        self.entries
+            .retain(|e| e.id != id || (e.suspect && e.holds()));
     }
 
     /// Recomputes the permissions by the algorithm at `now`; nothing new is granted while
@@ -383,20 +476,22 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
         match self.algorithm {
             Algorithm::Fifo | Algorithm::AllWayStop => {
-                if self.entries.iter().any(|e| e.permitted) {
+                if self.entries.iter().any(Entry::holds) {
                     return;
                 }
                 let order = self.priority(false);
+                // A suspect is never granted, and holds back no one by waiting.
+                let suspect = |i: &&usize| self.entries.get(**i).is_none_or(|e| e.suspect);
                 let first = if self.algorithm == Algorithm::AllWayStop {
                     // Served in the order they stopped (only a lane's first vehicle can
                     // stop at its line); ties in priority order.
                     let stopped = |i: &usize| self.entries.get(*i).and_then(|e| e.stopped_at);
                     order
                         .iter()
-                        .filter(|i| stopped(i).is_some())
+                        .filter(|i| stopped(i).is_some() && !suspect(i))
                         .min_by(|a, b| stopped(a).cmp(&stopped(b)))
                 } else {
-                    order.first()
+                    order.iter().find(|i| !suspect(i))
                 };
                 if let Some(e) = first.copied().and_then(|b| self.entries.get_mut(b)) {
                     e.permitted = true;
@@ -413,7 +508,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                     let Some(c) = self.entries.get(i) else {
                         continue;
                     };
-                    if c.permitted {
+                    if c.holds() || c.suspect {
                         continue;
                     }
                     if self.algorithm == Algorithm::Pipelined
@@ -474,7 +569,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         self.entries
             .iter()
             .enumerate()
-            .any(|(i, l)| !l.permitted && !granted_now.contains(&i) && self.ahead_on_inlet(l, c))
+            .any(|(i, l)| !l.holds() && !granted_now.contains(&i) && self.ahead_on_inlet(l, c))
     }
 
     /// Liveness fix 2 (root cause of the queue deadlocks of issue 14): a permitted vehicle
@@ -493,7 +588,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     fn revoke_blocked(&mut self) {
         let mut revoke: Vec<usize, CAP> = Vec::new();
         for (i, f) in self.entries.iter().enumerate() {
-            let usable = !f.permitted || !self.queued_behind(f, &[]);
+            let usable = !f.permitted || f.committed || !self.queued_behind(f, &[]);
             if !usable {
                 let _ = revoke.push(i);
             }
@@ -563,7 +658,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         let holders = self
             .entries
             .iter()
-            .filter(|e| e.permitted)
+            .filter(|e| e.holds())
             .chain(granted_now.iter().filter_map(|&i| self.entries.get(i)));
         for h in holders {
             let (hr, cr) = (usize::from(h.route), usize::from(c.route));
@@ -591,6 +686,35 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
         true
     }
+}
+
+/// Whether a report of progress `progress` past the A_S entry at speed `v`, heard at
+/// `now`, is physically possible after `last`, the last accepted from the same vehicle:
+/// no faster than vmax (+ [`PLAUSIBLE_SPEED_MPS`]), no further forward than vmax can take
+/// it in the time between (each report may have been delayed by up to `notify`, so the
+/// time between their sending may be longer by that much), and not backwards — each with
+/// [`PLAUSIBLE_POSITION_M`] to spare.
+///
+/// Why the manager checks: authentication (SecOC) proves who sent a report, not that it
+/// is true, and the manager releases conflict zones and frees routes on the reported
+/// progress. A vehicle that claims, from mid-run, to be 15 m further on than it is would
+/// otherwise have its zones given away while it is still in them (a red team found
+/// exactly that under the pipelined algorithm). A lie that stays within the physical
+/// bounds from the first report on cannot be told from the truth by any check on the
+/// reports; only a measurement bounds it.
+fn plausible<F: Real>(
+    p: &Params<F>,
+    notify: Duration,
+    last: &Entry<F>,
+    progress: F,
+    v: F,
+    now: Instant,
+) -> bool {
+    let margin = F::from_f64(PLAUSIBLE_POSITION_M);
+    let dt: F = now.since(last.heard_at).saturating_add(notify).as_secs();
+    let reach = p.v_max() * dt + margin;
+    let moved = progress - last.progress;
+    v <= p.v_max() + F::from_f64(PLAUSIBLE_SPEED_MPS) && moved <= reach && moved >= -margin
 }
 
 /// The vehicle side of the Intersection-Crossing Protocol: one vehicle's planner along

@@ -398,10 +398,7 @@ fn a_vehicle_first_heard_inside_a_s_holds_its_route_after_a_restart() {
         m.observe(&at(&l, 2, x, 0.5, 0.0), secs(10.0)).unwrap();
         m.observe(&at(&l, 1, a, -3.0, 5.0), secs(10.0)).unwrap();
         m.update(secs(100.0));
-        assert!(
-            entry(&m, 1).permitted,
-            "{alg:?}: inside A_S when first heard"
-        );
+        assert!(entry(&m, 1).holds(), "{alg:?}: inside A_S when first heard");
         assert!(
             !m.permitted(2),
             "{alg:?}: its route conflicts with one inside"
@@ -421,8 +418,98 @@ fn a_vehicle_first_heard_inside_a_s_holds_its_route_after_a_restart() {
         }
         assert!(m.permitted(2), "{alg:?}: granted once the zone is clear");
     }
-    // Heard before its line (the normal case): registered without a permission.
+    // Heard before its line, able to stop there (the normal case): registered without a
+    // permission. At the line at 5 m/s it could not stop: committed, it holds its zones.
     let mut m = manager(&l, Algorithm::Fifo);
-    m.observe(&at(&l, 1, a, 0.0, 5.0), secs(0.0)).unwrap();
-    assert!(!entry(&m, 1).permitted);
+    m.observe(&at(&l, 1, a, 20.0, 5.0), secs(0.0)).unwrap();
+    assert!(!entry(&m, 1).holds());
+    m.observe(&at(&l, 1, a, 0.0, 5.0), secs(4.0)).unwrap();
+    assert!(entry(&m, 1).holds() && entry(&m, 1).committed);
+}
+
+/// A vehicle that jumps 15 m between two reports 10 ms apart is a suspect: the report is
+/// refused, its record stays where it was last trusted, nothing it says later is taken —
+/// not even that it left — and, holding a permission when it lied, it holds its zones
+/// for good: no conflicting route is granted. One that lies before it is granted is
+/// never granted and holds back no one. An honest vehicle at vmax is never refused.
+#[test]
+fn a_vehicle_that_jumps_is_a_suspect_and_cannot_free_its_zones() {
+    use planner_core::crossing::ManagerError;
+    let l = layout();
+    // Two routes that cross, from different inlets.
+    let (a, x) = (0..ROUTES)
+        .flat_map(|a| (0..ROUTES).map(move |b| (a, b)))
+        .find(|&(a, b)| {
+            let (p, q) = (l.route(a).unwrap(), l.route(b).unwrap());
+            l.conflict(a, b) && p.inlet != q.inlet && p.outlet != q.outlet
+        })
+        .unwrap();
+    let exit = l.route(a).unwrap().path.exit();
+    for alg in [
+        Algorithm::AllWayStop,
+        Algorithm::Fifo,
+        Algorithm::ConcurrentFair,
+        Algorithm::Pipelined,
+    ] {
+        let mut m = manager(&l, alg);
+        // Vehicle 1 stopped at its line, granted, then 1 m inside A_S at 5 m/s.
+        m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+        m.update(secs(0.0));
+        assert!(m.permitted(1), "{alg:?}");
+        m.observe(&at(&l, 1, a, -1.0, 5.0), secs(0.3)).unwrap();
+        // It claims to have jumped 15 m on, then to have left A_S.
+        assert_eq!(
+            m.observe(&at(&l, 1, a, -16.0, 5.0), secs(0.31)),
+            Err(ManagerError::Implausible)
+        );
+        let e = entry(&m, 1);
+        assert!(e.suspect && e.holds(), "{alg:?}");
+        assert!(
+            (e.to_line + 1.0).abs() < 1e-9,
+            "frozen at its last trusted report"
+        );
+        let gone = CrossingReport {
+            s: exit + HALF + 1.0,
+            ..at(&l, 1, a, 0.0, 5.0)
+        };
+        assert_eq!(m.observe(&gone, secs(5.0)), Err(ManagerError::Distrusted));
+        m.forget(1);
+        assert!(m.holds(1), "{alg:?}: its word that it left is not taken");
+        // A crossing route waits.
+        for k in 0..100 {
+            let t = 5.0 + 0.1 * f64::from(k);
+            m.observe(&at(&l, 2, x, 0.5, 0.0), secs(t)).unwrap();
+            m.update(secs(t));
+            assert!(!m.permitted(2), "{alg:?}: granted over a suspect in A_S");
+        }
+    }
+    // A vehicle that lies while it waits: never granted, and the others go.
+    for alg in [
+        Algorithm::Fifo,
+        Algorithm::ConcurrentFair,
+        Algorithm::Pipelined,
+    ] {
+        let mut m = manager(&l, alg);
+        m.observe(&at(&l, 1, a, 10.0, 5.0), secs(0.0)).unwrap();
+        assert_eq!(
+            m.observe(&at(&l, 1, a, -5.0, 5.0), secs(0.01)),
+            Err(ManagerError::Implausible)
+        );
+        for k in 0..20 {
+            let t = 0.1 * f64::from(k);
+            m.observe(&at(&l, 2, x, 0.5, 0.0), secs(t)).unwrap();
+            m.update(secs(t));
+        }
+        assert!(!m.permitted(1) && m.permitted(2), "{alg:?}");
+    }
+    // Honest: 1 s of reports every 10 ms at vmax, and a lost second.
+    let mut m = manager(&l, Algorithm::Fifo);
+    let v = 27.8;
+    for k in 0..100 {
+        let t = 0.01 * f64::from(k);
+        m.observe(&at(&l, 3, a, 45.0 - v * t, v), secs(t)).unwrap();
+    }
+    m.observe(&at(&l, 3, a, 45.0 - v * 2.0, v), secs(2.0))
+        .unwrap();
+    assert!(!entry(&m, 3).suspect);
 }

@@ -66,9 +66,18 @@ impl Clock {
     }
 }
 
+/// The first node address of the junction managers: 0xFF00 to 0xFFFF are theirs.
+pub const FIRST_MANAGER_NODE: u16 = 0xFF00;
+
 /// The bus node of junction `j`'s manager (vehicle ids stay below it).
 pub fn manager_node(j: usize) -> u16 {
-    0xFF00 | (j as u16 & 0xFF)
+    FIRST_MANAGER_NODE | (j as u16 & 0xFF)
+}
+
+/// `true` if `id` can be a vehicle's: 1 to 65,279 (0 is no one's; from 0xFF00 on the
+/// junction managers' nodes).
+pub fn is_vehicle_id(id: u16) -> bool {
+    id != 0 && id < FIRST_MANAGER_NODE
 }
 
 /// A message on the bus.

@@ -685,7 +685,7 @@ impl<const N: usize> Harness<N> {
             })
             .collect();
         for m in &mut managers {
-            m.set_position_resolution(RESOLUTION.0)
+            m.set_resolution(RESOLUTION)
                 .map_err(|e| FleetError::Harness(format!("bus resolution: {e:?}")))?;
         }
         Ok(managers)

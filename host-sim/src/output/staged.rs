@@ -10,6 +10,11 @@
 //! one `rename(2)`, which POSIX makes atomic within a file system: readers see the old
 //! file or the new one, never a mix. A `Staged` dropped without [`Staged::commit`]
 //! removes its temporary file.
+//!
+//! A target that is not a regular file — `/dev/stdout`, `/dev/null`, a named pipe — is
+//! written to directly: it cannot be half-written in the sense above, and renaming over
+//! it would replace the device with a file. A symbolic link is followed, so the file it
+//! points to is the one replaced.
 
 use std::fs::File;
 use std::io;
@@ -24,9 +29,12 @@ static NEXT: AtomicU32 = AtomicU32::new(0);
 #[derive(Debug)]
 pub struct Staged {
     target: PathBuf,
+    /// The file written: beside the target, or the target itself when it is a device.
     temp: PathBuf,
     file: Option<File>,
     committed: bool,
+    /// The target is written directly (it is not a regular file).
+    direct: bool,
 }
 
 impl Staged {
@@ -39,6 +47,22 @@ impl Staged {
                 io::ErrorKind::IsADirectory,
                 "is a directory",
             ));
+        }
+        // Follow a link to the file it names.
+        let target = match std::fs::canonicalize(target) {
+            Ok(real) if target.is_symlink() => real,
+            _ => target.to_path_buf(),
+        };
+        let target = target.as_path();
+        if target.exists() && !target.is_file() {
+            let file = std::fs::OpenOptions::new().write(true).open(target)?;
+            return Ok(Self {
+                target: target.to_path_buf(),
+                temp: target.to_path_buf(),
+                file: Some(file),
+                committed: false,
+                direct: true,
+            });
         }
         let name = target
             .file_name()
@@ -65,6 +89,7 @@ impl Staged {
             temp,
             file: Some(file),
             committed: false,
+            direct: false,
         })
     }
 
@@ -87,7 +112,10 @@ impl Staged {
     /// Writes `bytes` as the whole content.
     pub fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
         use std::io::Write;
-        let mut f = File::create(&self.temp)?;
+        let mut f = match self.file.take() {
+            Some(f) if self.direct => f,
+            _ => File::create(&self.temp)?,
+        };
         f.write_all(bytes)?;
         self.file = Some(f);
         Ok(())
@@ -95,6 +123,10 @@ impl Staged {
 
     /// Flushes the content to disk and renames it over the target.
     pub fn commit(mut self) -> io::Result<()> {
+        if self.direct {
+            self.committed = true;
+            return Ok(());
+        }
         if let Some(f) = self.file.take() {
             f.sync_all()?;
         } else {
@@ -108,7 +140,7 @@ impl Staged {
 
 impl Drop for Staged {
     fn drop(&mut self) {
-        if !self.committed {
+        if !self.committed && !self.direct {
             let _ = std::fs::remove_file(&self.temp);
         }
     }
@@ -158,6 +190,26 @@ mod tests {
         drop(s);
         assert_eq!(std::fs::read(&target).unwrap(), b"kept");
         assert_eq!(listing(&d), vec!["trace.csv"]);
+    }
+
+    #[test]
+    fn devices_are_written_directly_and_links_are_followed() {
+        let mut s = Staged::create(Path::new("/dev/null")).unwrap();
+        assert_eq!(s.temp_path(), Path::new("/dev/null"));
+        s.write_all(b"gone").unwrap();
+        s.commit().unwrap();
+        let meta = std::fs::metadata("/dev/null").unwrap();
+        assert!(!meta.is_file(), "/dev/null is still a device");
+        let d = dir("link");
+        let real = d.join("real.csv");
+        std::fs::write(&real, b"old").unwrap();
+        let link = d.join("link.csv");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        let mut s = Staged::create(&link).unwrap();
+        s.write_all(b"new").unwrap();
+        s.commit().unwrap();
+        assert!(link.is_symlink(), "the link stays a link");
+        assert_eq!(std::fs::read(&real).unwrap(), b"new");
     }
 
     #[test]

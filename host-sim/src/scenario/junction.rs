@@ -503,7 +503,7 @@ pub fn placed(layout: &Layout<f64>, p: &Placement) -> VehicleSpec {
 /// room to stop before the line.
 fn place(v: &JunctionVehicle, layout: &Layout<f64>, lt: &LayoutToml) -> Result<Placement, String> {
     let lim = Limits::table_i();
-    if v.id == 0 || v.id >= 0xFF00 {
+    if !crate::bus::is_vehicle_id(v.id) {
         return Err("ids are 1 to 65,279 (above are the junction managers')".into());
     }
     let route = layout

@@ -258,10 +258,11 @@ impl NetworkScenario {
             ),
         };
         let network = build(&juncs, &segs, raw.algorithm, &e)?;
-        check_blocks(&network).map_err(|(k, m)| {
-            let span = segs.get(k).and_then(|(_, s)| s.clone());
-            e.at(span, m)
-        })?;
+        let junction_span = |j: usize| juncs.get(j).and_then(|(_, s)| s.clone());
+        let segment_span = |k: usize| segs.get(k).and_then(|(_, s)| s.clone());
+        check_apart(&network).map_err(|(j, m)| e.at(junction_span(j), m))?;
+        check_clear(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
+        check_blocks(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
         let mut vehicles = Vec::new();
         for sv in &raw.vehicles {
             let v = sv.get_ref();
@@ -584,6 +585,114 @@ fn segment(s: &SegmentToml, net: &Network) -> Result<Segment, String> {
     })
 }
 
+/// An axis-aligned rectangle [x0, x1] × [y0, y1] (m).
+type Rect = (f64, f64, f64, f64);
+
+/// `true` if the rectangles share interior (touching edges do not count).
+fn overlap(a: Rect, b: Rect) -> bool {
+    const EPS: f64 = 1e-6;
+    a.0 < b.1 - EPS && b.0 < a.1 - EPS && a.2 < b.3 - EPS && b.2 < a.3 - EPS
+}
+
+/// Junction `j`'s communication region A_C in the world.
+fn comm_region(j: &Junction) -> Rect {
+    let r = j.layout.spec.half_size + j.layout.spec.comm_margin;
+    (
+        j.centre.0 - r,
+        j.centre.0 + r,
+        j.centre.1 - r,
+        j.centre.1 + r,
+    )
+}
+
+/// The world rectangle of segment `s`'s lanes from x = `from` to x = `to` in its frame.
+fn segment_rect(s: &Segment, from: f64, to: f64) -> Rect {
+    let w = f64::from(s.lanes) * LANE_WIDTH_M;
+    let corners = [(from, 0.0), (to, 0.0), (from, w), (to, w)].map(|(x, y)| {
+        let (dx, dy) = rotate((x, y), s.heading);
+        (s.origin.0 + dx, s.origin.1 + dy)
+    });
+    let xs = corners.map(|c| c.0);
+    let ys = corners.map(|c| c.1);
+    let lo = |v: [f64; 4]| v.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = |v: [f64; 4]| v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (lo(xs), hi(xs), lo(ys), hi(ys))
+}
+
+/// No two intersections' communication regions overlap: a vehicle is in at most one
+/// junction's A_C, under at most one manager (two intersections at the same place were
+/// accepted before, each manager granting into the other's A_S: 39 collisions). Returns
+/// the second junction's index and why.
+fn check_apart(net: &Network) -> Result<(), (usize, String)> {
+    for (b, jb) in net.junctions.iter().enumerate() {
+        for ja in net.junctions.iter().take(b) {
+            if overlap(comm_region(ja), comm_region(jb)) {
+                let need = comm_region(ja).1 - ja.centre.0 + comm_region(jb).1 - jb.centre.0;
+                return Err((
+                    b,
+                    format!(
+                        "intersection {}: its communication region overlaps that of intersection {}; their centres must be at least {need:.1} m apart along x or y",
+                        jb.id, ja.id
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Every segment lies within the coordinate range, crosses no other segment, and passes
+/// through no intersection's communication region but those of its own two ends (where
+/// its first and last stretches are their outlet and inlet tracks). Returns the segment's
+/// index and why.
+fn check_clear(net: &Network) -> Result<(), (usize, String)> {
+    let rects: Vec<Rect> = net
+        .segments
+        .iter()
+        .map(|s| segment_rect(s, 0.0, s.end.x().unwrap_or(0.0)))
+        .collect();
+    for (k, (s, r)) in net.segments.iter().zip(&rects).enumerate() {
+        if ![r.0, r.1, r.2, r.3].iter().all(|&c| coord_ok(c)) {
+            return Err((
+                k,
+                format!("segment {}: reaches beyond ±{MAX_COORD_M} m", s.id),
+            ));
+        }
+        let own = |j: usize| s.from == Some(j) || s.into_junction() == Some(j);
+        for (j, jn) in net.junctions.iter().enumerate() {
+            if !own(j) && overlap(*r, comm_region(jn)) {
+                return Err((
+                    k,
+                    format!(
+                        "segment {}: passes through the communication region of intersection {}",
+                        s.id, jn.id
+                    ),
+                ));
+            }
+        }
+        for (o, ro) in net.segments.iter().zip(&rects).take(k) {
+            // Segments meeting at a junction do so inside its A_C; elsewhere a road that
+            // crosses another is an intersection no manager coordinates.
+            let at_junction = net.junctions.iter().any(|jn| {
+                let c = comm_region(jn);
+                let inside = |r: &Rect| r.0 >= c.0 && r.1 <= c.1 && r.2 >= c.2 && r.3 <= c.3;
+                let shared = (r.0.max(ro.0), r.1.min(ro.1), r.2.max(ro.2), r.3.min(ro.3));
+                inside(&shared)
+            });
+            if overlap(*r, *ro) && !at_junction {
+                return Err((
+                    k,
+                    format!(
+                        "segment {}: crosses segment {} outside any intersection",
+                        s.id, o.id
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Per segment leaving an intersection and feeding another: the lane changes a route
 /// through it may need (from the outlet lane a movement arrives in, to a lane serving the
 /// next movement) must fit between the end of the outlet track and the edge of the next
@@ -662,8 +771,8 @@ fn vehicle(
     if !(v.v >= 0.0 && v.v <= sg.v_max) {
         return Err(format!("v must be in [0, {}]", sg.v_max));
     }
-    if v.id == 0 || v.id >= 0xFF00 {
-        return Err("ids are 1 to 65,279".into());
+    if !crate::bus::is_vehicle_id(v.id) {
+        return Err("ids are 1 to 65,279 (above are the junction managers' bus nodes)".into());
     }
     let movements: Vec<Movement> = match (&v.route, v.destination) {
         (Some(r), None) => r.iter().map(|m| m.movement()).collect(),

@@ -181,6 +181,8 @@ impl RoadScenario {
             let dup = vehicles.iter().any(|(o, _)| o.id == v.id);
             let checked = if dup {
                 Err("duplicate id".into())
+            } else if !crate::bus::is_vehicle_id(v.id) {
+                Err("ids are 1 to 65,279 (above are the junction managers' bus nodes)".into())
             } else {
                 check_vehicle(&v, &road)
             };

@@ -44,9 +44,9 @@ pub struct ManagerNode {
     layout: Layout<f64>,
     /// It has been restarted (after an outage).
     pub restarted: bool,
-    /// The bus's position resolution it was given (m): a restart keeps it, the bus being
-    /// the same.
-    resolution: f64,
+    /// The bus's position and speed resolutions it was given (m, m/s): a restart keeps
+    /// them, the bus being the same.
+    resolution: (f64, f64),
 }
 
 impl ManagerNode {
@@ -66,15 +66,15 @@ impl ManagerNode {
             manager,
             layout,
             restarted: false,
-            resolution: 0.0,
+            resolution: (0.0, 0.0),
         }
     }
 
-    /// Reports reach it with positions rounded to `position` (m): see planner-core's
-    /// `Manager::set_position_resolution`.
-    pub fn set_position_resolution(&mut self, position: f64) -> Result<(), ConfigError> {
-        self.manager.set_position_resolution(position)?;
-        self.resolution = position;
+    /// Reports reach it with positions and speeds rounded to `resolution` (m, m/s): see
+    /// planner-core's `Manager::set_position_resolution` and `set_speed_resolution`.
+    pub fn set_resolution(&mut self, resolution: (f64, f64)) -> Result<(), ConfigError> {
+        self.manager.set_resolution(resolution)?;
+        self.resolution = resolution;
         Ok(())
     }
 
@@ -88,7 +88,7 @@ impl ManagerNode {
         let (algorithm, precision) = (self.manager.algorithm(), self.manager.precision());
         self.manager = AnyManager::new(&self.layout, algorithm, precision);
         // Both were accepted when they were set: they cannot be refused now.
-        let _ = self.manager.set_position_resolution(self.resolution);
+        let _ = self.manager.set_resolution(self.resolution);
         let _ = self.manager.set_lease(lease);
         self.restarted = true;
     }
@@ -130,11 +130,7 @@ impl ManagerNode {
             }
         }
         self.manager.update(now);
-        self.manager
-            .holders()
-            .into_iter()
-            .map(|(id, _)| id)
-            .collect()
+        self.manager.granted()
     }
 
     /// The grant of a lease to `id` sent at `now` (its clock).

@@ -302,7 +302,7 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     /// Closed system: (id, route) waiting to come back.
     pending: Vec<(u16, u8)>,
     streams: Vec<Stream>,
-    next_id: u16,
+    ids: spawn::Ids,
     rng: Box<ChaCha8Rng>,
     monitor: step::WorldMonitor,
     detector: DeadlockDetector,
@@ -364,7 +364,14 @@ impl<const N: usize, B: Bus> World<N, B> {
                 .collect(),
             _ => Vec::new(),
         };
-        let next_id = spec.vehicles.iter().map(|v| v.id).max().unwrap_or(0) + 1;
+        let ids = spawn::Ids::from(
+            spec.vehicles
+                .iter()
+                .map(|v| v.id)
+                .max()
+                .unwrap_or(0)
+                .wrapping_add(1),
+        );
         let clock = crate::bus::Clock::new(spec.clock_start, lim.h);
         Self {
             total_steps: (spec.duration_s / lim.h).round() as u64,
@@ -384,7 +391,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             departing: Vec::new(),
             pending: Vec::new(),
             streams,
-            next_id,
+            ids,
             rng,
             deadlock: None,
             counters: Counters::default(),
@@ -420,8 +427,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         self.setup.resolution = resolution;
         self.give_setup();
         for m in &mut self.managers {
-            m.set_position_resolution(resolution.0)
-                .map_err(|e| format!("{e:?}"))?;
+            m.set_resolution(resolution).map_err(|e| format!("{e:?}"))?;
         }
         Ok(())
     }

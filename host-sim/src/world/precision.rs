@@ -331,6 +331,24 @@ pub fn report32(rep: &CrossingReport<f64>) -> CrossingReport<f32> {
     }
 }
 
+/// (id, route) of the entries that hold their zones.
+fn holders_of<F>(entries: &[planner_core::crossing::Entry<F>]) -> Vec<(u16, u8)> {
+    entries
+        .iter()
+        .filter(|e| e.holds())
+        .map(|e| (e.id, e.route))
+        .collect()
+}
+
+/// The ids of the entries permitted.
+fn granted_of<F>(entries: &[planner_core::crossing::Entry<F>]) -> Vec<u16> {
+    entries
+        .iter()
+        .filter(|e| e.permitted)
+        .map(|e| e.id)
+        .collect()
+}
+
 /// A junction's manager in either precision.
 #[derive(Debug, Clone)]
 pub enum AnyManager<const CAP: usize> {
@@ -353,14 +371,18 @@ impl<const CAP: usize> AnyManager<CAP> {
         }
     }
 
-    /// See planner-core's `Manager::set_position_resolution`.
-    pub fn set_position_resolution(
+    /// See planner-core's `Manager::set_position_resolution` and `set_speed_resolution`.
+    pub fn set_resolution(
         &mut self,
-        position: f64,
+        (position, speed): (f64, f64),
     ) -> Result<(), planner_core::ConfigError> {
         match self {
-            Self::F64(m) => m.set_position_resolution(position),
-            Self::F32(m) => m.set_position_resolution(r(position)),
+            Self::F64(m) => m
+                .set_position_resolution(position)
+                .and(m.set_speed_resolution(speed)),
+            Self::F32(m) => m
+                .set_position_resolution(r(position))
+                .and(m.set_speed_resolution(r(speed))),
         }
     }
 
@@ -423,21 +445,20 @@ impl<const CAP: usize> AnyManager<CAP> {
         }
     }
 
-    /// The vehicles holding a permission, with their routes, in its order.
+    /// The vehicles holding their routes' conflict zones (permitted, or committed), with
+    /// their routes, in its order.
     pub fn holders(&self) -> Vec<(u16, u8)> {
         match self {
-            Self::F64(m) => m
-                .entries()
-                .iter()
-                .filter(|e| e.permitted)
-                .map(|e| (e.id, e.route))
-                .collect(),
-            Self::F32(m) => m
-                .entries()
-                .iter()
-                .filter(|e| e.permitted)
-                .map(|e| (e.id, e.route))
-                .collect(),
+            Self::F64(m) => holders_of(m.entries()),
+            Self::F32(m) => holders_of(m.entries()),
+        }
+    }
+
+    /// The vehicles it grants a permission: each is sent a lease.
+    pub fn granted(&self) -> Vec<u16> {
+        match self {
+            Self::F64(m) => granted_of(m.entries()),
+            Self::F32(m) => granted_of(m.entries()),
         }
     }
 

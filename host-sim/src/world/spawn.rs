@@ -36,11 +36,10 @@ pub enum Entry {
 /// Draws an arrival's trip at an entry: its movements, and at a stub its route.
 pub type DrawTrip<'a> = dyn FnMut(&Entry, &mut ChaCha8Rng) -> (Vec<Movement>, Option<u8>) + 'a;
 
-/// A vehicle waiting to enter: since when, and its trip.
+/// A vehicle waiting to enter: since when, and its trip (its id is given as it enters:
+/// [`Ids`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arrival {
-    /// Its id once it enters.
-    pub id: u16,
     /// When it arrived at the entry (s).
     pub since: f64,
     /// Its movements, one per junction.
@@ -87,24 +86,15 @@ impl Stream {
         -u.ln() * 3600.0 / self.rate_vph
     }
 
-    /// Queues every arrival up to `t`, each with a trip from `trip` and a new id from
-    /// `next_id`.
-    pub fn arrive(
-        &mut self,
-        t: f64,
-        rng: &mut ChaCha8Rng,
-        next_id: &mut u16,
-        trip: &mut DrawTrip<'_>,
-    ) {
+    /// Queues every arrival up to `t`, each with a trip from `trip`.
+    pub fn arrive(&mut self, t: f64, rng: &mut ChaCha8Rng, trip: &mut DrawTrip<'_>) {
         while self.next_at <= t {
             let (movements, route) = trip(&self.entry, rng);
             self.queue.push_back(Arrival {
-                id: *next_id,
                 since: self.next_at,
                 movements,
                 route,
             });
-            *next_id = next_id.wrapping_add(1).max(1);
             self.next_at += self.gap(rng);
             self.max_queue = self.max_queue.max(self.queue.len());
         }
@@ -147,9 +137,46 @@ pub fn start_at(entry: &Entry, route: Option<u8>, half_length: f64) -> At {
     }
 }
 
+/// The ids given to vehicles entering while the world runs: in turn from after the
+/// highest id at the start, wrapping around, never a junction manager's bus node
+/// (0xFF00 on: [`crate::bus::is_vehicle_id`]) and never one still in use — a vehicle in
+/// the world, one still repeating on the bus that it left, one of a closed system waiting
+/// to come back.
+///
+/// Why: ids continued past 65,279 reached 0xFF00, junction 0's manager, and the bus
+/// delivered that vehicle's messages as the manager's and the manager's grants to it (a
+/// red team counted 3,572 collisions); wrapping past 65,535 reused the ids of vehicles
+/// still on the road.
+#[derive(Debug, Clone)]
+pub struct Ids {
+    next: u16,
+}
+
+impl Ids {
+    /// Ids from `first` on.
+    pub fn from(first: u16) -> Self {
+        Self { next: first }
+    }
+
+    /// The next id that is a vehicle's and not `in_use`; `None` if every one is (65,279
+    /// vehicles).
+    pub fn take(&mut self, in_use: impl Fn(u16) -> bool) -> Option<u16> {
+        for _ in 0..=u16::MAX {
+            let id = self.next;
+            self.next = id.wrapping_add(1);
+            if crate::bus::is_vehicle_id(id) && !in_use(id) {
+                return Some(id);
+            }
+        }
+        None
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bus::{is_vehicle_id, manager_node};
+    use std::collections::BTreeSet;
 
     #[test]
     fn entry_speed_keeps_the_invariant() {
@@ -165,12 +192,41 @@ mod tests {
     fn arrivals_come_at_about_the_rate() {
         let mut rng = crate::reference::instances::rng(3);
         let mut s = Stream::new(Entry::Segment { seg: 0, lane: 0 }, 600.0, &mut rng);
-        let mut id = 1;
-        s.arrive(3600.0, &mut rng, &mut id, &mut |_, _| (Vec::new(), None));
+        s.arrive(3600.0, &mut rng, &mut |_, _| (Vec::new(), None));
         let n = s.queue.len() as f64;
         assert!(
             (n - 600.0).abs() < 4.0 * 600f64.sqrt(),
             "{n} arrivals in an hour"
         );
+    }
+
+    /// From every start near the managers' nodes and the wrap, 200,000 arrivals, each
+    /// leaving again after a while: no id is a node's, none is given while in use.
+    #[test]
+    fn ids_never_meet_a_node_or_an_id_in_use() {
+        let nodes: BTreeSet<u16> = (0..256).map(manager_node).collect();
+        for first in [1u16, 0xFEF0, 0xFEFF, 0xFF00, 0xFFFF, 0] {
+            let mut ids = Ids::from(first);
+            let mut live: std::collections::VecDeque<u16> = Default::default();
+            let mut set = BTreeSet::new();
+            for k in 0..200_000u32 {
+                let id = ids.take(|i| set.contains(&i)).expect("an id");
+                assert!(
+                    is_vehicle_id(id) && !nodes.contains(&id),
+                    "{id:#x} from {first:#x}"
+                );
+                assert!(set.insert(id), "{id} given twice");
+                live.push_back(id);
+                // About 1,000 vehicles in the world at a time.
+                if k % 7 != 0 || live.len() > 1_000 {
+                    if let Some(gone) = live.pop_front() {
+                        set.remove(&gone);
+                    }
+                }
+            }
+        }
+        // Every id in use: none left.
+        let mut ids = Ids::from(1);
+        assert_eq!(ids.take(|_| true), None);
     }
 }

@@ -455,15 +455,16 @@ impl<const N: usize, B: Bus> World<N, B> {
         let mut streams = std::mem::take(&mut self.streams);
         for s in &mut streams {
             let net = &self.net;
-            s.arrive(now, &mut self.rng, &mut self.next_id, &mut |e, rng| {
-                draw_trip(net, e, rng)
-            });
+            s.arrive(now, &mut self.rng, &mut |e, rng| draw_trip(net, e, rng));
             let Some(head) = s.queue.front() else {
                 continue;
             };
             let v_max = self.entry_limit(&s.entry);
             if let Some(v) = entry_speed(&self.lim, self.room(&s.entry), v_max) {
-                let (id, route, movements) = (head.id, head.route, head.movements.clone());
+                let Some(id) = self.free_id() else {
+                    continue;
+                };
+                let (route, movements) = (head.route, head.movements.clone());
                 let since = head.since;
                 s.queue.pop_front();
                 self.enter(id, &s.entry, route, movements, v, since)?;
@@ -471,6 +472,18 @@ impl<const N: usize, B: Bus> World<N, B> {
         }
         self.streams = streams;
         Ok(())
+    }
+
+    /// An id for a vehicle entering now ([`super::spawn::Ids`]).
+    fn free_id(&mut self) -> Option<u16> {
+        let used: std::collections::HashSet<u16> = self
+            .vehicles
+            .iter()
+            .map(|v| v.id)
+            .chain(self.departing.iter().map(|d| d.0))
+            .chain(self.pending.iter().map(|p| p.0))
+            .collect();
+        self.ids.take(|id| used.contains(&id))
     }
 
     /// The stub entry of junction `j`'s route `route`.
