@@ -35,7 +35,7 @@ fn others(view: &View, net: &Network, now: f64) -> Vec<planner_core::Other<f64>>
 #[test]
 fn a_liar_is_refused_and_then_taken_at_its_last_trusted_state() {
     let net = net();
-    let mut view = View::new(1);
+    let mut view = View::new(1, 1e9);
     // An honest vehicle 7 at 20 m/s, heard every 10 ms.
     for k in 0..10 {
         let t = 0.01 * f64::from(k);
@@ -90,7 +90,7 @@ fn each_kind_of_lie_has_its_reason() {
         ),
     ];
     for (lie, why) in cases {
-        let mut view = View::new(1);
+        let mut view = View::new(1, 1e9);
         hear(&mut view, &net, state(7, 100.0, 20.0, 0.05)).expect("honest");
         assert_eq!(hear(&mut view, &net, lie), Err(Reject::Implausible(why)));
     }

@@ -158,6 +158,9 @@ pub struct Entry<F> {
     /// report, it is never granted again, and if it held a permission or was committed
     /// then, it holds its zones for good ([`Manager::observe`]).
     pub suspect: bool,
+    /// Its centre's distance past the A_S entry as the manager's roadside sensor last
+    /// measured it ([`Manager::measure`]), if it has one and has seen it.
+    pub measured: Option<F>,
 }
 
 /// The terms of a manager's permissions (IC Protocol (iii)): every permission is a lease
@@ -238,6 +241,8 @@ pub struct Manager<F, const CAP: usize> {
     /// The limits it assumes of every vehicle (the weakest brakes among them): which
     /// vehicles can no longer stop before their stop line ([`Manager::observe`]).
     vehicles: Params<F>,
+    /// The error bound (m) of its roadside sensor, if it has one ([`Manager::measure`]).
+    roadside: Option<F>,
 }
 
 /// `true` for a usable bus resolution: finite, non-negative, below 1 (m or m/s).
@@ -258,7 +263,76 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             started: None,
             half_speed_step: F::ZERO,
             vehicles: Params::table_i(),
+            roadside: None,
         }
+    }
+
+    /// Gives the manager a roadside sensor that measures every vehicle in A_C within
+    /// ± `error` m ([`Manager::measure`]); `None` (the default): the paper's manager, which
+    /// knows the vehicles from their reports alone. A non-finite or negative error is
+    /// refused.
+    pub fn set_roadside_sensor(&mut self, error: Option<F>) -> Result<(), ConfigError> {
+        if error.is_some_and(|e| !(e.is_finite() && e >= F::ZERO)) {
+            return Err(ConfigError::InvalidSensing);
+        }
+        self.roadside = error;
+        Ok(())
+    }
+
+    /// A roadside measurement of registered vehicle `id`, taken this period: its centre at
+    /// `s` along its route's path (m), within the sensor's error.
+    ///
+    /// **Why a measurement.** Reports are checked against physics ([`Manager::observe`]),
+    /// which catches a vehicle whose claims jump, but a vehicle that misreports its
+    /// position by a constant offset from its first report on, or by one that creeps,
+    /// stays within every physical bound: no check on reports can tell it from the truth,
+    /// and the manager frees conflict zones and routes on reported progress. With a
+    /// roadside sensor the manager frees a zone, or takes a vehicle off its list, only
+    /// where the measurement (taken at its nearest) agrees; and a vehicle whose report
+    /// differs from the measurement by more than the error and
+    /// [`PLAUSIBLE_POSITION_M`] is a suspect, as one whose report jumps.
+    pub fn measure(&mut self, id: u16, s: F) -> Result<(), ManagerError> {
+        let Some(err) = self.roadside else {
+            return Ok(());
+        };
+        if !s.is_finite() {
+            return Err(ManagerError::BadValue);
+        }
+        let Some(i) = self.entries.iter().position(|e| e.id == id) else {
+            return Ok(());
+        };
+        let Some(route) = self
+            .entries
+            .get(i)
+            .and_then(|e| self.layout.route(usize::from(e.route)))
+        else {
+            return Ok(());
+        };
+        let (entry, exit) = (route.path.entry(), route.path.exit());
+        let Some(e) = self.entries.get_mut(i) else {
+            return Ok(());
+        };
+        let measured = s - entry;
+        e.measured = Some(measured);
+        // A report is older than the measurement (by up to the notification bound), and
+        // positions only grow: a vehicle may be measured ahead of its last report by what
+        // vmax covers in that time, never behind it.
+        let slack = err + F::from_f64(PLAUSIBLE_POSITION_M) + self.half_step;
+        let lag: F = self.lease.notify.as_secs::<F>() * self.vehicles.v_max();
+        let ahead_of_truth = e.progress - measured > slack;
+        let behind_truth = measured - e.progress > slack + lag;
+        if !e.suspect && (ahead_of_truth || behind_truth) {
+            e.suspect = true;
+            e.committed = e.committed || e.permitted;
+            return Err(ManagerError::Implausible);
+        }
+        // Its rear surely past A_S: off the list (C^I_t (25)), whatever it reports — a
+        // suspect too: the sensor, not its word, says it has left.
+        if measured - err - F::HALF * self.vehicles.length() >= exit - entry {
+            self.entries.swap_remove(i);
+            self.crossed = self.crossed.saturating_add(1);
+        }
+        Ok(())
     }
 
     /// Reports reach the manager with speeds rounded to `speed` (m/s): a vehicle may be up
@@ -394,17 +468,29 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             }
         }
         if s - half >= exit {
-            // On its outlet track: no longer in C^I_t (25).
-            if let Some(i) = idx {
+            // On its outlet track: no longer in C^I_t (25) — unless a roadside sensor
+            // measures it still inside (it is then taken off by [`Manager::measure`]).
+            let confirmed = |e: &Entry<F>| {
+                self.roadside
+                    .is_none_or(|err| e.measured.is_some_and(|m| m - err + entry - half >= exit))
+            };
+            if let Some(i) = idx.filter(|&i| self.entries.get(i).is_some_and(confirmed)) {
                 self.entries.swap_remove(i);
                 self.crossed = self.crossed.saturating_add(1);
+                return Ok(());
             }
-            return Ok(());
+            if idx.is_none() {
+                return Ok(());
+            }
         }
         let to_line = entry - (s + half);
         // As far forward and as fast as the rounding allows: can it still stop before the
         // line (its front not past it)?
-        let front_gap = entry - (r.s + self.half_step + half);
+        let measured_front = idx
+            .and_then(|i| self.entries.get(i))
+            .and_then(|e| Some(e.measured? + entry + self.roadside?))
+            .unwrap_or(r.s + self.half_step);
+        let front_gap = entry - (measured_front.max(r.s + self.half_step) + half);
         let v_hi = r.v + self.half_speed_step;
         let committed = to_line < F::ZERO || front_gap < safety::d_s(&self.vehicles, v_hi);
         let stopped =
@@ -444,6 +530,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                         committed,
                         heard_at: now,
                         suspect: false,
+                        measured: None,
                     })
                     .map_err(|_| ManagerError::Full)?;
             }
@@ -652,6 +739,18 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         order
     }
 
+    /// How far past its A_S entry a holder surely is, for freeing the zones behind it: as
+    /// reported, and no further than measured (at its nearest) when the manager has a
+    /// roadside sensor — not at all, if the sensor has not seen it.
+    fn released(&self, h: &Entry<F>) -> F {
+        match self.roadside {
+            None => h.progress,
+            Some(err) => h
+                .measured
+                .map_or(F::from_f64(-1e30), |m| h.progress.min(m - err)),
+        }
+    }
+
     /// Step 4's test: c's route conflicts with no route held by a permitted vehicle or
     /// one granted earlier in this scan (with the pipelined relaxations when chosen).
     fn admissible(&self, c: &Entry<F>, granted_now: &[usize]) -> bool {
@@ -677,8 +776,9 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                     .and_then(|row| row.get(cr))
                     .copied()
                     .unwrap_or(F::from_f64(1e30));
-                // 2: the holder's centre is past its conflict zone with c's route.
-                if hr != cr && h.progress > end + F::from_f64(CONFLICT_SAMPLE_M) {
+                // 2: the holder's centre is past its conflict zone with c's route — as
+                // reported, and as measured if the manager measures.
+                if hr != cr && self.released(h) > end + F::from_f64(CONFLICT_SAMPLE_M) {
                     continue;
                 }
             }

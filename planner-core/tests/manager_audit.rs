@@ -513,3 +513,64 @@ fn a_vehicle_that_jumps_is_a_suspect_and_cannot_free_its_zones() {
         .unwrap();
     assert!(!entry(&m, 3).suspect);
 }
+
+/// With a roadside sensor, a vehicle that claims to be further on than it is from its
+/// first report (no jump to catch) frees neither its conflict zones nor its route: the
+/// manager takes it where it is measured, and flags the difference. Without one, the
+/// pipelined manager frees the zone on the lie (what only a measurement can prevent).
+#[test]
+fn a_roadside_sensor_bounds_a_lie_that_never_jumps() {
+    let l = layout();
+    let (a, x) = (0..ROUTES)
+        .flat_map(|a| (0..ROUTES).map(move |b| (a, b)))
+        .find(|&(a, b)| {
+            let (p, q) = (l.route(a).unwrap(), l.route(b).unwrap());
+            l.conflict(a, b) && p.inlet != q.inlet && p.outlet != q.outlet
+        })
+        .unwrap();
+    let end = l.zone_end[a][x];
+    let entry = l.route(a).unwrap().path.entry();
+    // Truly 1 m into A_S; it claims to be past its conflict zone with x by 5 m.
+    let truth = entry + 1.0;
+    let lie = entry + end + 5.0;
+    let run = |sensor: bool| {
+        let mut m = manager(&l, Algorithm::Pipelined);
+        if sensor {
+            m.set_roadside_sensor(Some(0.1)).unwrap();
+        }
+        let claim = CrossingReport {
+            s: lie,
+            ..at(&l, 1, a, 0.0, 5.0)
+        };
+        m.observe(&claim, secs(0.0)).unwrap();
+        let measured = m.measure(1, truth);
+        m.observe(&at(&l, 2, x, 0.5, 0.0), secs(0.0)).unwrap();
+        m.update(secs(0.0));
+        (m.permitted(2), measured, m.holds(1))
+    };
+    let (granted, _, _) = run(false);
+    assert!(granted, "without a sensor the lie frees the zone");
+    let (granted, measured, holds) = run(true);
+    assert!(!granted, "with one it does not");
+    assert_eq!(
+        measured,
+        Err(planner_core::crossing::ManagerError::Implausible)
+    );
+    assert!(holds);
+    // An honest vehicle measured where it reports is not flagged, and leaves when the
+    // sensor sees its rear past A_S.
+    let mut m = manager(&l, Algorithm::Fifo);
+    m.set_roadside_sensor(Some(0.1)).unwrap();
+    let exit = l.route(a).unwrap().path.exit();
+    m.observe(&at(&l, 1, a, -1.0, 5.0), secs(0.0)).unwrap();
+    assert_eq!(m.measure(1, entry - HALF + 1.0), Ok(()));
+    let gone = CrossingReport {
+        s: exit + HALF + 1.0,
+        ..at(&l, 1, a, 0.0, 5.0)
+    };
+    m.observe(&gone, secs(1.0)).unwrap();
+    assert!(m.holds(1), "not off the list on its word alone");
+    m.measure(1, exit + HALF + 0.95).unwrap();
+    assert!(m.entries().is_empty());
+    assert!(m.set_roadside_sensor(Some(f64::NAN)).is_err());
+}

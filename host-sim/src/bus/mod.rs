@@ -206,4 +206,7 @@ pub trait Bus {
     /// Detaches node `node` (a vehicle leaving the world): what was still on its way to it
     /// is dropped, so an open world's memory stays bounded by the vehicles in it.
     fn detach(&mut self, node: u16);
+    /// Node `node` is at (`x`, `y`) in the world now (a radio medium reaches only so far;
+    /// a bus that reaches every node ignores it).
+    fn locate(&mut self, _node: u16, _x: f64, _y: f64) {}
 }

@@ -142,6 +142,20 @@ enum Command {
     /// Theorems 4–5 sweep: random queues at the intersection under every algorithm, every
     /// vehicle to cross.
     Crossings(sweep::LivenessArgs),
+    /// Red team: random queues at the intersection with its manager down from a random
+    /// moment for one period to 10 s, under every algorithm: no collision, every vehicle
+    /// across.
+    Outages(sweep::LivenessArgs),
+    /// Red team: random queues with one vehicle lying about its position (±0.2 to ±40 m,
+    /// from its first report or from a random moment), under every algorithm: no
+    /// collision; what it costs in liveness is reported.
+    Liars(sweep::LivenessArgs),
+    /// Red team: open arrivals whose ids run through the junction managers' bus nodes:
+    /// no vehicle ever gets a node's id, no collision.
+    Ids(sweep::LivenessArgs),
+    /// Red team: random network files, degenerate ones among them: each refused with its
+    /// file and line, or run to its end with no collision, violation or deadlock.
+    Layouts(sweep::LivenessArgs),
     /// Combines the shards of one sweep (each run with `--shard I/N`) into exactly the
     /// unsharded result: counts add, maxima take the max, means are weighted by cases.
     Merge {
@@ -238,6 +252,10 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Traffic(a) => sweep::traffic(a),
         Command::Deadends(a) => sweep::deadends(a),
         Command::Crossings(a) => sweep::crossings(a),
+        Command::Outages(a) => sweep::red_team(a, "outages"),
+        Command::Liars(a) => sweep::red_team(a, "liars"),
+        Command::Ids(a) => sweep::red_team(a, "ids"),
+        Command::Layouts(a) => sweep::red_team(a, "layouts"),
         Command::Merge { files, json } => sweep::merge(&files, json),
         Command::Experiment(e) => experiment::run(e),
         Command::Scale(a) => bench::scale(a),

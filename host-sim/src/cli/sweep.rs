@@ -166,6 +166,66 @@ pub fn crossings(a: LivenessArgs) -> ExitCode {
     liveness("crossings", &a, (first, end), &r, &r.totals, &r.failing)
 }
 
+/// The red team's sweeps (`outages`, `liars`, `ids`): their shard's JSON, or the report
+/// and its failing cases.
+pub fn red_team(a: LivenessArgs, sweep: &'static str) -> ExitCode {
+    use host_sim::experiments::redteam::{ids, junction_faults, Kind};
+    let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    let (value, failing, exit) = match sweep {
+        "layouts" => {
+            let r = host_sim::experiments::layouts::sweep(end - first, first, a.seed, 0);
+            let exit = code(
+                r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries
+                    == 0,
+                r.clean(),
+            );
+            (serde_json::to_value(&r), r.failing, exit)
+        }
+        "ids" => {
+            let r = ids(end - first, first, a.seed, 0);
+            let exit = code(
+                r.collisions + r.invariant_violations + r.node_ids == 0,
+                r.wrapped == r.cases,
+            );
+            (serde_json::to_value(&r), r.failing, exit)
+        }
+        _ => {
+            let kind = if sweep == "liars" {
+                Kind::Liars
+            } else {
+                Kind::Outages
+            };
+            let r = junction_faults(kind, end - first, first, a.seed, 0);
+            let exit = code(r.safe(), r.live());
+            (serde_json::to_value(&r), r.failing, exit)
+        }
+    };
+    let value = match value {
+        Ok(v) => v,
+        Err(e) => return bad(&e.to_string()),
+    };
+    if let Some(sh) = a.shard {
+        let settings = json!({"cases": a.cases, "seed": a.seed});
+        return emit(sweep, settings, sh, (first, end), &value, exit);
+    }
+    let printed = if a.json {
+        print_json(&value)
+    } else {
+        let mut text = format!("{sweep}, {} cases:\n{}", a.cases, human(&value));
+        for f in &failing {
+            text += &format!(
+                "\n\n# failing case {} ({}): {}\n{}",
+                f.case, f.label, f.reason, f.scenario
+            );
+        }
+        say(&text)
+    };
+    match printed {
+        Ok(()) => exit,
+        Err(c) => c,
+    }
+}
+
 /// A liveness sweep's answer: its shard's JSON, or the report.
 fn liveness<T: serde::Serialize + std::fmt::Debug>(
     sweep: &str,
@@ -262,11 +322,12 @@ pub fn merge(files: &[PathBuf], json: bool) -> ExitCode {
 /// judges safety alone; demand judges deadlocks per row.
 fn merged_exit(sweep: &str, v: &Value) -> ExitCode {
     fn unsafe_events(v: &Value) -> u64 {
-        const UNSAFE: [&str; 4] = [
+        const UNSAFE: [&str; 5] = [
             "collisions",
             "invariant_violations",
             "limit_violations",
             "unpermitted_entries",
+            "node_ids",
         ];
         match v {
             Value::Object(m) => m
@@ -287,7 +348,12 @@ fn merged_exit(sweep: &str, v: &Value) -> ExitCode {
     };
     let runs = v.get("multilane_faulty").unwrap_or(v);
     let live = match sweep {
-        "faults-grid" => true,
+        // A liar costs liveness by design: the sweep judges safety.
+        "faults-grid" | "liars" => true,
+        "ids" => n(v, "wrapped") == n(v, "cases"),
+        "layouts" => ["refused_without_line", "deadlocks", "internal_errors"]
+            .iter()
+            .all(|k| n(v, k) == 0),
         "demand" => v
             .get("results")
             .and_then(Value::as_array)

@@ -573,6 +573,7 @@ impl<const N: usize> Harness<N> {
             sensing: self.spec.sensing,
             reuse: None,
             precision: self.spec.precision,
+            relevant_m: crate::world::heard::relevance_radius(&self.spec.network, self.lim.v_max),
         }
     }
 
@@ -646,6 +647,7 @@ impl<const N: usize> Harness<N> {
             // The master releases the vehicles each period; the channels stay open until
             // every task has ended.
             master.go = std::mem::take(&mut tasks.go);
+            master.readings = std::mem::take(&mut tasks.readings);
             let mut result = master.periods(trace);
             if result.is_err() {
                 let _ = end(&mut master.clock, master.tally.ticks as u32);
@@ -681,7 +683,10 @@ impl<const N: usize> Harness<N> {
             .map(|(j, jn)| {
                 let setup = self.setup();
                 let lease = crate::world::junction::lease(setup.notify, self.lim.h);
-                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision))
+                let mut m =
+                    ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision));
+                let _ = m.set_roadside(self.spec.sensing.map(|s| s.position_error_m));
+                m
             })
             .collect();
         for m in &mut managers {
@@ -859,7 +864,12 @@ struct Tasks<'scope, const N: usize> {
     vehicles: Vec<std::thread::ScopedJoinHandle<'scope, Result<VehicleResult<N>, FleetError>>>,
     go: Vec<mpsc::Sender<Go>>,
     managers: Vec<std::thread::ScopedJoinHandle<'scope, Result<CanStats, FleetError>>>,
+    /// Per manager, its roadside sensor's readings of each period (when it has one).
+    readings: Vec<mpsc::Sender<Readings>>,
 }
+
+/// A roadside sensor's readings of one period: (vehicle, position along its route).
+type Readings = Vec<(u16, f64)>;
 
 impl<'scope, const N: usize> Tasks<'scope, N> {
     fn spawn<'env, P: CanPort + 'static>(
@@ -874,6 +884,7 @@ impl<'scope, const N: usize> Tasks<'scope, N> {
             vehicles: Vec::with_capacity(cars.len()),
             go: Vec::with_capacity(cars.len()),
             managers: Vec::with_capacity(mgrs.len()),
+            readings: Vec::with_capacity(mgrs.len()),
         };
         for (index, (car, node)) in cars.into_iter().zip(vnodes).enumerate() {
             let (task_tx, (gtx, grx)) = (tx.clone(), mpsc::channel::<Go>());
@@ -884,10 +895,11 @@ impl<'scope, const N: usize> Tasks<'scope, N> {
             })?);
         }
         for (mgr, node) in mgrs.into_iter().zip(mnodes) {
-            let task_tx = tx.clone();
+            let (task_tx, (rtx, rrx)) = (tx.clone(), mpsc::channel::<Readings>());
+            tasks.readings.push(rtx);
             let name = format!("manager-{}", mgr.junction);
             tasks.managers.push(spawn(sc, clock, &name, move || {
-                manager_task(mgr, node, ctx, &task_tx)
+                manager_task(mgr, node, ctx, &task_tx, &rrx)
             })?);
         }
         Ok(tasks)
@@ -919,6 +931,10 @@ struct Master<'a, P: CanPort, const N: usize> {
     clock: CanNode<P>,
     rx: mpsc::Receiver<Report>,
     go: Vec<mpsc::Sender<Go>>,
+    /// Per manager, where its roadside sensor's readings go.
+    readings: Vec<mpsc::Sender<Readings>>,
+    /// The roadside sensors' noise, drawn as the in-process world draws it.
+    roadside_rng: Box<rand_chacha::ChaCha8Rng>,
     tally: Tally,
     monitor: WorldMonitor,
     detector: DeadlockDetector,
@@ -962,6 +978,10 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
             clock,
             rx,
             go: Vec::new(),
+            readings: Vec::new(),
+            roadside_rng: Box::new(crate::reference::instances::rng(
+                harness.seed ^ crate::world::sensor::ROADSIDE_SEED,
+            )),
             tally: Tally::default(),
             monitor: WorldMonitor::new(ctx.net),
             detector: DeadlockDetector::new(harness.spec.deadlock_window_s),
@@ -1014,6 +1034,9 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
         let last = k == self.ctx.total || self.deadlock.is_some() || gone;
         let with_managers = self.ctx.with_managers;
         if with_managers {
+            if !last {
+                self.roadside(k, &present);
+            }
             let at = tick(&mut self.clock, 2 * k, last)?;
             self.tally.ticks += 1;
             if last {
@@ -1043,6 +1066,38 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
         self.last_tick = Some(tick(&mut self.clock, plan, !with_managers && last)?);
         self.tally.ticks += 1;
         Ok(!with_managers && last)
+    }
+
+    /// Each manager's roadside readings of period k (when the world has sensors; none
+    /// while it is down), drawn in junction order as the in-process world draws them.
+    fn roadside(&mut self, k: u64, present: &[VehicleTruth]) {
+        let Some(error) = self.harness.spec.sensing.map(|s| s.position_error_m) else {
+            return;
+        };
+        let seen: Vec<Seen> = present
+            .iter()
+            .map(|v| Seen {
+                id: v.id,
+                at: v.at,
+                v: v.v,
+            })
+            .collect();
+        let t = k as f64 * self.ctx.lim.h;
+        for (j, out) in self.readings.iter().enumerate() {
+            let down = self.ctx.faults.manager_down;
+            if down.is_some_and(|d| d.junction == j && d.is_down(t)) {
+                let _ = out.send(Vec::new());
+                continue;
+            }
+            let r = crate::world::sensor::roadside(
+                self.ctx.net,
+                j,
+                &seen,
+                error,
+                &mut self.roadside_rng,
+            );
+            let _ = out.send(r);
+        }
     }
 
     /// The monitors and the deadlock detector on the ground truth of period k.
@@ -1346,6 +1401,7 @@ fn manager_task<P: CanPort>(
     mut node: CanNode<P>,
     ctx: &TaskCtx<'_>,
     tx: &mpsc::Sender<Report>,
+    readings: &mpsc::Receiver<Readings>,
 ) -> Result<CanStats, FleetError> {
     let j = mgr.junction;
     let fail = |error: String| {
@@ -1368,8 +1424,13 @@ fn manager_task<P: CanPort>(
             break;
         };
         let received = in_order(&mut inbox, ctx.order, t);
+        let seen = if mgr.has_roadside() {
+            readings.recv_timeout(TIMEOUT).unwrap_or_default()
+        } else {
+            Vec::new()
+        };
         let granted = if mgr.is_up(&ctx.faults, t) {
-            mgr.manage(&received, now)
+            mgr.manage(&received, &seen, now)
         } else {
             Vec::new()
         };

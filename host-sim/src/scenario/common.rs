@@ -41,6 +41,21 @@ pub struct SensingToml {
     pub speed_error_mps: f64,
 }
 
+impl SensingToml {
+    /// The table that says exactly `sensing`: on with its figures, or off — always
+    /// written, since a file without it gets the default, which depends on its faults.
+    pub fn of(sensing: Option<Sensing<f64>>) -> Self {
+        let s = sensing.unwrap_or_else(Sensing::radar);
+        Self {
+            enabled: Some(sensing.is_some()),
+            ahead_m: s.ahead_m,
+            behind_m: s.behind_m,
+            position_error_m: s.position_error_m,
+            speed_error_mps: s.speed_error_mps,
+        }
+    }
+}
+
 fn radar_ahead() -> f64 {
     Sensing::<f64>::radar().ahead_m
 }

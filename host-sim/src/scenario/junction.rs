@@ -14,7 +14,7 @@ use crate::world::{
 };
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{Layout, LayoutError, LayoutSpec, Movement};
-use planner_core::{Params, Sensing};
+use planner_core::Params;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::Path;
@@ -311,7 +311,21 @@ pub fn build_layout(lt: &LayoutToml) -> Result<Layout<f64>, String> {
         v_limit: lt.v_limit,
         lanes: lt.lanes,
     };
-    Layout::new(&p, spec).map_err(|e| layout_error_text(e, &p))
+    let layout = Layout::new(&p, spec).map_err(|e| layout_error_text(e, &p))?;
+    // Spaciousness (27) with the vehicles' extent: a vehicle hands over to its crossing
+    // planner once its centre is in A_C, and must then still be able to stop with its
+    // front d0 before the line. A margin below that left vehicles waiting outside A_C
+    // for ever (a red team's v_limit 1.0 with a 0.2 m margin).
+    let lim = crate::monitor::Limits::table_i();
+    let handover = lim.safe_distance(lt.v_limit) + lt.v_limit * lim.h + 0.5 * LENGTH_M + lim.d0;
+    if !(lt.comm_margin >= handover) {
+        return Err(format!(
+            "comm_margin {:.2} m is too short to hand a vehicle over inside A_C and still \
+             stop before A_S: at {} m/s it needs dS(v) + v h + L/2 + d0 = {handover:.2} m",
+            lt.comm_margin, lt.v_limit
+        ));
+    }
+    Ok(layout)
 }
 
 impl JunctionScenario {
@@ -462,13 +476,7 @@ impl JunctionScenario {
             algorithm: AlgorithmToml::of(self.algorithm),
             intersection: self.layout_toml,
             faults: self.header.faults,
-            sensing: self.header.sensing.map(|s: Sensing<f64>| SensingToml {
-                enabled: Some(true),
-                ahead_m: s.ahead_m,
-                behind_m: s.behind_m,
-                position_error_m: s.position_error_m,
-                speed_error_mps: s.speed_error_mps,
-            }),
+            sensing: Some(SensingToml::of(self.header.sensing)),
             vehicles,
         };
         toml::to_string(&file).unwrap_or_else(|e| format!("# cannot write: {e}"))

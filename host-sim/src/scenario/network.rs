@@ -257,12 +257,24 @@ impl NetworkScenario {
                     .collect(),
             ),
         };
-        let network = build(&juncs, &segs, raw.algorithm, &e)?;
-        let junction_span = |j: usize| juncs.get(j).and_then(|(_, s)| s.clone());
-        let segment_span = |k: usize| segs.get(k).and_then(|(_, s)| s.clone());
+        // What a grid stands for was not written: its problems are the [grid] table's.
+        let grid_span = raw.grid.as_ref().map(Spanned::span);
+        let network = build(&juncs, &segs, (raw.algorithm, grid_span.clone()), &e)?;
+        let junction_span = |j: usize| {
+            juncs
+                .get(j)
+                .and_then(|(_, s)| s.clone())
+                .or(grid_span.clone())
+        };
+        let segment_span = |k: usize| {
+            segs.get(k)
+                .and_then(|(_, s)| s.clone())
+                .or(grid_span.clone())
+        };
         check_apart(&network).map_err(|(j, m)| e.at(junction_span(j), m))?;
         check_clear(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
         check_blocks(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
+        check_ends(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
         let mut vehicles = Vec::new();
         for sv in &raw.vehicles {
             let v = sv.get_ref();
@@ -274,7 +286,8 @@ impl NetworkScenario {
             vehicles.push(spec);
         }
         if vehicles.len() > MAX_VEHICLES {
-            return Err(e.at(None, format!("at most {MAX_VEHICLES} vehicles")));
+            let span = raw.vehicles.get(MAX_VEHICLES).map(Spanned::span);
+            return Err(e.at(span, format!("at most {MAX_VEHICLES} vehicles")));
         }
         check_spacing(&vehicles, &network)
             .map_err(|(i, m)| e.at(raw.vehicles.get(i).map(Spanned::span), m))?;
@@ -291,7 +304,10 @@ impl NetworkScenario {
             }
         };
         if vehicles.is_empty() && rate_vph.is_none() {
-            return Err(e.at(None, "a network needs [[vehicle]]s or [arrivals]"));
+            return Err(e.at(
+                Some(raw.duration_s.span()),
+                "a network needs [[vehicle]]s or [arrivals]",
+            ));
         }
         Ok(Self {
             name: raw.name,
@@ -432,16 +448,19 @@ fn half_size_for(lanes: u8) -> f64 {
 fn build(
     juncs: &[(IntersectionToml, Spans)],
     segs: &[(SegmentToml, Spans)],
-    default: AlgorithmToml,
+    (default, fallback): (AlgorithmToml, Spans),
     e: &Errors<'_>,
 ) -> Result<Network, ScenarioError> {
+    // A grid's generated tables were not written: their problems are the [grid] table's.
+    let at = |span: &Spans| span.clone().or(fallback.clone());
     if juncs.len() > MAX_JUNCTIONS {
-        return Err(e.at(None, format!("at most {MAX_JUNCTIONS} intersections")));
+        let span = juncs.get(MAX_JUNCTIONS).and_then(|(_, s)| at(s));
+        return Err(e.at(span, format!("at most {MAX_JUNCTIONS} intersections")));
     }
     let mut net = Network::default();
     for (j, span) in juncs {
         if net.junctions.iter().any(|o| o.id == j.id) {
-            return Err(e.at(span.clone(), format!("intersection {}: duplicate id", j.id)));
+            return Err(e.at(at(span), format!("intersection {}: duplicate id", j.id)));
         }
         if !(coord_ok(j.x) && coord_ok(j.y)) {
             return Err(e.at(
@@ -457,8 +476,8 @@ fn build(
             v_limit: j.v_limit,
             lanes: j.lanes,
         };
-        let layout = build_layout(&lt)
-            .map_err(|m| e.at(span.clone(), format!("intersection {}: {m}", j.id)))?;
+        let layout =
+            build_layout(&lt).map_err(|m| e.at(at(span), format!("intersection {}: {m}", j.id)))?;
         net.junctions.push(Junction {
             id: j.id,
             centre: (j.x, j.y),
@@ -469,22 +488,16 @@ fn build(
         });
     }
     for (k, (s, span)) in segs.iter().enumerate() {
-        let seg =
-            segment(s, &net).map_err(|m| e.at(span.clone(), format!("segment {}: {m}", s.id)))?;
+        let seg = segment(s, &net).map_err(|m| e.at(at(span), format!("segment {}: {m}", s.id)))?;
         if net.segments.iter().any(|o| o.id == s.id) {
-            return Err(e.at(span.clone(), format!("segment {}: duplicate id", s.id)));
+            return Err(e.at(at(span), format!("segment {}: duplicate id", s.id)));
         }
         let d = usize::from(seg.heading);
         if let Some(j) = seg.into_junction() {
             let slot = net.junctions.get_mut(j).and_then(|jn| jn.inlets.get_mut(d));
             match slot {
                 Some(slot @ None) => *slot = Some(k),
-                _ => {
-                    return Err(e.at(
-                        span.clone(),
-                        format!("segment {}: that inlet is taken", s.id),
-                    ))
-                }
+                _ => return Err(e.at(at(span), format!("segment {}: that inlet is taken", s.id))),
             }
         }
         if let Some(j) = seg.from {
@@ -494,12 +507,7 @@ fn build(
                 .and_then(|jn| jn.outlets.get_mut(d));
             match slot {
                 Some(slot @ None) => *slot = Some(k),
-                _ => {
-                    return Err(e.at(
-                        span.clone(),
-                        format!("segment {}: that outlet is taken", s.id),
-                    ))
-                }
+                _ => return Err(e.at(at(span), format!("segment {}: that outlet is taken", s.id))),
             }
         }
         net.segments.push(seg);
@@ -570,7 +578,16 @@ fn segment(s: &SegmentToml, net: &Network) -> Result<Segment, String> {
         }
         (None, None) => (0.0, 0.0),
     };
-    let v_max = a.or(b).map_or(13.9, |j| j.layout.spec.v_limit);
+    // The slower of its two junctions': a vehicle reaches the next junction's A_C at no
+    // more than its vImax (Spaciousness (27) assumes it), and the block's lane changes are
+    // planned at the speed it drives (a segment that kept a fast junction's limit into a
+    // slow one's A_C had vehicles enter it at 27.8 m/s under a limit of 1).
+    let v_max = [a, b]
+        .iter()
+        .flatten()
+        .map(|j| j.layout.spec.v_limit)
+        .fold(f64::INFINITY, f64::min)
+        .min(Limits::table_i().v_max);
     Ok(Segment {
         id: s.id,
         lanes,
@@ -724,6 +741,71 @@ fn check_blocks(net: &Network) -> Result<(), (usize, String)> {
                     change_distance(s.v_max)
                 ),
             ));
+        }
+    }
+    Ok(())
+}
+
+/// Every road into and out of the network long enough for what happens on it, and a way
+/// out from every way in. Returns the offending segment's index and why.
+///
+/// - An entry carries the junction's inlet track (its last `comm_margin` metres, inside
+///   A_C) and, before it, where arrivals appear (a vehicle length and d0) and change lanes
+///   toward their first movement (up to lanes − 1 changes at the commitment distance (23)
+///   each, as between junctions). A shorter one put arrivals inside A_C at full speed (a
+///   red team's `boundary_m = 1`: 26 colliding pairs).
+/// - An exit carries the junction's outlet track (its first `comm_margin + L` metres): a
+///   vehicle is off the junction only once it is on its outlet outside A_C, so the road
+///   must reach a vehicle length beyond that (a shorter one ended the run with a bus error).
+/// - Every entry leads to an exit: arrivals draw their destinations among the exits they
+///   can reach, and one that can reach none would wait forever.
+fn check_ends(net: &Network) -> Result<(), (usize, String)> {
+    let lim = Limits::table_i();
+    let exits = net.exits();
+    for (k, s) in net.segments.iter().enumerate() {
+        let length = s.end.x().unwrap_or(f64::INFINITY);
+        if let (None, Some(j)) = (s.from, s.into_junction()) {
+            let jn = net.junctions.get(j).map(|j| &j.layout.spec);
+            let margin = jn.map_or(0.0, |l| l.comm_margin);
+            let changes = s.lanes.saturating_sub(1);
+            let need = margin + LENGTH_M + lim.d0 + f64::from(changes) * change_distance(s.v_max);
+            if !(length >= need) {
+                return Err((
+                    k,
+                    format!(
+                        "segment {}: an entry of {length:.1} m cannot hold the inlet track \
+                         ({margin:.1} m), where arrivals appear ({:.1} m) and the {changes} lane \
+                         change(s) they may need ({:.1} m at the commitment distance (23)); it \
+                         needs {need:.1} m",
+                        s.id,
+                        LENGTH_M + lim.d0,
+                        f64::from(changes) * change_distance(s.v_max)
+                    ),
+                ));
+            }
+            if !exits.iter().any(|&x| net.path(k, x).is_some()) {
+                return Err((
+                    k,
+                    format!("segment {}: no exit can be reached from this entry", s.id),
+                ));
+            }
+        }
+        if let (Some(a), End::Exit(_)) = (s.from, s.end) {
+            let outlet = net
+                .junctions
+                .get(a)
+                .map_or(0.0, |j| j.layout.spec.outlet_length);
+            if !(length >= outlet + LENGTH_M) {
+                return Err((
+                    k,
+                    format!(
+                        "segment {}: an exit of {length:.1} m must reach a vehicle length \
+                         beyond the outlet track ({outlet:.1} m): at least {:.1} m",
+                        s.id,
+                        outlet + LENGTH_M
+                    ),
+                ));
+            }
         }
     }
     Ok(())

@@ -35,7 +35,6 @@ use crate::world::{Arrivals, Finish, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MA
 use planner_core::free_space::FreeSpace;
 use planner_core::lane_change::commitment_distance;
 use planner_core::lanes::Band;
-use planner_core::Sensing;
 use planner_core::{Params, Pose};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -249,13 +248,7 @@ impl RoadScenario {
 
     /// The scenario as a file that `host-sim run` loads (a sweep's failing case).
     pub fn to_toml(&self) -> String {
-        let sensing = self.header.sensing.map(|s: Sensing<f64>| SensingToml {
-            enabled: Some(true),
-            ahead_m: s.ahead_m,
-            behind_m: s.behind_m,
-            position_error_m: s.position_error_m,
-            speed_error_mps: s.speed_error_mps,
-        });
+        let sensing = Some(SensingToml::of(self.header.sensing));
         let file = RoadFile {
             name: &self.name,
             duration_s: self.header.duration_s,

@@ -9,11 +9,17 @@
 //! out), its newer message replaces the old one, so no stale copy of it stays behind in
 //! the other frame.
 //!
-//! Bounded memory: at most [`VIEW_CAP`] vehicles. When full, a message from a new vehicle
-//! takes the place of the record farthest from the receiver if it is nearer than that
-//! (every vehicle repeats its message every period, so a vehicle dropped while far is
-//! back as soon as it comes near); a message that finds no place is an overflow, and the
-//! receiver, which may now miss a vehicle near it, drives on its certified fallback.
+//! Bounded memory: at most [`VIEW_CAP`] vehicles, and what it holds depends on what is
+//! near, never on how many vehicles the world holds. When full, a message from a new
+//! vehicle takes the place of the record farthest from the receiver if it is nearer than
+//! that (every vehicle repeats its message every period, so a vehicle dropped while far is
+//! back as soon as it comes near). A vehicle farther than the view's relevance radius
+//! ([`View::new`]) cannot matter to this period's plan, and one that finds no place is
+//! simply not taken ([`Reject::Far`]). Only when the view cannot hold every vehicle within
+//! the radius — a message from a vehicle within it finds no place, or displaces one within
+//! it — is that an overflow: the receiver, which may now miss a vehicle near it, drives on
+//! its certified fallback. (Before, any message that found no place was an overflow, so a
+//! world of more than 257 vehicles froze: every vehicle heard more than its view held.)
 
 use super::network::Network;
 use super::plausible::{Bounds, Implausible};
@@ -102,13 +108,36 @@ pub enum Reject {
     Invalid,
     /// Not newer than what is held.
     Stale,
-    /// The view is full of vehicles nearer than this one.
+    /// The view is full of vehicles nearer than this one, and this one is within the
+    /// relevance radius: an overflow.
     Full,
+    /// The view is full of vehicles nearer than this one, which is beyond the relevance
+    /// radius: it cannot matter now.
+    Far,
     /// Physically impossible after the last message accepted from the sender
     /// ([`super::plausible`]): the sender is a suspect from now on.
     Implausible(Implausible),
     /// From a suspect: nothing it says is taken any more ([`View::take`]).
     Distrusted,
+}
+
+/// The distance (m) beyond which no vehicle can matter to a vehicle's plan this period on
+/// `net`, whose roads allow at most `v_max`: the reach of a multi-lane plan — twice the
+/// safe distance dS(vmax) (8) plus a second at vmax, for vehicles ahead and behind alike —
+/// and the diagonal of the largest junction's communication region (a crossing planner
+/// plans with every vehicle in A_C), whichever is larger, with 20 m to spare. With Table I
+/// and the SPEC §8 layout: max(155, 175) + 20 = 195 m.
+pub fn relevance_radius(net: &Network, v_max: f64) -> f64 {
+    let lim = crate::monitor::Limits::table_i();
+    let lanes = 2.0 * (lim.safe_distance(v_max) + v_max);
+    let junctions = net
+        .junctions
+        .iter()
+        .map(|j| {
+            2.0 * std::f64::consts::SQRT_2 * (j.layout.spec.half_size + j.layout.spec.comm_margin)
+        })
+        .fold(0.0, f64::max);
+    lanes.max(junctions) + 20.0
 }
 
 /// Where a record's vehicle is in the world (m), for keeping the nearest.
@@ -138,17 +167,68 @@ pub struct View {
     /// Senders that have sent an implausible message (at most [`VIEW_CAP`]; the oldest
     /// suspicion is forgotten first).
     suspects: Vec<u16>,
+    /// Per record, how far (m) its vehicle was from this one when it was last taken.
+    heard_from: Vec<f64>,
+    /// Beyond this distance (m) a vehicle cannot matter to this period's plan.
+    relevant_m: f64,
+    /// A record within the relevance radius was displaced since the last
+    /// [`View::take_overflow`].
+    overflowed: bool,
 }
 
 impl View {
-    /// An empty view for vehicle `own`.
-    pub fn new(own: u16) -> Self {
+    /// An empty view for vehicle `own`, to which vehicles farther than `relevant_m` (m)
+    /// cannot matter ([`relevance_radius`]).
+    pub fn new(own: u16, relevant_m: f64) -> Self {
         Self {
             own,
             records: Vec::new(),
+            heard_from: Vec::new(),
             bounds: Bounds::table_i(),
             suspects: Vec::new(),
+            relevant_m,
+            overflowed: false,
         }
+    }
+
+    /// Forgets the records of vehicles that fell silent beyond the relevance radius: a
+    /// record not renewed for longer than the notification bound `notify` (plus a period
+    /// `h`), of a vehicle farther than the radius when last heard. A radio of limited range
+    /// ([`crate::bus::InProcessBus::set_range`]) stops delivering a vehicle that drives
+    /// away; without this its record would stay where it was last heard, a phantom in the
+    /// road. A vehicle within reach is heard within the notification bound — the bus's
+    /// promise — so one silent for longer was out of range, and one that comes back within
+    /// range is heard again before it can matter.
+    pub fn forget_silent(&mut self, now: Instant, (notify, h): (f64, f64)) {
+        let relevant = self.relevant_m;
+        // A suspect's record is silent because its words are refused, not because it is
+        // far: it stays.
+        let suspects = std::mem::take(&mut self.suspects);
+        self.retain_where(|r, from| {
+            let age = now.since(r.id_stamp().1).as_secs::<f64>();
+            age <= notify + h || from <= relevant || suspects.contains(&r.id_stamp().0)
+        });
+        self.suspects = suspects;
+    }
+
+    /// Keeps the records (and their distances) for which `keep` holds.
+    fn retain_where(&mut self, keep: impl Fn(&Record, f64) -> bool) {
+        let mut i = 0;
+        while i < self.records.len() {
+            match (self.records.get(i), self.heard_from.get(i)) {
+                (Some(r), Some(&d)) if !keep(r, d) => {
+                    self.records.remove(i);
+                    self.heard_from.remove(i);
+                }
+                _ => i += 1,
+            }
+        }
+    }
+
+    /// `true` if, since the last call, a record within the relevance radius was displaced
+    /// by a nearer one: the view could not hold every vehicle that may matter.
+    pub fn take_overflow(&mut self) -> bool {
+        std::mem::take(&mut self.overflowed)
     }
 
     /// Takes a message heard at world position `me` on `net`: states and crossing reports
@@ -193,14 +273,14 @@ impl View {
                 }
             }
             Message::Left { id, at, junction } => {
-                self.records.retain(|r| {
+                self.retain_where(|r, _| {
                     !matches!(*r, Record::Crossing { report, junction: j, stamp }
                         if report.id == id && j == junction && stamp <= at)
                 });
                 return Ok(());
             }
             Message::Gone { id, at } => {
-                self.records.retain(|r| {
+                self.retain_where(|r, _| {
                     let (rid, stamp) = r.id_stamp();
                     rid != id || stamp > at
                 });
@@ -222,14 +302,21 @@ impl View {
             self.suspect(id);
             return Err(Reject::Implausible(why));
         }
-        match held.and_then(|i| self.records.get_mut(i)) {
-            Some(r) => {
-                *r = rec;
+        let from = {
+            let (x, y) = where_is(&rec, net);
+            (x - me.0).hypot(y - me.1)
+        };
+        match held {
+            Some(i) => {
+                if let (Some(r), Some(d)) = (self.records.get_mut(i), self.heard_from.get_mut(i)) {
+                    (*r, *d) = (rec, from);
+                }
                 Ok(())
             }
             None if full => self.replace_farthest(rec, net, me),
             None => {
                 self.records.push(rec);
+                self.heard_from.push(from);
                 Ok(())
             }
         }
@@ -250,7 +337,9 @@ impl View {
         }
     }
 
-    /// A full view takes `rec` in place of its farthest record, if `rec` is nearer.
+    /// A full view takes `rec` in place of its farthest record, if `rec` is nearer (an
+    /// overflow if that one was within the relevance radius); else `rec` is refused, as
+    /// an overflow if it is within the radius itself.
     fn replace_farthest(
         &mut self,
         rec: Record,
@@ -269,11 +358,15 @@ impl View {
             .max_by(|a, b| a.1.total_cmp(&b.1));
         match far {
             Some((i, dist)) if d(&rec) < dist => {
-                if let Some(slot) = self.records.get_mut(i) {
-                    *slot = rec;
+                let from = d(&rec);
+                if let (Some(slot), Some(f)) = (self.records.get_mut(i), self.heard_from.get_mut(i))
+                {
+                    (*slot, *f) = (rec, from);
                 }
+                self.overflowed |= dist <= self.relevant_m;
                 Ok(())
             }
+            _ if d(&rec) > self.relevant_m => Err(Reject::Far),
             _ => Err(Reject::Full),
         }
     }

@@ -47,6 +47,8 @@ pub struct ManagerNode {
     /// The bus's position and speed resolutions it was given (m, m/s): a restart keeps
     /// them, the bus being the same.
     resolution: (f64, f64),
+    /// Its roadside sensor's error (m), if it has one: a restart keeps it.
+    roadside: Option<f64>,
 }
 
 impl ManagerNode {
@@ -67,6 +69,28 @@ impl ManagerNode {
             layout,
             restarted: false,
             resolution: (0.0, 0.0),
+            roadside: None,
+        }
+    }
+
+    /// Gives it a roadside sensor measuring every vehicle in A_C within ± `error` m (see
+    /// planner-core's `Manager::set_roadside_sensor`); `None`: reports alone.
+    pub fn set_roadside(&mut self, error: Option<f64>) -> Result<(), ConfigError> {
+        self.manager.set_roadside_sensor(error)?;
+        self.roadside = error;
+        Ok(())
+    }
+
+    /// `true` if it has a roadside sensor.
+    pub fn has_roadside(&self) -> bool {
+        self.roadside.is_some()
+    }
+
+    /// Its roadside sensor's readings of this period: (id, centre along the route's path).
+    pub fn measure(&mut self, readings: &[(u16, f64)]) {
+        for &(id, s) in readings {
+            // A suspect is flagged by it; the manager's record says so.
+            let _ = self.manager.measure(id, s);
         }
     }
 
@@ -90,6 +114,7 @@ impl ManagerNode {
         // Both were accepted when they were set: they cannot be refused now.
         let _ = self.manager.set_resolution(self.resolution);
         let _ = self.manager.set_lease(lease);
+        let _ = self.manager.set_roadside_sensor(self.roadside);
         self.restarted = true;
     }
 
@@ -113,9 +138,15 @@ impl ManagerNode {
     }
 
     /// The manager's part of a period at `now` (its clock): takes the reports and
-    /// departures it heard for its junction, decides, and returns the vehicles that hold
-    /// a permission now (each is to be sent a lease).
-    pub fn manage(&mut self, heard: &[Received], now: Instant) -> Vec<u16> {
+    /// departures it heard for its junction and its roadside sensor's `readings` (if it
+    /// has one), decides, and returns the vehicles that hold a permission now (each is to
+    /// be sent a lease).
+    pub fn manage(
+        &mut self,
+        heard: &[Received],
+        readings: &[(u16, f64)],
+        now: Instant,
+    ) -> Vec<u16> {
         for r in heard {
             match r.msg {
                 Message::Crossing {
@@ -129,6 +160,7 @@ impl ManagerNode {
                 _ => {}
             }
         }
+        self.measure(readings);
         self.manager.update(now);
         self.manager.granted()
     }

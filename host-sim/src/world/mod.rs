@@ -304,6 +304,8 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     streams: Vec<Stream>,
     ids: spawn::Ids,
     rng: Box<ChaCha8Rng>,
+    /// The roadside sensors' noise (its own stream: the other draws stay as they were).
+    roadside_rng: Box<ChaCha8Rng>,
     monitor: step::WorldMonitor,
     detector: DeadlockDetector,
     deadlock: Option<Deadlock>,
@@ -323,7 +325,12 @@ impl<const N: usize> World<N, InProcessBus> {
         let seed = seed.unwrap_or(spec.seed);
         let mut nodes: Vec<u16> = spec.vehicles.iter().map(|v| v.id).collect();
         nodes.extend((0..spec.network.junctions.len()).map(junction::manager_node));
-        let bus = InProcessBus::with_faults(&nodes, spec.faults, seed, lim.h);
+        let mut bus = InProcessBus::with_faults(&nodes, spec.faults, seed, lim.h);
+        // A radio that reaches every vehicle that can matter before a message from it
+        // can arrive ([`InProcessBus::set_range`]).
+        let relevant = heard::relevance_radius(&spec.network, lim.v_max);
+        let notify = spec.faults.notify_bound(lim.h);
+        bus.set_range(Some(relevant + 2.0 * lim.v_max * (notify + lim.h)));
         Self::with_bus(spec, solver, Some(seed), bus)
     }
 }
@@ -340,6 +347,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             sensing: spec.sensing,
             reuse: None,
             precision: spec.precision,
+            relevant_m: heard::relevance_radius(&spec.network, lim.v_max),
         };
         let net = spec.network.clone();
         let vehicles = spec
@@ -353,9 +361,17 @@ impl<const N: usize, B: Bus> World<N, B> {
             .enumerate()
             .map(|(j, jn)| {
                 let lease = junction::lease(setup.notify, lim.h);
-                ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision))
+                let mut m =
+                    ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision));
+                // A world with sensors has them at its junctions too.
+                let _ = m.set_roadside(spec.sensing.map(|s| s.position_error_m));
+                m
             })
             .collect();
+        let mut bus = bus;
+        for (j, jn) in net.junctions.iter().enumerate() {
+            bus.locate(junction::manager_node(j), jn.centre.0, jn.centre.1);
+        }
         let mut rng = Box::new(crate::reference::instances::rng(seed ^ 0x1c));
         let streams = match &spec.arrivals {
             Arrivals::Poisson(entries) => entries
@@ -393,6 +409,9 @@ impl<const N: usize, B: Bus> World<N, B> {
             streams,
             ids,
             rng,
+            roadside_rng: Box::new(crate::reference::instances::rng(
+                seed ^ sensor::ROADSIDE_SEED,
+            )),
             deadlock: None,
             counters: Counters::default(),
             costs: None,
@@ -472,6 +491,11 @@ impl<const N: usize, B: Bus> World<N, B> {
                 && self.pending.is_empty()
                 && self.streams.is_empty()
                 && !self.net.junctions.is_empty())
+    }
+
+    /// The junctions' managers.
+    pub fn managers(&self) -> &[ManagerNode] {
+        &self.managers
     }
 
     /// The deadlock found, if any.

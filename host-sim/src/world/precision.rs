@@ -397,6 +397,25 @@ impl<const CAP: usize> AnyManager<CAP> {
         }
     }
 
+    /// See planner-core's `Manager::set_roadside_sensor`.
+    pub fn set_roadside_sensor(
+        &mut self,
+        error: Option<f64>,
+    ) -> Result<(), planner_core::ConfigError> {
+        match self {
+            Self::F64(m) => m.set_roadside_sensor(error),
+            Self::F32(m) => m.set_roadside_sensor(error.map(r)),
+        }
+    }
+
+    /// See planner-core's `Manager::measure`.
+    pub fn measure(&mut self, id: u16, s: f64) -> Result<(), ManagerError> {
+        match self {
+            Self::F64(m) => m.measure(id, s),
+            Self::F32(m) => m.measure(id, r(s)),
+        }
+    }
+
     /// Its lease terms.
     pub fn lease(&self) -> planner_core::crossing::Lease {
         match self {

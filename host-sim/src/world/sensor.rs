@@ -11,6 +11,9 @@
 //!   their positions along its path, with the same error.
 //! - A scripted or random driver sees the bumper gap to the nearest vehicle physically in
 //!   its lane ahead, exactly (it brakes for it; see `Driver::Script`).
+//! - A junction's roadside sensor (its manager's, when the world has sensors) sees every
+//!   vehicle crossing there inside its communication region A_C: its position along its
+//!   route's path, with the same error ([`roadside`]).
 
 use super::network::Network;
 use super::vehicle::At;
@@ -193,6 +196,41 @@ fn path_returns(
         }
     }
     out
+}
+
+/// Mixed into a run's seed for the roadside sensors' noise (a stream of its own, drawn the
+/// same way by the in-process world and the fleet).
+pub const ROADSIDE_SEED: u64 = 0x00ad_51de;
+
+/// What junction `j`'s roadside sensor (error bound `error`, m) measures this period: every
+/// vehicle crossing there whose centre is inside A_C, as (id, position along its route's
+/// path), each with an error drawn uniformly within the bound.
+pub fn roadside(
+    net: &Network,
+    j: usize,
+    all: &[Seen],
+    error: f64,
+    rng: &mut ChaCha8Rng,
+) -> Vec<(u16, f64)> {
+    let Some(jn) = net.junctions.get(j) else {
+        return Vec::new();
+    };
+    all.iter()
+        .filter_map(|c| match c.at {
+            At::Crossing { junction, route, s } if junction == j => {
+                let p = jn.layout.route(usize::from(route))?.path.pose_at(s);
+                jn.layout.in_comm_region(p.x, p.y).then(|| {
+                    let e = if error > 0.0 {
+                        rng.random_range(-error..=error)
+                    } else {
+                        0.0
+                    };
+                    (c.id, s + e)
+                })
+            }
+            _ => None,
+        })
+        .collect()
 }
 
 #[cfg(test)]

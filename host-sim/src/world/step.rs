@@ -1,8 +1,9 @@
 //! The world's period: see the module docs of [`super`] for the order of things.
 
+use super::junction::ManagerNode;
 use super::junction::{manager_node, LEFT_REPEAT_S};
 use super::network::{End, Network};
-use super::sensor::{sense, Seen, Sensed};
+use super::sensor::{roadside, sense, Seen, Sensed};
 use super::spawn::{entry_speed, start_at, Entry};
 use super::vehicle::{At, Brain, Driver, PlannerSetup, StepCtx, Trip, Vehicle, VehicleTruth};
 use super::DriverKind;
@@ -328,6 +329,10 @@ impl<const N: usize, B: Bus> World<N, B> {
         }
         let now = self.clock.at_step(self.steps_done);
         for v in &self.vehicles {
+            let (x, y) = v.position(&self.net);
+            self.bus.locate(v.id, x, y);
+        }
+        for v in &self.vehicles {
             let msg = self.spec.faults.told(v.id, v.message(now), t);
             self.bus.send(v.id, &msg, t)?;
         }
@@ -339,13 +344,24 @@ impl<const N: usize, B: Bus> World<N, B> {
     fn manage(&mut self, t: f64) -> Result<(), BusError> {
         let mut inbox = Vec::new();
         let now = self.clock.at_step(self.steps_done);
+        let seen: Vec<Seen> = if self.managers.iter().any(ManagerNode::has_roadside) {
+            self.vehicles.iter().map(Vehicle::seen).collect()
+        } else {
+            Vec::new()
+        };
+        let error = self.spec.sensing.map_or(0.0, |s| s.position_error_m);
         for m in &mut self.managers {
             inbox.clear();
             self.bus.receive(m.node(), t, &mut inbox)?;
             if !m.is_up(&self.spec.faults, t) {
                 continue;
             }
-            let granted = m.manage(&inbox, now);
+            let readings = if m.has_roadside() {
+                roadside(&self.net, m.junction, &seen, error, &mut self.roadside_rng)
+            } else {
+                Vec::new()
+            };
+            let granted = m.manage(&inbox, &readings, now);
             self.monitor.granted(m.junction, &granted);
             for id in granted {
                 let g = m.grant(id, now);
@@ -362,15 +378,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         if self.spec.sensing.is_none() && !any_script {
             return Vec::new();
         }
-        let all: Vec<Seen> = self
-            .vehicles
-            .iter()
-            .map(|v| Seen {
-                id: v.id,
-                at: v.at,
-                v: v.v,
-            })
-            .collect();
+        let all: Vec<Seen> = self.vehicles.iter().map(Vehicle::seen).collect();
         self.vehicles
             .iter()
             .zip(&all)
@@ -654,12 +662,18 @@ pub(crate) fn draw_trip(
             (vec![m], route)
         }
         Entry::Segment { seg, .. } => {
-            let exits = net.exits();
-            if exits.is_empty() {
+            // A destination among the exits this entry leads to (the loader refuses an
+            // entry that leads to none).
+            let paths: Vec<Vec<Movement>> = net
+                .exits()
+                .into_iter()
+                .filter_map(|to| net.path(seg, to))
+                .collect();
+            if paths.is_empty() {
                 return (Vec::new(), None);
             }
-            let to = exits[rng.random_range(0..exits.len())];
-            (net.path(seg, to).unwrap_or_default(), None)
+            let k = rng.random_range(0..paths.len());
+            (paths.into_iter().nth(k).unwrap_or_default(), None)
         }
     }
 }

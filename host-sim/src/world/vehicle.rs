@@ -75,6 +75,9 @@ pub struct PlannerSetup {
     pub reuse: Option<ReusePolicy<f64>>,
     /// The planners' precision (`f32` as on the MCU: ours alone, no reuse).
     pub precision: Precision,
+    /// Beyond this distance (m) no vehicle can matter to a plan
+    /// ([`super::heard::relevance_radius`]).
+    pub relevant_m: f64,
 }
 
 /// A vehicle's multi-lane planner, in the setup's precision.
@@ -478,7 +481,7 @@ impl<const N: usize> Brain<N> {
         Self {
             lane: None,
             crossing: None,
-            view: View::new(id),
+            view: View::new(id, setup.relevant_m),
             others: Box::new(heapless::Vec::new()),
             setup,
         }
@@ -588,6 +591,15 @@ impl<const N: usize> Vehicle<N> {
         matches!(self.driver, Driver::Planner(_))
     }
 
+    /// What sensors see of it now.
+    pub fn seen(&self) -> super::sensor::Seen {
+        super::sensor::Seen {
+            id: self.id,
+            at: self.at,
+            v: self.v,
+        }
+    }
+
     /// Its ground truth now.
     pub fn truth(&self, net: &Network) -> VehicleTruth {
         VehicleTruth {
@@ -622,6 +634,7 @@ impl<const N: usize> Vehicle<N> {
         let Driver::Planner(b) = &mut self.driver else {
             return true;
         };
+        b.view.forget_silent(ctx.now, (b.setup.notify, ctx.lim.h));
         let mut whole = true;
         for r in inbox {
             let taken = b.view.take(&r.msg, net, me);
@@ -631,6 +644,7 @@ impl<const N: usize> Vehicle<N> {
             }
             match taken {
                 Err(Reject::Full) => whole = false,
+                Err(Reject::Far) => {}
                 Err(Reject::Stale | Reject::Invalid) => {
                     if matches!(r.msg, Message::State { .. }) {
                         counters.rejected += 1;
@@ -656,7 +670,7 @@ impl<const N: usize> Vehicle<N> {
                 }
             }
         }
-        whole
+        whole && !b.view.take_overflow()
     }
 
     /// Its centre in the world.
