@@ -110,7 +110,7 @@ impl CanPort for Noisy {
         let got = self.inner.receive(timeout)?;
         if let Some((f, at)) = got {
             self.n += 1;
-            if self.n % 50 == 0 {
+            if self.n.is_multiple_of(50) {
                 let foreign = FdFrame::new(
                     Id::Standard(StandardId::new(0x123).expect("11 bits")),
                     &[1, 2, 3],

@@ -39,7 +39,7 @@ fn files_that_cannot_be_safe_are_refused_with_the_reason() {
         // still plan around them.
         (
             "A.toml",
-            "A.toml:5: intersection: outlet_length 40 m ends inside A_C",
+            "A.toml:5: intersection: outlet_length: 40 m ends inside A_C",
         ),
         // Coordinates where f64 spacing is centimetres.
         (

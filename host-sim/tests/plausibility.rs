@@ -191,7 +191,7 @@ fn a_lie_or_an_outage_the_world_cannot_have_is_refused() {
     for (text, says) in [
         (
             junction + "\n[faults.manager_down]\njunction = 1\nfrom_s = 1.0\nuntil_s = 2.0\n",
-            "faults.manager_down.junction = 1: the scenario has 1 junction(s)",
+            "faults.manager_down.junction = 1: no junction has that id (the scenario's: 0)",
         ),
         (
             road.clone() + "\n[faults.liar]\nid = 1\nfrom_s = 1.0\noffset_m = 500.0\n",

@@ -195,6 +195,17 @@ fn four_liveness_shards_merge_into_the_unsharded_sweeps() {
 }
 
 #[test]
+fn four_red_team_shards_merge_into_the_unsharded_sweeps() {
+    for sweep in ["outages", "liars", "ids", "layouts"] {
+        check(sweep, &["--cases", "5", "--seed", "7"]);
+    }
+    check(
+        "grids",
+        &["--cases", "2", "--duration", "20", "--seed", "7"],
+    );
+}
+
+#[test]
 fn shards_that_do_not_belong_together_are_refused() {
     let a = shards(&["platoons"], &["--cases", "4", "--seed", "1"], 2);
     let b = shards(&["deadends"], &["--cases", "2", "--seed", "1"], 2);

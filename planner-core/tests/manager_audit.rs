@@ -574,3 +574,123 @@ fn a_roadside_sensor_bounds_a_lie_that_never_jumps() {
     assert!(m.entries().is_empty());
     assert!(m.set_roadside_sensor(Some(f64::NAN)).is_err());
 }
+
+/// The roadside sensor's bounds, to the last bit: a measurement may trail the report
+/// (taken after its rounding) by the sensor's error, [`PLAUSIBLE_POSITION_M`] and half the
+/// bus's position step, and lead it by that plus what vmax covers in the notification
+/// bound; one ulp further either way makes the vehicle a suspect. A vehicle leaves the
+/// list when the measurement, less the error, puts its rear exactly at the end of A_S.
+#[test]
+fn a_roadside_measurement_is_judged_at_its_exact_bounds() {
+    use planner_core::crossing::{Lease, PLAUSIBLE_POSITION_M};
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let (entry, exit) = {
+        let p = &l.route(a).unwrap().path;
+        (p.entry(), p.exit())
+    };
+    let (err, step) = (0.25, 0.25);
+    let fresh = |report: f64| {
+        let mut m = manager(&l, Algorithm::Fifo);
+        m.set_roadside_sensor(Some(err)).unwrap();
+        m.set_position_resolution(step).unwrap();
+        let r = CrossingReport {
+            s: report,
+            ..at(&l, 1, a, 20.0, 5.0)
+        };
+        m.observe(&r, secs(0.0)).unwrap();
+        m
+    };
+    let report = entry - HALF - 20.0;
+    let progress = fresh(report).entries()[0].progress;
+    let slack = err + PLAUSIBLE_POSITION_M + step / 2.0;
+    let lag = Lease::default().notify.as_secs::<f64>() * Params::<f64>::table_i().v_max();
+    // The last measured centres the bounds allow, as the manager computes (it subtracts
+    // `entry` first): the lowest not more than `slack` behind the progress, the highest
+    // not more than `slack + lag` ahead of it.
+    let behind = |s: f64| progress - (s - entry);
+    let ahead = |s: f64| (s - entry) - progress;
+    let low = edge(
+        progress + entry - slack,
+        |s| behind(s) <= slack,
+        f64::next_down,
+    );
+    let high = edge(
+        progress + entry + slack + lag,
+        |s| ahead(s) <= slack + lag,
+        f64::next_up,
+    );
+    for (s, ok) in [
+        (low, true),
+        (high, true),
+        (low.next_down(), false),
+        (high.next_up(), false),
+        (low - 0.01, false),
+        (high + 0.01, false),
+        (progress + entry, true),
+    ] {
+        let mut m = fresh(report);
+        let got = m.measure(1, s);
+        assert_eq!(got.is_ok(), ok, "measured at {s}: {got:?}");
+        assert_eq!(entry_of(&m).suspect, !ok, "{s}");
+    }
+    // The bounds are the documented ones, to a micrometre.
+    assert!((behind(low) - slack).abs() < 1e-6 && (ahead(high) - slack - lag).abs() < 1e-6);
+    // Leaving: reported well past A_S, measured with its rear at the end of A_S.
+    let gone = exit + HALF + 0.5;
+    for (rear, leaves) in [(0.0, true), (-0.01, false), (0.01, true)] {
+        let mut m = fresh(report);
+        let r = CrossingReport {
+            s: gone,
+            ..at(&l, 1, a, 20.0, 5.0)
+        };
+        m.forget(1);
+        m.observe(&at(&l, 1, a, -1.0, 5.0), secs(0.0)).unwrap();
+        m.observe(&r, secs(1.0)).unwrap();
+        assert_eq!(m.entries().len(), 1, "not off on its word");
+        let mut s = exit + HALF + err + rear;
+        if rear == 0.0 {
+            while (s - entry) - err - HALF < exit - entry {
+                s = s.next_up();
+            }
+        }
+        m.measure(1, s).unwrap();
+        assert_eq!(m.entries().is_empty(), leaves, "rear {rear} m past A_S");
+    }
+    // The error must be finite and not negative.
+    for bad in [-0.01, f64::NAN, f64::INFINITY] {
+        assert!(manager(&l, Algorithm::Fifo)
+            .set_roadside_sensor(Some(bad))
+            .is_err());
+    }
+    for good in [Some(0.0), None] {
+        assert!(manager(&l, Algorithm::Fifo)
+            .set_roadside_sensor(good)
+            .is_ok());
+    }
+}
+
+fn entry_of(m: &Manager<f64, 8>) -> planner_core::crossing::Entry<f64> {
+    m.entries()[0]
+}
+
+/// The last value from `start` on, stepping by `next` one ulp at a time, for which `ok`
+/// holds (`start` is within a few ulps of it).
+fn edge(start: f64, ok: impl Fn(f64) -> bool, next: fn(f64) -> f64) -> f64 {
+    let back = |x: f64| {
+        if next(x) > x {
+            x.next_down()
+        } else {
+            x.next_up()
+        }
+    };
+    let mut x = start;
+    for _ in 0..64 {
+        match (ok(x), ok(next(x))) {
+            (true, false) => return x,
+            (true, true) => x = next(x),
+            _ => x = back(x),
+        }
+    }
+    panic!("no edge near {start}");
+}

@@ -34,12 +34,21 @@ pub struct Faults {
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ManagerDown {
-    /// The junction (index; 0 for a scenario's single intersection).
-    pub junction: usize,
+    /// The junction's id (as the network file names it; 0 for a scenario's single
+    /// intersection).
+    pub junction: u16,
     /// When it stops (s).
     pub from_s: f64,
     /// When it restarts (s).
     pub until_s: f64,
+}
+
+impl Faults {
+    /// `true` while the manager of the junction with id `junction` is down at `t`.
+    pub fn manager_down_at(&self, junction: u16, t: f64) -> bool {
+        self.manager_down
+            .is_some_and(|d| d.junction == junction && d.is_down(t))
+    }
 }
 
 impl ManagerDown {

@@ -156,6 +156,10 @@ enum Command {
     /// Red team: random network files, degenerate ones among them: each refused with its
     /// file and line, or run to its end with no collision, violation or deadlock.
     Layouts(sweep::LivenessArgs),
+    /// Random grids (2×2 to 4×4, 1 to 4 lanes, blocks from the commitment bound up,
+    /// demand to saturation and past): no collision, no deadlock (each one reported with
+    /// whom every vehicle waits on).
+    Grids(sweep::GridsArgs),
     /// Combines the shards of one sweep (each run with `--shard I/N`) into exactly the
     /// unsharded result: counts add, maxima take the max, means are weighted by cases.
     Merge {
@@ -256,6 +260,7 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Liars(a) => sweep::red_team(a, "liars"),
         Command::Ids(a) => sweep::red_team(a, "ids"),
         Command::Layouts(a) => sweep::red_team(a, "layouts"),
+        Command::Grids(a) => sweep::grids(a),
         Command::Merge { files, json } => sweep::merge(&files, json),
         Command::Experiment(e) => experiment::run(e),
         Command::Scale(a) => bench::scale(a),

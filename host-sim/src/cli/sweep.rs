@@ -166,6 +166,75 @@ pub fn crossings(a: LivenessArgs) -> ExitCode {
     liveness("crossings", &a, (first, end), &r, &r.totals, &r.failing)
 }
 
+/// `host-sim grids`.
+#[derive(clap::Args)]
+pub struct GridsArgs {
+    /// Number of random grids.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
+    cases: u64,
+    /// Seed of the sweep.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Simulated seconds per grid.
+    #[arg(long, default_value_t = 180.0)]
+    duration: f64,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// Run only shard I of N (0-based) and print it as JSON for `host-sim merge`.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
+}
+
+/// Random grids: no collision, no deadlock.
+pub fn grids(a: GridsArgs) -> ExitCode {
+    if let Err(code) = check_duration(a.duration, 3600.0) {
+        return code;
+    }
+    let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    let r = host_sim::experiments::network::grids(end - first, first, a.seed, a.duration, 0);
+    let safe =
+        r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries == 0;
+    let exit = code(safe, r.deadlocks == 0);
+    let value = match serde_json::to_value(&r) {
+        Ok(v) => v,
+        Err(e) => return bad(&e.to_string()),
+    };
+    if let Some(sh) = a.shard {
+        let settings = json!({"cases": a.cases, "seed": a.seed, "duration": a.duration});
+        return emit("grids", settings, sh, (first, end), &value, exit);
+    }
+    print_sweep("grids", a.cases, a.json, &value, &r.failing, exit)
+}
+
+/// A sweep's report: one JSON object, or its numbers and each failing case's reason and
+/// file.
+fn print_sweep(
+    sweep: &str,
+    cases: u64,
+    json: bool,
+    value: &Value,
+    failing: &[host_sim::experiments::sweep::Failing],
+    exit: ExitCode,
+) -> ExitCode {
+    let printed = if json {
+        print_json(value)
+    } else {
+        let mut text = format!("{sweep}, {cases} cases:\n{}", human(value));
+        for f in failing {
+            text += &format!(
+                "\n\n# failing case {} ({}): {}\n{}",
+                f.case, f.label, f.reason, f.scenario
+            );
+        }
+        say(&text)
+    };
+    match printed {
+        Ok(()) => exit,
+        Err(c) => c,
+    }
+}
+
 /// The red team's sweeps (`outages`, `liars`, `ids`): their shard's JSON, or the report
 /// and its failing cases.
 pub fn red_team(a: LivenessArgs, sweep: &'static str) -> ExitCode {
@@ -208,22 +277,7 @@ pub fn red_team(a: LivenessArgs, sweep: &'static str) -> ExitCode {
         let settings = json!({"cases": a.cases, "seed": a.seed});
         return emit(sweep, settings, sh, (first, end), &value, exit);
     }
-    let printed = if a.json {
-        print_json(&value)
-    } else {
-        let mut text = format!("{sweep}, {} cases:\n{}", a.cases, human(&value));
-        for f in &failing {
-            text += &format!(
-                "\n\n# failing case {} ({}): {}\n{}",
-                f.case, f.label, f.reason, f.scenario
-            );
-        }
-        say(&text)
-    };
-    match printed {
-        Ok(()) => exit,
-        Err(c) => c,
-    }
+    print_sweep(sweep, a.cases, a.json, &value, &failing, exit)
 }
 
 /// A liveness sweep's answer: its shard's JSON, or the report.
@@ -351,6 +405,7 @@ fn merged_exit(sweep: &str, v: &Value) -> ExitCode {
         // A liar costs liveness by design: the sweep judges safety.
         "faults-grid" | "liars" => true,
         "ids" => n(v, "wrapped") == n(v, "cases"),
+        "grids" => n(v, "deadlocks") == 0,
         "layouts" => ["refused_without_line", "deadlocks", "internal_errors"]
             .iter()
             .all(|k| n(v, k) == 0),

@@ -129,6 +129,14 @@ pub struct NetworkReport {
 
 /// Runs the grid of `s` to its end.
 pub fn run(s: &NetworkSettings) -> Result<NetworkReport, String> {
+    run_with(s, &mut |_| {})
+}
+
+/// [`run`], handing a deadlock, if one ends the run, to `deadlock`.
+pub fn run_with(
+    s: &NetworkSettings,
+    deadlock: &mut dyn FnMut(&crate::monitor::liveness::Deadlock),
+) -> Result<NetworkReport, String> {
     let spec = s.world()?;
     let t0 = std::time::Instant::now();
     let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
@@ -142,6 +150,9 @@ pub fn run(s: &NetworkSettings) -> Result<NetworkReport, String> {
     }
     let wall = t0.elapsed().as_secs_f64();
     let end = w.time();
+    if let Some(d) = w.deadlock() {
+        deadlock(d);
+    }
     let summary = w.summary(wall);
     let trips = Trips::of(&w, end);
     Ok(NetworkReport {
@@ -260,4 +271,133 @@ impl core::fmt::Display for NetworkReport {
             self.deadlocks
         )
     }
+}
+
+/// `host-sim grids`: random grids — 2 × 2 to 4 × 4 intersections, 1 to 4 lanes, blocks
+/// from the shortest the loader takes (the commitment distance (23) for the lane changes
+/// a block may need) to 1.8 times that, boundary roads as long as a block, and demand from
+/// 100 to 1,500 vehicles per hour per boundary inlet, past saturation — each run for
+/// `duration_s`. A case fails on any collision or violation, or a deadlock (with the
+/// wait-for relation as its reason); trips that cannot finish in time are reported.
+#[derive(Debug, Clone, Serialize)]
+pub struct GridsReport {
+    /// Cases run.
+    pub cases: u64,
+    /// Vehicles that entered, over all cases.
+    pub vehicles: u64,
+    /// Trips completed.
+    pub trips_completed: u64,
+    /// Trips due (arrived at least free flow + [`GRACE_S`] before the end).
+    pub trips_due: u64,
+    /// Of those, completed.
+    pub trips_due_completed: u64,
+    /// Collisions (pairs × steps).
+    pub collisions: u64,
+    /// Invariant violations (pairs × steps).
+    pub invariant_violations: u64,
+    /// Limit violations, road-end overruns and departures from the road.
+    pub limit_violations: u64,
+    /// Steps × vehicles inside A_S without a permission.
+    pub unpermitted_entries: u64,
+    /// Cases that deadlocked.
+    pub deadlocks: u64,
+    /// Simulated seconds over all cases.
+    pub sim_seconds: f64,
+    /// The largest number of vehicles in one network at once.
+    pub max_vehicles: u64,
+    /// The sweep's seed.
+    pub seed: u64,
+    /// Failing cases (at most 20), each as its file and the reason.
+    pub failing: Vec<super::sweep::Failing>,
+    /// Wall-clock time (s).
+    pub wall_seconds: f64,
+}
+
+/// Case `index` of the grids sweep seeded `seed`, `duration_s` long.
+pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
+    use rand::Rng;
+    let mut r = crate::reference::instances::rng(super::sweep::case_seed(seed, index));
+    let lanes: u8 = r.random_range(1..=4);
+    let min = crate::scenario::network::min_block_m(lanes);
+    NetworkSettings {
+        rows: r.random_range(2..=4),
+        cols: r.random_range(2..=4),
+        block_m: (min * r.random_range(1.0..1.8)).ceil(),
+        lanes,
+        rate_vph: r.random_range(100.0f64..1500.0).round(),
+        duration_s,
+        seed: super::sweep::case_seed(seed, index),
+    }
+}
+
+/// Runs `cases` grids from index `first` of the sweep seeded `seed`, each for
+/// `duration_s`, on `threads` threads.
+pub fn grids(cases: u64, first: u64, seed: u64, duration_s: f64, threads: usize) -> GridsReport {
+    let t0 = std::time::Instant::now();
+    let runs = super::par::map_indexed(cases as usize, threads, |i| {
+        let index = first + i as u64;
+        let s = grid_case(seed, index, duration_s);
+        let deadlock = std::cell::RefCell::new(None);
+        let r = run_with(&s, &mut |d| *deadlock.borrow_mut() = Some(d.to_string()));
+        (index, s, r, deadlock.into_inner())
+    });
+    let mut g = GridsReport {
+        cases,
+        vehicles: 0,
+        trips_completed: 0,
+        trips_due: 0,
+        trips_due_completed: 0,
+        collisions: 0,
+        invariant_violations: 0,
+        limit_violations: 0,
+        unpermitted_entries: 0,
+        deadlocks: 0,
+        sim_seconds: 0.0,
+        max_vehicles: 0,
+        seed,
+        failing: Vec::new(),
+        wall_seconds: 0.0,
+    };
+    for (index, s, r, deadlock) in runs {
+        let reason = match r {
+            Err(e) => Some(format!("did not run: {e}")),
+            Ok(r) => {
+                g.vehicles += r.vehicles_spawned;
+                g.trips_completed += r.trips_completed;
+                g.trips_due += r.trips_due;
+                g.trips_due_completed +=
+                    (r.due_completed_share * r.trips_due as f64).round() as u64;
+                g.collisions += r.collisions;
+                g.invariant_violations += r.invariant_violations;
+                g.limit_violations += r.limit_violations;
+                g.unpermitted_entries += r.unpermitted_entries;
+                g.deadlocks += r.deadlocks;
+                g.sim_seconds += r.sim_seconds;
+                g.max_vehicles = g.max_vehicles.max(r.max_vehicles);
+                let unsafe_events = r.collisions
+                    + r.invariant_violations
+                    + r.limit_violations
+                    + r.unpermitted_entries;
+                match (unsafe_events, deadlock) {
+                    (0, None) => None,
+                    (n, d) => Some(format!(
+                        "{n} unsafe events{}",
+                        d.map(|d| format!("; {d}")).unwrap_or_default()
+                    )),
+                }
+            }
+        };
+        if let Some(reason) = reason {
+            if g.failing.len() < super::sweep::KEEP_FAILING {
+                g.failing.push(super::sweep::Failing {
+                    case: index,
+                    label: "grid",
+                    reason,
+                    scenario: s.to_toml(),
+                });
+            }
+        }
+    }
+    g.wall_seconds = t0.elapsed().as_secs_f64();
+    g
 }

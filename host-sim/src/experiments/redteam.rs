@@ -152,7 +152,7 @@ pub fn faults(kind: Kind, seed: u64, index: u64, ids: &[u16]) -> Faults {
 
 /// `true` if liar case `index` has sensors (onboard and roadside): every other case.
 pub fn sensed(seed: u64, index: u64) -> bool {
-    case_seed(seed ^ 0x5e25, index) % 2 == 0
+    case_seed(seed ^ 0x5e25, index).is_multiple_of(2)
 }
 
 /// Case `index` of `kind` under `algorithm`: random queues and the case's fault.

@@ -683,8 +683,7 @@ impl<const N: usize> Harness<N> {
             .map(|(j, jn)| {
                 let setup = self.setup();
                 let lease = crate::world::junction::lease(setup.notify, self.lim.h);
-                let mut m =
-                    ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision));
+                let mut m = ManagerNode::new(j, jn, (lease, setup.precision));
                 let _ = m.set_roadside(self.spec.sensing.map(|s| s.position_error_m));
                 m
             })
@@ -1084,8 +1083,8 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
             .collect();
         let t = k as f64 * self.ctx.lim.h;
         for (j, out) in self.readings.iter().enumerate() {
-            let down = self.ctx.faults.manager_down;
-            if down.is_some_and(|d| d.junction == j && d.is_down(t)) {
+            let id = self.harness.spec.network.junctions.get(j).map(|jn| jn.id);
+            if id.is_some_and(|id| self.ctx.faults.manager_down_at(id, t)) {
                 let _ = out.send(Vec::new());
                 continue;
             }
@@ -1178,12 +1177,14 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
                     self.monitor.granted(junction, &granted);
                     self.tally.grants += granted.len() as u64;
                     let t = k as f64 * self.ctx.lim.h;
-                    if self
-                        .ctx
-                        .faults
-                        .manager_down
-                        .is_some_and(|d| d.junction == junction && d.is_down(t))
-                    {
+                    let id = self
+                        .harness
+                        .spec
+                        .network
+                        .junctions
+                        .get(junction)
+                        .map(|jn| jn.id);
+                    if id.is_some_and(|id| self.ctx.faults.manager_down_at(id, t)) {
                         self.tally.grants_while_down += granted.len() as u64;
                     }
                     if !granted.is_empty() {

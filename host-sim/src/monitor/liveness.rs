@@ -43,6 +43,13 @@ pub enum WaitsOn {
     },
     /// The end of its road: a dead end, or a junction's edge of A_C it may not pass yet.
     RoadEnd,
+    /// Nothing within reach stops it: its own planner holds it (a certified fallback, or a
+    /// plan that waits on what it heard), and `nearest` is the nearest vehicle ahead on
+    /// its lane or path, at any distance, if there is one.
+    Planner {
+        /// The nearest vehicle ahead of it, however far.
+        nearest: Option<u16>,
+    },
 }
 
 impl WaitsOn {
@@ -53,6 +60,7 @@ impl WaitsOn {
             WaitsOn::LaneChange { ids } => ids.clone(),
             WaitsOn::Grant { holders, .. } => holders.clone(),
             WaitsOn::RoadEnd => Vec::new(),
+            WaitsOn::Planner { nearest } => nearest.iter().copied().collect(),
         }
     }
 }
@@ -73,6 +81,14 @@ impl std::fmt::Display for WaitsOn {
                 )
             }
             WaitsOn::RoadEnd => write!(f, "the end of its road"),
+            WaitsOn::Planner { nearest: Some(id) } => write!(
+                f,
+                "its own planner: nothing within reach stops it (vehicle {id} is the nearest ahead)"
+            ),
+            WaitsOn::Planner { nearest: None } => write!(
+                f,
+                "its own planner: nothing within reach stops it, and no vehicle is ahead"
+            ),
         }
     }
 }

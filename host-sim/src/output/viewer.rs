@@ -104,7 +104,7 @@ impl Viewer {
     /// Takes one trace row (every [`SAMPLE_S`] of a vehicle's rows are kept).
     pub fn add(&mut self, r: &TraceRow) {
         let step = (r.t / self.h).round() as u64;
-        if step % self.every != 0 || !(r.x.is_finite() && r.y.is_finite()) {
+        if !(step.is_multiple_of(self.every) && r.x.is_finite() && r.y.is_finite()) {
             return;
         }
         let k = step / self.every;
@@ -162,7 +162,7 @@ impl Viewer {
                 .samples
                 .iter()
                 .enumerate()
-                .filter(|(i, _)| (t.k0 + *i as u64) % thin == 0)
+                .filter(|(i, _)| (t.k0 + *i as u64).is_multiple_of(thin))
                 .map(|(_, s)| s)
                 .collect();
             if kept.is_empty() {

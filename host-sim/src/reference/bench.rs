@@ -355,7 +355,7 @@ pub fn warm<const N: usize>(problems: usize, seed: u64, reps: usize) -> BenchRes
     let mut step = 0u64;
     while samples.len() < problems && step < 100 * problems as u64 {
         step += 1;
-        if step % 150 == 0 {
+        if step.is_multiple_of(150) {
             accel = r.random_range(p.a_min()..p.a_max());
         }
         let gap = (xl - x - p.length() - p.d0()).min(free_road_gap(&p, N));

@@ -3,7 +3,7 @@
 //! position along the inlet; a network of one junction and no segment.
 
 use super::common::{Header, RawHeader, SensingToml};
-use super::error::{Errors, ScenarioError};
+use super::error::{Errors, FieldError, ScenarioError};
 use crate::bus::Faults;
 use crate::monitor::Limits;
 use crate::world::junction::MANAGER_CAP;
@@ -253,54 +253,76 @@ pub struct JunctionScenario {
     pub placements: Vec<Placement>,
 }
 
-/// Why a layout is refused, in words.
-pub fn layout_error_text(e: LayoutError<f64>, p: &Params<f64>) -> String {
+/// Why a layout is refused: the field at fault and what is wrong, in words.
+pub fn layout_error_text(e: LayoutError<f64>, p: &Params<f64>) -> FieldError {
     match e {
-        LayoutError::NotPositive => "every length must be positive and finite".to_string(),
-        LayoutError::LanesDoNotFit => format!(
-            "half_size must hold the inlet lanes (lanes × {LANE_WIDTH_M} m), and lanes be 1 to {}",
-            planner_core::intersection::MAX_LANES
-        ),
-        LayoutError::TurnTooTight { radius } => format!(
-            "the right turn's radius a − (lanes − ½) Wl = {radius:.2} m is below ρmin = {} m",
-            p.rho_min()
-        ),
-        LayoutError::NotSpacious { margin, needed } => format!(
-            "violates the Spaciousness Assumption (27): A_C is {margin:.2} m from A_S, needs \
-             at least dS(vImax) + vImax h = {needed:.2} m"
-        ),
-        LayoutError::InletShorterThanCommRegion => {
-            "inlet_length must reach back to the edge of A_C (≥ comm_margin)".to_string()
+        LayoutError::NotPositive => {
+            FieldError::new("half_size", "every length must be positive and finite")
         }
-        LayoutError::OutletShorterThanCommRegion { length, needed } => format!(
-            "outlet_length {length} m ends inside A_C: vehicles leave the intersection once \
-             they are on their outlet outside A_C, so it must be at least comm_margin + L = \
-             {needed:.2} m"
+        LayoutError::LanesDoNotFit => FieldError::new(
+            "half_size",
+            format!("must hold the inlet lanes (lanes × {LANE_WIDTH_M} m) and the outlet lanes"),
+        ),
+        LayoutError::TurnTooTight { radius } => FieldError::new(
+            "half_size",
+            format!(
+                "the right turn's radius a − (lanes − ½) Wl = {radius:.2} m is below ρmin = {} m",
+                p.rho_min()
+            ),
+        ),
+        LayoutError::NotSpacious { margin, needed } => FieldError::new(
+            "comm_margin",
+            format!(
+                "violates the Spaciousness Assumption (27): A_C is {margin:.2} m from A_S, \
+                 needs at least dS(vImax) + vImax h = {needed:.2} m"
+            ),
+        ),
+        LayoutError::InletShorterThanCommRegion => FieldError::new(
+            "inlet_length",
+            "must reach back to the edge of A_C (≥ comm_margin)",
+        ),
+        LayoutError::OutletShorterThanCommRegion { length, needed } => FieldError::new(
+            "outlet_length",
+            format!(
+                "{length} m ends inside A_C: vehicles leave the intersection once they are on \
+                 their outlet outside A_C, so it must be at least comm_margin + L = {needed:.2} m"
+            ),
         ),
     }
 }
 
-/// The layout of `lt`, or why not.
-pub fn build_layout(lt: &LayoutToml) -> Result<Layout<f64>, String> {
+/// The layout of `lt`, or which field is wrong and why.
+pub fn build_layout(lt: &LayoutToml) -> Result<Layout<f64>, FieldError> {
     let p = Params::<f64>::table_i();
     if !(lt.v_limit > 0.0 && lt.v_limit <= p.v_max()) {
-        return Err(format!(
-            "v_limit must be in (0, {}], got {}",
-            p.v_max(),
-            lt.v_limit
+        return Err(FieldError::new(
+            "v_limit",
+            format!("must be in (0, {}], got {}", p.v_max(), lt.v_limit),
+        ));
+    }
+    let max_lanes = planner_core::intersection::MAX_LANES;
+    if !(1..=max_lanes).contains(&lt.lanes) {
+        return Err(FieldError::new(
+            "lanes",
+            format!("must be 1 to {max_lanes}, got {}", lt.lanes),
         ));
     }
     let lengths = [
-        lt.half_size,
-        lt.comm_margin,
-        lt.inlet_length,
-        lt.outlet_length,
+        ("half_size", lt.half_size),
+        ("comm_margin", lt.comm_margin),
+        ("inlet_length", lt.inlet_length),
+        ("outlet_length", lt.outlet_length),
     ];
-    if !lengths.iter().all(|&x| super::common::coord_ok(x)) {
-        return Err(format!(
-            "lengths must be finite and within {} m",
-            super::common::MAX_COORD_M
-        ));
+    for (field, x) in lengths {
+        if !(x > 0.0 && super::common::coord_ok(x)) {
+            return Err(FieldError::new(
+                field,
+                format!(
+                    "must be positive, finite and within {} m, got {x}",
+                    super::common::MAX_COORD_M
+                ),
+            ));
+        }
     }
     let spec = LayoutSpec {
         half_size: lt.half_size,
@@ -319,10 +341,13 @@ pub fn build_layout(lt: &LayoutToml) -> Result<Layout<f64>, String> {
     let lim = crate::monitor::Limits::table_i();
     let handover = lim.safe_distance(lt.v_limit) + lt.v_limit * lim.h + 0.5 * LENGTH_M + lim.d0;
     if !(lt.comm_margin >= handover) {
-        return Err(format!(
-            "comm_margin {:.2} m is too short to hand a vehicle over inside A_C and still \
-             stop before A_S: at {} m/s it needs dS(v) + v h + L/2 + d0 = {handover:.2} m",
-            lt.comm_margin, lt.v_limit
+        return Err(FieldError::new(
+            "comm_margin",
+            format!(
+                "{:.2} m is too short to hand a vehicle over inside A_C and still stop before \
+                 A_S: at {} m/s it needs dS(v) + v h + L/2 + d0 = {handover:.2} m",
+                lt.comm_margin, lt.v_limit
+            ),
         ));
     }
     Ok(layout)
@@ -344,10 +369,12 @@ impl JunctionScenario {
         let span = raw.intersection.span();
         let lt = raw.intersection.into_inner();
         let layout =
-            build_layout(&lt).map_err(|m| e.at(Some(span), format!("intersection: {m}")))?;
+            build_layout(&lt).map_err(|m| e.field(Some(span.clone()), "intersection", &m))?;
         if raw.vehicles.is_empty() || raw.vehicles.len() > MANAGER_CAP {
+            // The first vehicle too many, or the intersection none is at.
+            let at = raw.vehicles.get(MANAGER_CAP).map_or(span, Spanned::span);
             return Err(e.at(
-                None,
+                Some(at),
                 format!("1 to {MANAGER_CAP} vehicles, got {}", raw.vehicles.len()),
             ));
         }
@@ -396,7 +423,7 @@ impl JunctionScenario {
                 deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
             },
             algorithm,
-            layout: build_layout(&lt)?,
+            layout: build_layout(&lt).map_err(|m| m.to_string())?,
             layout_toml: lt,
             placements,
         })

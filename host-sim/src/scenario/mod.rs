@@ -64,22 +64,58 @@ pub fn parse(text: &str, path: &Path) -> Result<WorldSpec, ScenarioError> {
         Format::Junction => junction::JunctionScenario::parse(text, path).map(|s| s.world()),
         Format::Network => network::NetworkScenario::parse(text, path).map(|s| s.world()),
     }?;
-    faults_fit(&spec).map_err(|problem| ScenarioError {
-        file: path.to_path_buf(),
-        line: None,
-        problem,
-    })?;
+    faults_fit(&spec, &error::Errors::new(text, path))?;
     Ok(spec)
 }
 
-/// The faults name what the world has: a manager that goes down is one of its junctions.
-fn faults_fit(spec: &WorldSpec) -> Result<(), String> {
-    let junctions = spec.network.junctions.len();
-    match spec.faults.manager_down {
-        Some(d) if d.junction >= junctions => Err(format!(
-            "faults.manager_down.junction = {}: the scenario has {junctions} junction(s)",
-            d.junction
-        )),
-        _ => Ok(()),
+/// The faults name what the world has: a manager that goes down is one of its junctions
+/// (by id), a vehicle that goes silent or lies is one of its vehicles — or, in a world
+/// with arrivals, an id the arrivals can be given. A fault on nothing would pass for a
+/// fault survived.
+fn faults_fit(spec: &WorldSpec, e: &error::Errors<'_>) -> Result<(), ScenarioError> {
+    if let Some(d) = spec.faults.manager_down {
+        if !spec.network.junctions.iter().any(|j| j.id == d.junction) {
+            let ids: Vec<String> = spec
+                .network
+                .junctions
+                .iter()
+                .map(|j| j.id.to_string())
+                .collect();
+            let ids = if ids.is_empty() {
+                "none".to_string()
+            } else {
+                ids.join(", ")
+            };
+            return Err(e.key(
+                "faults.manager_down",
+                "junction",
+                format!(
+                    "faults.manager_down.junction = {}: no junction has that id (the scenario's: {ids})",
+                    d.junction
+                ),
+            ));
+        }
     }
+    let arrivals = matches!(spec.arrivals, crate::world::Arrivals::Poisson(_));
+    let exists = |id: u16| {
+        spec.vehicles.iter().any(|v| v.id == id) || (arrivals && crate::bus::is_vehicle_id(id))
+    };
+    let named = [
+        ("faults.silent", spec.faults.silent.map(|s| s.id)),
+        ("faults.liar", spec.faults.liar.map(|l| l.id)),
+    ];
+    for (table, id) in named {
+        match id {
+            Some(id) if !exists(id) => {
+                let which = if arrivals {
+                    "neither a vehicle of the scenario nor an id arrivals can have (1 to 65279)"
+                } else {
+                    "no vehicle of the scenario has that id"
+                };
+                return Err(e.key(table, "id", format!("{table}.id = {id}: {which}")));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }

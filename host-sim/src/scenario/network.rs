@@ -435,6 +435,17 @@ fn grid(g: &GridToml) -> Result<Tables, String> {
     Ok((juncs, segs))
 }
 
+/// The shortest `block_m` a `[grid]` of `lanes` lanes at the default communication
+/// margin and speed limit takes (what `check_blocks` requires between junctions).
+pub fn min_block_m(lanes: u8) -> f64 {
+    let a = half_size_for(lanes);
+    let margin = comm();
+    2.0 * a
+        + (margin + LENGTH_M)
+        + margin
+        + f64::from(lanes.saturating_sub(1)) * change_distance(limit())
+}
+
 /// The least A_S half-size for `lanes` lanes: the right turn's radius a − (n − ½) Wl at
 /// least ρmin, and never below the SPEC §8 12 m.
 fn half_size_for(lanes: u8) -> f64 {
@@ -476,8 +487,8 @@ fn build(
             v_limit: j.v_limit,
             lanes: j.lanes,
         };
-        let layout =
-            build_layout(&lt).map_err(|m| e.at(at(span), format!("intersection {}: {m}", j.id)))?;
+        let layout = build_layout(&lt)
+            .map_err(|m| e.field(at(span), &format!("intersection {}", j.id), &m))?;
         net.junctions.push(Junction {
             id: j.id,
             centre: (j.x, j.y),

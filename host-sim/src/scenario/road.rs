@@ -165,13 +165,17 @@ impl RoadScenario {
         .validate(&e)?;
         let road_span = raw.road.span();
         let road = raw.road.into_inner();
-        check_road(&road).map_err(|p| e.at(Some(road_span), p))?;
+        check_road(&road).map_err(|p| e.at(Some(road_span.clone()), p))?;
         if raw.vehicles.is_empty() {
-            return Err(e.at(None, "a scenario needs at least one [[vehicle]]"));
+            // Nothing to point at but the road the vehicles are missing from.
+            return Err(e.at(Some(road_span), "a scenario needs at least one [[vehicle]]"));
         }
-        if raw.vehicles.len() > MAX_VEHICLES {
+        if let Some(extra) = raw.vehicles.get(MAX_VEHICLES) {
             let n = raw.vehicles.len();
-            return Err(e.at(None, format!("at most {MAX_VEHICLES} vehicles, got {n}")));
+            return Err(e.at(
+                Some(extra.span()),
+                format!("at most {MAX_VEHICLES} vehicles, got {n}"),
+            ));
         }
         let mut vehicles: Vec<(RoadVehicle, Range<usize>)> = Vec::new();
         for sv in raw.vehicles {

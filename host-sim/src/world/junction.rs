@@ -38,6 +38,8 @@ pub use crate::bus::manager_node;
 pub struct ManagerNode {
     /// The junction (index).
     pub junction: usize,
+    /// The junction's id in the scenario (what `[faults.manager_down]` names).
+    pub junction_id: u16,
     /// The manager.
     pub manager: AnyManager<MANAGER_CAP>,
     /// Its layout (a restart builds the new manager on it).
@@ -52,19 +54,20 @@ pub struct ManagerNode {
 }
 
 impl ManagerNode {
-    /// The manager of junction `junction` with `layout`, running `algorithm` in
+    /// The manager of the network's junction `junction`, `jn`, running its algorithm in
     /// `precision`, granting leases on the terms `lease` (see [`lease`]).
     pub fn new(
         junction: usize,
-        layout: Layout<f64>,
-        algorithm: planner_core::crossing::Algorithm,
+        jn: &crate::world::network::Junction,
         (lease, precision): (Lease, Precision),
     ) -> Self {
-        let mut manager = AnyManager::new(&layout, algorithm, precision);
+        let layout = jn.layout.clone();
+        let mut manager = AnyManager::new(&layout, jn.algorithm, precision);
         // A zero notification bound or length is refused: keep the defaults then.
         let _ = manager.set_lease(lease);
         Self {
             junction,
+            junction_id: jn.id,
             manager,
             layout,
             restarted: false,
@@ -122,7 +125,9 @@ impl ManagerNode {
     /// down (what it hears is lost and it grants nothing); at its first period back it
     /// restarts, remembering nothing but the bus's resolution.
     pub fn is_up(&mut self, faults: &Faults, t: f64) -> bool {
-        let down = faults.manager_down.filter(|d| d.junction == self.junction);
+        let down = faults
+            .manager_down
+            .filter(|d| d.junction == self.junction_id);
         if down.is_some_and(|d| d.is_down(t)) {
             return false;
         }

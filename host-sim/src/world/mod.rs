@@ -361,8 +361,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             .enumerate()
             .map(|(j, jn)| {
                 let lease = junction::lease(setup.notify, lim.h);
-                let mut m =
-                    ManagerNode::new(j, jn.layout.clone(), jn.algorithm, (lease, setup.precision));
+                let mut m = ManagerNode::new(j, jn, (lease, setup.precision));
                 // A world with sensors has them at its junctions too.
                 let _ = m.set_roadside(spec.sensing.map(|s| s.position_error_m));
                 m

@@ -22,7 +22,7 @@ use crate::reference::ClarabelSolver;
 use planner_core::crossing::{CrossingPlanner, CrossingReport};
 use planner_core::intersection::Layout;
 use planner_core::intersection::Movement;
-use planner_core::lane_change::{LaneEvent, StartBlock};
+use planner_core::lane_change::LaneEvent;
 use planner_core::{
     Command, CostWeights, FallbackReason, InputError, Instant, IpmSolver, LaneCommand,
     LaneInputError, LaneObservation, LanePlanner, Method, Other, Params, ParamsSpec, Planner, Pose,
@@ -93,20 +93,6 @@ impl<const N: usize> LaneBrain<N> {
         match self {
             Self::F64(p) => p.step(obs),
             Self::F32(p) => p.step(obs),
-        }
-    }
-
-    fn beta(&self) -> Option<u8> {
-        match self {
-            Self::F64(p) => p.beta(),
-            Self::F32(p) => p.beta(),
-        }
-    }
-
-    fn start_check(&mut self, obs: &LaneObservation<'_, f64>, m: u8) -> Result<(), StartBlock> {
-        match self {
-            Self::F64(p) => p.start_check(obs, m),
-            Self::F32(p) => p.start_check(obs, m),
         }
     }
 
@@ -869,17 +855,6 @@ impl<const N: usize> Vehicle<N> {
             return (0.0, 0.0);
         };
         counters.planner_steps += 1;
-        if let Some(m) = planner.beta() {
-            // The cheap test first: the environment is read every 50th step only.
-            if ctx.steps_done % 50 == 0 && std::env::var_os("HOST_SIM_DEBUG").is_some() {
-                eprintln!(
-                    "t={:.2} id={} wants lane {m}: {:?}",
-                    ctx.t,
-                    self.id,
-                    planner.start_check(&obs, m)
-                );
-            }
-        }
         match planner.step(&obs) {
             Ok(c) => {
                 self.at = At::Lane {

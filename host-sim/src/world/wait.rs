@@ -52,7 +52,8 @@ pub fn watch(
 /// count as what it waits on.
 pub const NEAR_M: f64 = 5.0;
 
-/// What stopped vehicle `v` waits on, among `all`.
+/// What stopped vehicle `v` waits on, among `all`: never nothing — when nothing within
+/// [`NEAR_M`] stops it, its own planner does, and the nearest vehicle ahead is named.
 pub fn waits_on(
     v: &VehicleTruth,
     all: &[VehicleTruth],
@@ -60,12 +61,55 @@ pub fn waits_on(
     holders: &Holders<'_>,
     lim: &Limits,
 ) -> Vec<WaitsOn> {
-    match v.at {
+    let out = match v.at {
         At::Lane { .. } => on_segment(v, all, net, lim),
         At::Crossing { junction, route, s } => {
             at_junction(v, all, net, holders, junction, route, s)
         }
+    };
+    if out.is_empty() {
+        return vec![WaitsOn::Planner {
+            nearest: nearest_ahead(v, all, net),
+        }];
     }
+    out
+}
+
+/// The nearest vehicle ahead of `v` on its lane (on a segment) or on its route's path
+/// (in a junction), however far; `None` if there is none.
+fn nearest_ahead(v: &VehicleTruth, all: &[VehicleTruth], net: &Network) -> Option<u16> {
+    let ahead = |o: &VehicleTruth| -> Option<f64> {
+        match (v.at, o.at) {
+            (
+                At::Lane { seg, x, lane, .. },
+                At::Lane {
+                    seg: s,
+                    x: ox,
+                    lane: l,
+                    alpha,
+                    ..
+                },
+            ) => (s == seg && (l == lane || alpha == Some(lane)) && ox > x).then_some(ox - x),
+            (At::Lane { seg, x, lane, .. }, At::Crossing { junction, route, s }) => net
+                .on_segment(junction, route, s)
+                .filter(|&(sg, ox, l)| sg == seg && l == lane && ox > x)
+                .map(|(_, ox, _)| ox - x),
+            (
+                At::Crossing { junction, route, s },
+                At::Crossing {
+                    junction: j,
+                    route: r,
+                    s: os,
+                },
+            ) => (j == junction && r == route && os > s).then_some(os - s),
+            _ => None,
+        }
+    };
+    all.iter()
+        .filter(|o| o.id != v.id)
+        .filter_map(|o| ahead(o).map(|d| (o.id, d)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(id, _)| id)
 }
 
 /// On a segment: the vehicle ahead in its lane, the vehicles next to it in the lane it
@@ -196,4 +240,52 @@ fn at_junction(
         });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stopped(id: u16, x: f64, lane: u8) -> VehicleTruth {
+        VehicleTruth {
+            id,
+            at: At::Lane {
+                seg: 0,
+                x,
+                y: 0.0,
+                theta: 0.0,
+                lane,
+                alpha: None,
+                beta: None,
+            },
+            v: 0.0,
+            v_before: 0.0,
+            planner: true,
+            unmet: true,
+            target_lane: lane,
+        }
+    }
+
+    /// A deadlock report never says a vehicle waits on nothing: one with nothing within
+    /// reach waits on its own planner, and the nearest vehicle ahead is named.
+    #[test]
+    fn a_stopped_vehicle_always_waits_on_something() {
+        let net = Network::road(2, None, 27.8);
+        let lim = Limits::table_i();
+        let none = |_: usize| Vec::new();
+        let far = [stopped(1, 0.0, 0), stopped(2, 80.0, 0), stopped(3, 40.0, 1)];
+        assert_eq!(
+            waits_on(&far[0], &far, &net, &none, &lim),
+            [WaitsOn::Planner { nearest: Some(2) }]
+        );
+        assert_eq!(
+            waits_on(&far[1], &far, &net, &none, &lim),
+            [WaitsOn::Planner { nearest: None }]
+        );
+        let near = [stopped(1, 0.0, 0), stopped(2, 6.0, 0)];
+        assert_eq!(
+            waits_on(&near[0], &near, &net, &none, &lim),
+            [WaitsOn::Vehicle { id: 2 }]
+        );
+    }
 }
