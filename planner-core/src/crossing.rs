@@ -468,13 +468,11 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             }
         }
         if s - half >= exit {
-            // On its outlet track: no longer in C^I_t (25) — unless a roadside sensor
-            // measures it still inside (it is then taken off by [`Manager::measure`]).
-            let confirmed = |e: &Entry<F>| {
-                self.roadside
-                    .is_none_or(|err| e.measured.is_some_and(|m| m - err + entry - half >= exit))
-            };
-            if let Some(i) = idx.filter(|&i| self.entries.get(i).is_some_and(confirmed)) {
+            // On its outlet track: no longer in C^I_t (25) — on its word alone only where
+            // there is no roadside sensor; with one, [`Manager::measure`] takes it off
+            // when the sensor sees its rear past A_S (a measurement that showed that
+            // already took it off, so no measured entry is still here to confirm).
+            if let Some(i) = idx.filter(|_| self.roadside.is_none()) {
                 self.entries.swap_remove(i);
                 self.crossed = self.crossed.saturating_add(1);
                 return Ok(());

@@ -594,6 +594,7 @@ fn a_roadside_measurement_is_judged_at_its_exact_bounds() {
         let mut m = manager(&l, Algorithm::Fifo);
         m.set_roadside_sensor(Some(err)).unwrap();
         m.set_position_resolution(step).unwrap();
+        m.set_vehicle_params(vehicles());
         let r = CrossingReport {
             s: report,
             ..at(&l, 1, a, 20.0, 5.0)
@@ -604,7 +605,10 @@ fn a_roadside_measurement_is_judged_at_its_exact_bounds() {
     let report = entry - HALF - 20.0;
     let progress = fresh(report).entries()[0].progress;
     let slack = err + PLAUSIBLE_POSITION_M + step / 2.0;
-    let lag = Lease::default().notify.as_secs::<f64>() * Params::<f64>::table_i().v_max();
+    // vmax 25 m/s over the 10 ms bound: 0.25 m, so both bounds are binary fractions that
+    // a difference of positions can equal exactly (a tie is judged as the docs say).
+    let lag = Lease::default().notify.as_secs::<f64>() * vehicles().v_max();
+    assert_eq!(slack + lag, 1.125);
     // The last measured centres the bounds allow, as the manager computes (it subtracts
     // `entry` first): the lowest not more than `slack` behind the progress, the highest
     // not more than `slack + lag` ahead of it.
@@ -634,8 +638,8 @@ fn a_roadside_measurement_is_judged_at_its_exact_bounds() {
         assert_eq!(got.is_ok(), ok, "measured at {s}: {got:?}");
         assert_eq!(entry_of(&m).suspect, !ok, "{s}");
     }
-    // The bounds are the documented ones, to a micrometre.
-    assert!((behind(low) - slack).abs() < 1e-6 && (ahead(high) - slack - lag).abs() < 1e-6);
+    // The bounds are the documented ones, exactly: a tie is allowed.
+    assert_eq!((behind(low), ahead(high)), (slack, slack + lag));
     // Leaving: reported well past A_S, measured with its rear at the end of A_S.
     let gone = exit + HALF + 0.5;
     for (rear, leaves) in [(0.0, true), (-0.01, false), (0.01, true)] {
@@ -646,7 +650,7 @@ fn a_roadside_measurement_is_judged_at_its_exact_bounds() {
         };
         m.forget(1);
         m.observe(&at(&l, 1, a, -1.0, 5.0), secs(0.0)).unwrap();
-        m.observe(&r, secs(1.0)).unwrap();
+        m.observe(&r, secs(2.0)).unwrap();
         assert_eq!(m.entries().len(), 1, "not off on its word");
         let mut s = exit + HALF + err + rear;
         if rear == 0.0 {
@@ -693,4 +697,11 @@ fn edge(start: f64, ok: impl Fn(f64) -> bool, next: fn(f64) -> f64) -> f64 {
         }
     }
     panic!("no edge near {start}");
+}
+
+/// Table I with vmax 25 m/s.
+fn vehicles() -> Params<f64> {
+    let mut spec = *Params::<f64>::table_i().spec();
+    spec.v_max = 25.0;
+    Params::new(spec).unwrap()
 }

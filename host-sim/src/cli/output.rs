@@ -14,6 +14,9 @@ pub const EXIT_BAD_INPUT: u8 = 2;
 pub const EXIT_NOT_LIVE: u8 = 3;
 /// The CAN bus failed (`--bus`).
 pub const EXIT_BUS: u8 = 4;
+/// A run that started failed inside the simulator: a bug, never the input's fault (the
+/// input was checked before anything ran), reported with what failed.
+pub const EXIT_INTERNAL: u8 = 5;
 
 /// Prints `value` as one line of JSON, its floats rounded to 12 significant digits (a sum
 /// of 0.01 s steps is 19.84, not 19.840000000000302).

@@ -1,7 +1,9 @@
 //! `host-sim run FILE`: a scenario — a road, an intersection or a network — every vehicle
 //! its own planner, talking only over the bus; its trace, plot and viewer page.
 
-use super::output::{bad_input, check_plot, code, commit, print_json, staged, EXIT_BUS};
+use super::output::{
+    bad_input, check_plot, code, commit, print_json, staged, EXIT_BUS, EXIT_INTERNAL,
+};
 use host_sim::output::plot::PlotData;
 use host_sim::output::staged::Staged;
 use host_sim::output::trace::TraceWriter;
@@ -171,7 +173,15 @@ fn execute(
             _ => in_process::<20>(spec, a.solver, a.seed, &mut sinks),
         }
         .map(|s| (s, None))
-        .map_err(|e| bad_input(format!("bus: {e}")))
+        .map_err(|e| {
+            // Everything the world could refuse was refused before it started: a failure
+            // now is the simulator's, and says so (exit 5, not bad input).
+            eprintln!(
+                "error: internal: the run stopped at an in-process bus error: {e} \
+                 (a bug: the scenario passed every check; please report it with the file)"
+            );
+            ExitCode::from(EXIT_INTERNAL)
+        })
     } else {
         let link = super::fleet::Link { keys, fd: a.can_fd };
         super::fleet::run(&a.bus, spec, (a.solver, a.seed), link, &mut |r| {
