@@ -176,6 +176,11 @@ fn the_page_parses_into_every_section() {
         "scale --compare",
         "scale --sweep",
         "bench-planner",
+        "outages, liars",
+        "ids",
+        "layouts",
+        "grids",
+        "worlds",
     ] {
         assert!(d.get(s).is_some_and(|k| k.len() >= 3), "section {s}");
     }
@@ -225,6 +230,24 @@ fn sweep_outputs_match_the_page() {
     );
     check("deadends", &["deadends", "--cases", "2"], &[]);
     check("crossings", &["crossings", "--cases", "1"], &[]);
+    check("outages, liars", &["outages", "--cases", "1"], &[]);
+    check("outages, liars", &["liars", "--cases", "2"], &[]);
+    check("ids", &["ids", "--cases", "1"], &[]);
+    check("layouts", &["layouts", "--cases", "3"], &[]);
+    check("grids", &["grids", "--cases", "1", "--duration", "10"], &[]);
+    check(
+        "worlds",
+        &[
+            "worlds",
+            "--vehicles",
+            "50",
+            "--duration",
+            "1",
+            "--delay",
+            "1",
+        ],
+        &[],
+    );
 }
 
 #[test]

@@ -659,3 +659,45 @@ fn a_rotated_rectangle_spans_what_its_corners_span() {
         );
     }
 }
+
+/// The swept collision count is the count over every pair: random crowds (headings,
+/// lengths and widths of their own, some touching exactly, a few far away), each counted
+/// both ways.
+#[test]
+fn the_swept_collision_count_is_every_pairs() {
+    use rand::{Rng, SeedableRng};
+    let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let mut total = 0;
+    for case in 0..200 {
+        let n = r.random_range(2..120);
+        let span = r.random_range(5.0..200.0);
+        let mut all: Vec<Truth> = (0..n)
+            .map(|_| Truth {
+                theta: r.random_range(-1.6..1.6),
+                length: r.random_range(2.0..12.0),
+                width: r.random_range(1.0..2.6),
+                ..car(r.random_range(0.0..span), r.random_range(0.0..10.0), 0.0)
+            })
+            .collect();
+        // Bumper to bumper exactly, and one far off.
+        let a = all[0];
+        all.push(Truth {
+            x: a.x + a.length,
+            ..a
+        });
+        all.push(Truth { x: 1e5, ..a });
+        let mut every = 0;
+        for (i, a) in all.iter().enumerate() {
+            for b in &all[i + 1..] {
+                every += u64::from(host_sim::monitor::rectangles_overlap(a, b));
+            }
+        }
+        assert_eq!(
+            host_sim::monitor::road::collisions(&all),
+            every,
+            "case {case}"
+        );
+        total += every;
+    }
+    assert!(total > 1000, "the crowds collide: {total} pairs");
+}

@@ -106,3 +106,29 @@ fn random_grids_come_out_clean() {
     }
     assert!(n(&v, "vehicles") > 0, "{v}");
 }
+
+/// A view holds what matters, however many vehicles the world holds: worlds of 100 and
+/// 400 vehicles (past the 258 at which every vehicle once fell back) run with no blind
+/// step, no fallback at all, no collision; a grid asked for more vehicles than it holds
+/// is refused, never written short.
+#[test]
+fn worlds_of_any_size_have_no_blind_step() {
+    use host_sim::experiments::worlds::{grid_fleet, worlds};
+    let r = worlds(&[100, 400], 2.0, None).expect("the worlds run");
+    assert_eq!(r.worlds.len(), 2);
+    for w in &r.worlds {
+        assert_eq!(
+            (
+                w.blind_steps,
+                w.fallback_steps,
+                w.collisions,
+                w.invariant_violations
+            ),
+            (0, 0, 0, 0),
+            "{w:?}"
+        );
+        assert_eq!(w.planner_steps, w.vehicles as u64 * 200, "{w:?}");
+    }
+    let err = grid_fleet((2, 2), 100_000, 300.0, 1.0).expect_err("too many");
+    assert!(err.contains("holds"), "{err}");
+}

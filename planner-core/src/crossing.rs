@@ -484,11 +484,14 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         let to_line = entry - (s + half);
         // As far forward and as fast as the rounding allows: can it still stop before the
         // line (its front not past it)?
-        let measured_front = idx
+        // Its centre as far forward as its report allows, or as the roadside measurement
+        // (plus its error) does, if that is further.
+        let reported = r.s + self.half_step;
+        let furthest = idx
             .and_then(|i| self.entries.get(i))
             .and_then(|e| Some(e.measured? + entry + self.roadside?))
-            .unwrap_or(r.s + self.half_step);
-        let front_gap = entry - (measured_front.max(r.s + self.half_step) + half);
+            .map_or(reported, |m| m.max(reported));
+        let front_gap = entry - (furthest + half);
         let v_hi = r.v + self.half_speed_step;
         let committed = to_line < F::ZERO || front_gap < safety::d_s(&self.vehicles, v_hi);
         let stopped =

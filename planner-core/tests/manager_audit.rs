@@ -705,3 +705,46 @@ fn vehicles() -> Params<f64> {
     spec.v_max = 25.0;
     Params::new(spec).unwrap()
 }
+
+/// With a roadside sensor, a vehicle is judged committed (too close to stop before its
+/// line) where it may be by the measurement — up to the sensor's error ahead of it — not
+/// only where it reports itself: a report just beyond dS(v) of the line, measured where
+/// it reports, is committed once the error takes it within dS(v), and not without the
+/// sensor.
+#[test]
+fn a_measurement_within_its_error_of_the_line_commits_the_vehicle() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let v = 10.0;
+    let ds = planner_core::safety::d_s(&Params::<f64>::table_i(), v);
+    let err = 1.0;
+    for sensor in [false, true] {
+        let mut m = manager(&l, Algorithm::Fifo);
+        if sensor {
+            m.set_roadside_sensor(Some(err)).unwrap();
+        }
+        let r = at(&l, 1, a, ds + 0.6, v);
+        m.observe(&r, secs(0.0)).unwrap();
+        assert!(!entry(&m, 1).committed, "its report alone: it can stop");
+        m.measure(1, r.s).unwrap();
+        m.observe(&r, secs(0.01)).unwrap();
+        assert_eq!(entry(&m, 1).committed, sensor, "sensor {sensor}");
+    }
+}
+
+/// Reports rounded to the bus's position step are taken as far forward as the rounding
+/// allows when judging commitment: a front reported 0.1 m beyond dS(v) of the line on a
+/// bus of 0.25 m steps may be 0.025 m within it.
+#[test]
+fn a_rounded_report_commits_where_the_rounding_allows() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let v = 10.0;
+    let ds = planner_core::safety::d_s(&Params::<f64>::table_i(), v);
+    for (step, committed) in [(0.0, false), (0.25, true)] {
+        let mut m = manager(&l, Algorithm::Fifo);
+        m.set_position_resolution(step).unwrap();
+        m.observe(&at(&l, 1, a, ds + 0.1, v), secs(0.0)).unwrap();
+        assert_eq!(entry(&m, 1).committed, committed, "step {step}");
+    }
+}

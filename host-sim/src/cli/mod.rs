@@ -160,6 +160,10 @@ enum Command {
     /// demand to saturation and past): no collision, no deadlock (each one reported with
     /// whom every vehicle waits on).
     Grids(sweep::GridsArgs),
+    /// One world of each size (vehicles placed on the smallest grid that holds them): the
+    /// realtime factor, fallbacks and blind steps (a view that overflowed); with
+    /// `--delay`, each again on a slow bus, its cost as a ratio to the clean bus's.
+    Worlds(sweep::WorldsArgs),
     /// Combines the shards of one sweep (each run with `--shard I/N`) into exactly the
     /// unsharded result: counts add, maxima take the max, means are weighted by cases.
     Merge {
@@ -261,6 +265,7 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Ids(a) => sweep::red_team(a, "ids"),
         Command::Layouts(a) => sweep::red_team(a, "layouts"),
         Command::Grids(a) => sweep::grids(a),
+        Command::Worlds(a) => sweep::worlds(a),
         Command::Merge { files, json } => sweep::merge(&files, json),
         Command::Experiment(e) => experiment::run(e),
         Command::Scale(a) => bench::scale(a),

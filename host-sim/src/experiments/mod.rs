@@ -18,3 +18,4 @@ pub mod shard;
 pub mod sweep;
 pub mod throughput;
 pub mod traffic;
+pub mod worlds;

@@ -217,6 +217,8 @@ pub fn junction_faults(
     );
     totals.unfinished = live.unfinished;
     totals.deadlocks = live.deadlocks;
+    // Cases drawn (each run under every algorithm: `runs`), as the other sweeps count.
+    totals.cases = cases;
     let failed = |c: &&Case| {
         let s = &c.summary;
         let not_live = c.label != Algorithm::Concurrent.name()

@@ -169,6 +169,9 @@ pub struct View {
     suspects: Vec<u16>,
     /// Per record, how far (m) its vehicle was from this one when it was last taken.
     heard_from: Vec<f64>,
+    /// Per record, its vehicle's id: what every message is looked up by, kept apart so
+    /// the lookup reads two bytes a record (a view of a dense world holds hundreds).
+    ids: Vec<u16>,
     /// Beyond this distance (m) a vehicle cannot matter to this period's plan.
     relevant_m: f64,
     /// A record within the relevance radius was displaced since the last
@@ -184,6 +187,7 @@ impl View {
             own,
             records: Vec::new(),
             heard_from: Vec::new(),
+            ids: Vec::new(),
             bounds: Bounds::table_i(),
             suspects: Vec::new(),
             relevant_m,
@@ -219,6 +223,7 @@ impl View {
                 (Some(r), Some(&d)) if !keep(r, d) => {
                     self.records.remove(i);
                     self.heard_from.remove(i);
+                    self.ids.remove(i);
                 }
                 _ => i += 1,
             }
@@ -293,7 +298,7 @@ impl View {
             return Err(Reject::Own);
         }
         let full = self.records.len() >= VIEW_CAP;
-        let held = self.records.iter().position(|r| r.id_stamp().0 == id);
+        let held = self.ids.iter().position(|&r| r == id);
         let last = held.and_then(|i| self.records.get(i));
         if last.is_some_and(|r| stamp <= r.id_stamp().1) {
             return Err(Reject::Stale);
@@ -304,7 +309,7 @@ impl View {
         }
         let from = {
             let (x, y) = where_is(&rec, net);
-            (x - me.0).hypot(y - me.1)
+            distance((x, y), me)
         };
         match held {
             Some(i) => {
@@ -317,6 +322,7 @@ impl View {
             None => {
                 self.records.push(rec);
                 self.heard_from.push(from);
+                self.ids.push(id);
                 Ok(())
             }
         }
@@ -348,7 +354,7 @@ impl View {
     ) -> Result<(), Reject> {
         let d = |r: &Record| {
             let (x, y) = where_is(r, net);
-            (x - me.0).hypot(y - me.1)
+            distance((x, y), me)
         };
         let far = self
             .records
@@ -359,9 +365,12 @@ impl View {
         match far {
             Some((i, dist)) if d(&rec) < dist => {
                 let from = d(&rec);
-                if let (Some(slot), Some(f)) = (self.records.get_mut(i), self.heard_from.get_mut(i))
-                {
-                    (*slot, *f) = (rec, from);
+                if let (Some(slot), Some(f), Some(k)) = (
+                    self.records.get_mut(i),
+                    self.heard_from.get_mut(i),
+                    self.ids.get_mut(i),
+                ) {
+                    (*k, *slot, *f) = (rec.id_stamp().0, rec, from);
                 }
                 self.overflowed |= dist <= self.relevant_m;
                 Ok(())
@@ -467,4 +476,12 @@ impl View {
         }
         out
     }
+}
+
+/// The distance (m) between two points: a square root of squares, not `hypot` (which
+/// guards against overflow no world coordinate, at most 10⁶ m, can reach, at several
+/// times the cost: a view of a dense world measures every message it takes).
+fn distance(a: (f64, f64), b: (f64, f64)) -> f64 {
+    let (dx, dy) = (a.0 - b.0, a.1 - b.1);
+    (dx * dx + dy * dy).sqrt()
 }

@@ -73,6 +73,9 @@ pub struct Summary {
     /// Planner steps that applied the certified fallback (solver, verification or
     /// invariant).
     pub fallback_steps: u64,
+    /// Of those, steps whose view overflowed within the relevance radius (a vehicle that
+    /// may matter could not be held): 0 in any world, whatever its size.
+    pub blind_steps: u64,
     /// Planner steps standing still with no room (forced, not a failure).
     pub waiting_steps: u64,
     /// Planner steps braking under the Yield Protocol (not a failure).
@@ -253,6 +256,7 @@ pub fn summarize<'v, const N: usize>(
         off_road: f.off_road,
         min_gap_m: f.min_gap_m,
         fallback_steps: c.fallback_steps,
+        blind_steps: c.blind_steps,
         waiting_steps: c.waiting_steps,
         yield_steps: c.yield_steps,
         lane_changes: lc,

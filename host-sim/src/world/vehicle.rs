@@ -397,6 +397,9 @@ pub struct StepCtx<'a> {
 pub struct Counters {
     /// Certified-fallback steps (not standstill, not yield).
     pub fallback_steps: u64,
+    /// Of those, steps whose view could not hold every vehicle that may matter (it
+    /// overflowed within the relevance radius): spurious, had the view been bigger.
+    pub blind_steps: u64,
     /// Standing with no room.
     pub waiting_steps: u64,
     /// Braking under the Yield Protocol.
@@ -444,6 +447,7 @@ impl Counters {
     /// Adds `o`.
     pub fn add(&mut self, o: &Counters) {
         self.fallback_steps += o.fallback_steps;
+        self.blind_steps += o.blind_steps;
         self.waiting_steps += o.waiting_steps;
         self.yield_steps += o.yield_steps;
         self.lateral_iterations += o.lateral_iterations;
@@ -714,6 +718,7 @@ impl<const N: usize> Vehicle<N> {
     /// the certified fallback (max braking with straightening), safe whatever is there.
     fn blind(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
         counters.fallback_steps += 1;
+        counters.blind_steps += 1;
         self.mode = Mode::Fallback;
         let p = params(self.speed_limit(ctx.net));
         let v = planner_core::safety::max_braking_command(&p, self.v);
