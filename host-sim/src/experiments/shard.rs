@@ -332,6 +332,20 @@ fn comparison_of_sums(merged: &Value) -> Result<Value, MergeError> {
 fn combine(key: &str, a: &Value, b: &Value) -> Result<Value, MergeError> {
     let shape = || MergeError::Shape(format!("`{key}` differs in kind between shards"));
     Ok(match (a, b) {
+        // Counts by kind (`layouts`' refusals): each shard has the kinds it met.
+        (Value::Object(x), Value::Object(y)) if key == "refusals" => {
+            // In the order of their names, as each shard prints them.
+            let mut out: std::collections::BTreeMap<String, Value> =
+                x.clone().into_iter().collect();
+            for (k, n) in y {
+                let sum = match out.get(k) {
+                    Some(m) => combine(k, m, n)?,
+                    None => n.clone(),
+                };
+                out.insert(k.clone(), sum);
+            }
+            Value::Object(out.into_iter().collect())
+        }
         (Value::Object(x), Value::Object(y)) => Value::Object(combine_objects(x, y)?),
         (Value::Array(x), Value::Array(y)) if key == "algorithms" => {
             if x.len() != y.len() {
