@@ -132,3 +132,28 @@ fn worlds_of_any_size_have_no_blind_step() {
     let err = grid_fleet((2, 2), 100_000, 300.0, 1.0).expect_err("too many");
     assert!(err.contains("holds"), "{err}");
 }
+
+/// The 1,000-case layouts sweep's two failures, replayed: a junction (17.38 m/s) feeding
+/// a slower segment (16.42 m/s) let vehicles leave at its own limit, over the segment's
+/// (91 and 199 limit violations); crossing planners now take the slower of the two. And
+/// the failing file, whose seed is above i64::MAX, is read as the network it is.
+#[test]
+fn the_layouts_sweeps_failures_run_within_their_limits() {
+    for case in ["508/1000", "917/1000"] {
+        let out = bin()
+            .args(["layouts", "--cases", "1000", "--shard", case, "--json"])
+            .output()
+            .expect("host-sim runs");
+        let v: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+        let r = &v["result"];
+        assert_eq!(r["ran"], 1, "{case}: {v}");
+        assert_eq!(r["limit_violations"], 0, "{case}: {v}");
+        assert_eq!(r["collisions"], 0, "{case}: {v}");
+    }
+    let text =
+        "name = \"x\"\nseed = 11831777341924566518\n[[intersection]]\nid = 1\nx = 0.0\ny = 0.0\n";
+    assert_eq!(
+        host_sim::scenario::format_of(text),
+        host_sim::scenario::Format::Network
+    );
+}

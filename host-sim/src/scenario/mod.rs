@@ -36,7 +36,19 @@ pub enum Format {
 /// The format of `text` (by its tables; the parser of that format checks the rest).
 pub fn format_of(text: &str) -> Format {
     let Ok(t) = toml::from_str::<toml::Table>(text) else {
-        return Format::Road;
+        // Not a generic TOML table (a syntax error, or a value such as a seed above
+        // i64::MAX that only the typed reader takes): judged by its headers, so that the
+        // right reader parses it and names what is wrong.
+        let has = |h: &str| text.lines().any(|l| l.trim() == h);
+        return if has("[road]") {
+            Format::Road
+        } else if has("[intersection]") {
+            Format::Junction
+        } else if has("[[intersection]]") || has("[[segment]]") || has("[grid]") {
+            Format::Network
+        } else {
+            Format::Road
+        };
     };
     match (t.get("road"), t.get("intersection")) {
         (Some(_), _) => Format::Road,

@@ -520,8 +520,13 @@ impl<const N: usize> Brain<N> {
     }
 
     /// A crossing planner for vehicle `id` on `route` of `layout`.
-    fn crossing_planner(&self, id: u16, route: u8, layout: &Layout<f64>) -> CrossingBrain {
-        let v_limit = layout.spec.v_limit;
+    /// Its speed limit is `v_limit` ([`Network::route_limit`]).
+    fn crossing_planner(
+        &self,
+        (id, route): (u16, u8),
+        layout: &Layout<f64>,
+        v_limit: f64,
+    ) -> CrossingBrain {
         if self.setup.precision == Precision::F32 {
             let w = CostWeights {
                 target_position: 1e-3,
@@ -733,10 +738,9 @@ impl<const N: usize> Vehicle<N> {
     fn speed_limit(&self, net: &Network) -> f64 {
         match self.at {
             At::Lane { seg, .. } => net.segments.get(seg).map_or(27.8, |s| s.v_max),
-            At::Crossing { junction, .. } => net
-                .junctions
-                .get(junction)
-                .map_or(13.9, |j| j.layout.spec.v_limit),
+            At::Crossing {
+                junction, route, ..
+            } => net.route_limit(junction, route).unwrap_or(13.9),
         }
     }
 
@@ -938,12 +942,15 @@ impl<const N: usize> Vehicle<N> {
             return (0.0, 0.0);
         };
         let layout = &jn.layout;
-        let v_limit = layout.spec.v_limit;
+        let v_limit = ctx
+            .net
+            .route_limit(junction, route)
+            .unwrap_or(layout.spec.v_limit);
         let Driver::Planner(b) = &mut self.driver else {
             return (0.0, 0.0);
         };
         if b.crossing.is_none() {
-            b.crossing = Some(b.crossing_planner(self.id, route, layout));
+            b.crossing = Some(b.crossing_planner((self.id, route), layout, v_limit));
         }
         let mapped = b.view.on_path(ctx.net, junction, route);
         let Some(c) = b.crossing.as_mut() else {
