@@ -63,7 +63,7 @@ use toml::Spanned;
 /// Most intersections.
 pub const MAX_JUNCTIONS: usize = 64;
 /// Most vehicles at t = 0.
-pub const MAX_VEHICLES: usize = 2000;
+pub const MAX_VEHICLES: usize = 5000;
 
 /// `[grid]`.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
