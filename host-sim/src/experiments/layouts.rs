@@ -15,7 +15,7 @@
 //! unpermitted entry, no deadlock and no internal error. The report counts refusals by
 //! reason, so that a sweep shows what the loader guards against.
 
-use super::sweep::{case_seed, Failing, KEEP_FAILING};
+use super::sweep::{case_seed, keep_failing, Failing};
 use crate::reference::instances::rng;
 use crate::scenario::network::NetworkScenario;
 use crate::world::{SolverChoice, World};
@@ -337,14 +337,12 @@ pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> LayoutsReport
             }
         };
         if let Some(reason) = why {
-            if r.failing.len() < KEEP_FAILING {
-                r.failing.push(Failing {
-                    case: index,
-                    label: "layout",
-                    reason,
-                    scenario: text,
-                });
-            }
+            keep_failing(&mut r.failing, || Failing {
+                case: index,
+                label: "layout",
+                reason,
+                scenario: text,
+            });
         }
     }
     r.wall_seconds = t0.elapsed().as_secs_f64();

@@ -388,14 +388,12 @@ pub fn grids(cases: u64, first: u64, seed: u64, duration_s: f64, threads: usize)
             }
         };
         if let Some(reason) = reason {
-            if g.failing.len() < super::sweep::KEEP_FAILING {
-                g.failing.push(super::sweep::Failing {
-                    case: index,
-                    label: "grid",
-                    reason,
-                    scenario: s.to_toml(),
-                });
-            }
+            super::sweep::keep_failing(&mut g.failing, || super::sweep::Failing {
+                case: index,
+                label: "grid",
+                reason,
+                scenario: s.to_toml(),
+            });
         }
     }
     g.wall_seconds = t0.elapsed().as_secs_f64();

@@ -357,8 +357,8 @@ pub fn ids(cases: u64, first: u64, seed: u64, threads: usize) -> IdsReport {
             }
             Err(e) => format!("did not run: {e}"),
         };
-        if !reason.is_empty() && r.failing.len() < sweep::KEEP_FAILING {
-            r.failing.push(Failing {
+        if !reason.is_empty() {
+            sweep::keep_failing(&mut r.failing, || Failing {
                 case: index,
                 label: "ids",
                 reason,

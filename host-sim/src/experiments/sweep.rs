@@ -200,6 +200,14 @@ pub fn reason(c: &Case) -> String {
 /// How many failing cases a sweep's report keeps (each with its scenario file).
 pub const KEEP_FAILING: usize = 20;
 
+/// Adds the failing case `make` builds to `list`, unless it holds [`KEEP_FAILING`]
+/// already (the case's file is only written for those kept).
+pub fn keep_failing(list: &mut Vec<Failing>, make: impl FnOnce() -> Failing) {
+    if list.len() < KEEP_FAILING {
+        list.push(make());
+    }
+}
+
 /// The failing cases among `cases` (at most `keep`), each with its scenario file.
 pub fn failing<'a>(cases: impl Iterator<Item = &'a Case>, keep: usize) -> Vec<Failing> {
     cases

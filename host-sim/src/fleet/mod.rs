@@ -1073,14 +1073,7 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
         let Some(error) = self.harness.spec.sensing.map(|s| s.position_error_m) else {
             return;
         };
-        let seen: Vec<Seen> = present
-            .iter()
-            .map(|v| Seen {
-                id: v.id,
-                at: v.at,
-                v: v.v,
-            })
-            .collect();
+        let seen: Vec<Seen> = present.iter().map(VehicleTruth::seen).collect();
         let t = k as f64 * self.ctx.lim.h;
         for (j, out) in self.readings.iter().enumerate() {
             let id = self.harness.spec.network.junctions.get(j).map(|jn| jn.id);
@@ -1222,25 +1215,14 @@ fn sense_all(
     seed: u64,
     k: u64,
 ) -> Vec<Sensed> {
-    let all: Vec<Seen> = present
-        .iter()
-        .map(|v| Seen {
-            id: v.id,
-            at: v.at,
-            v: v.v,
-        })
-        .collect();
+    let all: Vec<Seen> = present.iter().map(VehicleTruth::seen).collect();
     let mut rng = crate::reference::instances::rng(seed ^ 0x5e15 ^ k.wrapping_mul(0x9E37_79B9));
     truths
         .iter()
         .map(|t| match t {
             Some(v) if v.planner && sensing.is_none() => Sensed::default(),
             Some(v) => {
-                let me = Seen {
-                    id: v.id,
-                    at: v.at,
-                    v: v.v,
-                };
+                let me = v.seen();
                 sense(
                     net,
                     &me,

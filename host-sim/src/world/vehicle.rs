@@ -319,6 +319,17 @@ pub struct VehicleTruth {
     pub target_lane: u8,
 }
 
+impl VehicleTruth {
+    /// What sensors see of it (as [`Vehicle::seen`] gives for a vehicle of the world).
+    pub fn seen(&self) -> super::sensor::Seen {
+        super::sensor::Seen {
+            id: self.id,
+            at: self.at,
+            v: self.v,
+        }
+    }
+}
+
 /// What vehicle `id` at `at`, moving at (v, ω) = `vw`, broadcasts at `now` (its clock):
 /// its state on a segment, its crossing report in a junction.
 pub fn announce(
