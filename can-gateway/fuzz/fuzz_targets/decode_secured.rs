@@ -40,7 +40,7 @@ fuzz_target!(|bytes: &[u8]| {
         }
         Some(3) => {
             let at = Instant::from_millis(bytes.get(1).map_or(1_000, |b| u64::from(*b) * 1_000));
-            let exit = Message::Exit { id: 1, at };
+            let exit = Message::<f64>::Exit { id: 1, at };
             received.push(encode_fd_secured(&exit, 1, 2, &derive_key(&MASTER, 1), now).unwrap());
             received.push(encode_fd_secured(&m, 0xF1, 1, &key, now).unwrap());
         }
