@@ -179,7 +179,10 @@ fn a_vehicle_changing_into_an_outlets_lane_is_on_the_crossing_followers_path() {
                 segment: seg,
             },
             &net,
-            (0.0, 0.0),
+            host_sim::world::heard::Here {
+                at: (0.0, 0.0),
+                v: 0.0,
+            },
         )
         .expect("taken")
     };

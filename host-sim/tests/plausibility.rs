@@ -4,10 +4,16 @@
 //! is handed its last trusted record, ageing, as a vehicle that does not cooperate.
 
 use host_sim::bus::Message;
-use host_sim::world::heard::{Reject, View};
+use host_sim::world::heard::{Here, Reject, View};
 use host_sim::world::network::Network;
 use host_sim::world::plausible::Implausible;
 use planner_core::VehicleState;
+
+/// The receiver: at the origin, standing.
+const HERE: Here = Here {
+    at: (0.0, 0.0),
+    v: 0.0,
+};
 
 fn net() -> Network {
     Network::road(2, None, 27.8)
@@ -22,7 +28,7 @@ fn hear(view: &mut View, net: &Network, s: VehicleState<f64>) -> Result<(), Reje
             segment: 0,
         },
         net,
-        (0.0, 0.0),
+        HERE,
     )
 }
 
@@ -56,7 +62,7 @@ fn a_liar_is_refused_and_then_taken_at_its_last_trusted_state() {
         id: 7,
         at: common::secs(0.3),
     };
-    assert_eq!(view.take(&gone, &net, (0.0, 0.0)), Err(Reject::Distrusted));
+    assert_eq!(view.take(&gone, &net, HERE), Err(Reject::Distrusted));
     // The record is the last trusted one, now marked as not cooperating.
     let kept = view.records().to_vec();
     assert_eq!(kept.len(), before.len());

@@ -10,15 +10,27 @@
 //! the other frame.
 //!
 //! Bounded memory: at most [`VIEW_CAP`] vehicles, and what it holds depends on what is
-//! near, never on how many vehicles the world holds. When full, a message from a new
-//! vehicle takes the place of the record farthest from the receiver if it is nearer than
-//! that (every vehicle repeats its message every period, so a vehicle dropped while far is
-//! back as soon as it comes near). A vehicle farther than the view's relevance radius
-//! ([`View::new`]) cannot matter to this period's plan, and one that finds no place is
-//! simply not taken ([`Reject::Far`]). Only when the view cannot hold every vehicle within
-//! the radius — a message from a vehicle within it finds no place, or displaces one within
-//! it — is that an overflow: the receiver, which may now miss a vehicle near it, drives on
-//! its certified fallback. (Before, any message that found no place was an overflow, so a
+//! near, never on how many vehicles the world holds. Two vehicles matter to each other
+//! only within the sum of their [`reach`]es (what each can cover in one plan at the speed
+//! it goes, and its stopping distance) and [`SPARE_M`]: their *slack* ([`slack`]) is how
+//! far apart they are beyond that. When full, a message from a new vehicle takes the place
+//! of the record of most slack if its own is less (every vehicle repeats its message every
+//! period, so a vehicle dropped while it could not matter is back as soon as it can). One
+//! of positive slack that finds no place is simply not taken ([`Reject::Far`]). Only when
+//! the view cannot hold every vehicle that may matter — a message of slack ≤ 0 finds no
+//! place, or displaces one of slack ≤ 0 — is that an overflow: the receiver, which may now
+//! miss a vehicle that matters, drives on its certified fallback.
+//!
+//! Why speeds, not a fixed radius: a fixed radius (the reach of two vehicles at vmax, 195
+//! m) is what a jam fills. Standing 6 m apart on two lanes each way, a city grid puts
+//! more than 256 vehicles within 195 m of each, and a world of 1,000 vehicles had 13,988
+//! blind steps. Standing vehicles reach under 5 m (a second from rest at amax and the
+//! safe distance at 3.8 m/s), so in a jam a view needs the twenty or so around it; at
+//! speed, vehicles are spaced by their safe distances and as few fit within their longer
+//! reach. Slack is judged on what a message says (position and speed at its stamp): a
+//! record is renewed every period, and the planners take its age into account themselves.
+//! (Before views were
+//! bounded by relevance at all, any message that found no place was an overflow, so a
 //! world of more than 257 vehicles froze: every vehicle heard more than its view held.)
 
 use super::network::Network;
@@ -91,6 +103,14 @@ impl Record {
         self
     }
 
+    /// Its vehicle's speed (m/s).
+    fn speed(&self) -> f64 {
+        match *self {
+            Record::Lane { state, .. } => state.v,
+            Record::Crossing { report, .. } => report.v,
+        }
+    }
+
     fn id_stamp(&self) -> (u16, Instant) {
         match *self {
             Record::Lane { state, .. } => (state.id, state.stamp),
@@ -108,11 +128,11 @@ pub enum Reject {
     Invalid,
     /// Not newer than what is held.
     Stale,
-    /// The view is full of vehicles nearer than this one, and this one is within the
-    /// relevance radius: an overflow.
+    /// The view is full of vehicles that matter more than this one ([`slack`]), and this
+    /// one may matter (slack ≤ 0): an overflow.
     Full,
-    /// The view is full of vehicles nearer than this one, which is beyond the relevance
-    /// radius: it cannot matter now.
+    /// The view is full of vehicles that matter more than this one, which cannot matter
+    /// now (slack > 0).
     Far,
     /// Physically impossible after the last message accepted from the sender
     /// ([`super::plausible`]): the sender is a suspect from now on.
@@ -121,12 +141,45 @@ pub enum Reject {
     Distrusted,
 }
 
+/// Distance (m) to spare beyond the sum of two vehicles' reaches ([`slack`]).
+pub const SPARE_M: f64 = 20.0;
+
+/// A receiver as its view judges what matters to it: where it is in the world (m) and its
+/// speed (m/s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Here {
+    /// Its centre in the world.
+    pub at: (f64, f64),
+    /// Its speed.
+    pub v: f64,
+}
+
+/// How far (m) from itself a vehicle going at `v` can matter to a plan: a second of travel
+/// and its safe distance dS (8), both at the speed it may reach within that second
+/// (v + amax·1 s, at most vmax; Table I). A multi-lane plan looks no further, ahead or
+/// behind (a follower in the target lane must keep dS toward it); a crossing planner
+/// takes only the vehicles on its own path. At vmax it is 77.0 m; standing, 4.75 m.
+pub fn reach(v: f64) -> f64 {
+    let lim = crate::monitor::Limits::table_i();
+    let v = (v.max(0.0) + lim.a_max).min(lim.v_max);
+    lim.safe_distance(v) + v
+}
+
+/// How far apart (m) two vehicles `d` apart at speeds `v` and `w` are beyond what can
+/// matter between them: `d` less both reaches and [`SPARE_M`]. At most 0: either may
+/// matter to the other's plan.
+pub fn slack(d: f64, v: f64, w: f64) -> f64 {
+    d - reach(v) - reach(w) - SPARE_M
+}
+
 /// The distance (m) beyond which no vehicle can matter to a vehicle's plan this period on
 /// `net`, whose roads allow at most `v_max`: the reach of a multi-lane plan — twice the
 /// safe distance dS(vmax) (8) plus a second at vmax, for vehicles ahead and behind alike —
-/// and the diagonal of the largest junction's communication region (a crossing planner
-/// plans with every vehicle in A_C), whichever is larger, with 20 m to spare. With Table I
-/// and the SPEC §8 layout: max(155, 175) + 20 = 195 m.
+/// and the diagonal of the largest junction's communication region (a manager hears every
+/// vehicle in A_C), whichever is larger, with [`SPARE_M`]. With Table I and the four-leg
+/// layout of docs/spec.md: max(155, 175) + 20 = 195 m. A record of a vehicle within it
+/// that falls silent is kept ([`View::forget_silent`]); which records a full view keeps
+/// is judged by [`slack`].
 pub fn relevance_radius(net: &Network, v_max: f64) -> f64 {
     let lim = crate::monitor::Limits::table_i();
     let lanes = 2.0 * (lim.safe_distance(v_max) + v_max);
@@ -137,7 +190,7 @@ pub fn relevance_radius(net: &Network, v_max: f64) -> f64 {
             2.0 * std::f64::consts::SQRT_2 * (j.layout.spec.half_size + j.layout.spec.comm_margin)
         })
         .fold(0.0, f64::max);
-    lanes.max(junctions) + 20.0
+    lanes.max(junctions) + SPARE_M
 }
 
 /// Where a record's vehicle is in the world (m), for keeping the nearest.
@@ -169,24 +222,29 @@ pub struct View {
     suspects: Vec<u16>,
     /// Per record, how far (m) its vehicle was from this one when it was last taken.
     heard_from: Vec<f64>,
+    /// Per record, its [`slack`] toward this one when it was last taken (every vehicle
+    /// sends each period, so it is at most a period old for a vehicle that is heard).
+    slacks: Vec<f64>,
     /// Per record, its vehicle's id: what every message is looked up by, kept apart so
     /// the lookup reads two bytes a record (a view of a dense world holds hundreds).
     ids: Vec<u16>,
-    /// Beyond this distance (m) a vehicle cannot matter to this period's plan.
+    /// Beyond this distance (m) no vehicle at any speed can matter to a plan: a silent
+    /// vehicle heard within it is kept ([`View::forget_silent`]).
     relevant_m: f64,
-    /// A record within the relevance radius was displaced since the last
+    /// A record that may matter was displaced or refused since the last
     /// [`View::take_overflow`].
     overflowed: bool,
 }
 
 impl View {
-    /// An empty view for vehicle `own`, to which vehicles farther than `relevant_m` (m)
-    /// cannot matter ([`relevance_radius`]).
+    /// An empty view for vehicle `own`, to which no vehicle farther than `relevant_m` (m)
+    /// can matter at any speed ([`relevance_radius`]).
     pub fn new(own: u16, relevant_m: f64) -> Self {
         Self {
             own,
             records: Vec::new(),
             heard_from: Vec::new(),
+            slacks: Vec::new(),
             ids: Vec::new(),
             bounds: Bounds::table_i(),
             suspects: Vec::new(),
@@ -223,6 +281,7 @@ impl View {
                 (Some(r), Some(&d)) if !keep(r, d) => {
                     self.records.remove(i);
                     self.heard_from.remove(i);
+                    self.slacks.remove(i);
                     self.ids.remove(i);
                 }
                 _ => i += 1,
@@ -230,13 +289,13 @@ impl View {
         }
     }
 
-    /// `true` if, since the last call, a record within the relevance radius was displaced
-    /// by a nearer one: the view could not hold every vehicle that may matter.
+    /// `true` if, since the last call, a record that may matter (slack ≤ 0) was displaced
+    /// or refused: the view could not hold every vehicle that may matter.
     pub fn take_overflow(&mut self) -> bool {
         std::mem::take(&mut self.overflowed)
     }
 
-    /// Takes a message heard at world position `me` on `net`: states and crossing reports
+    /// Takes a message heard by the receiver as it is (`me`) on `net`: states and crossing reports
     /// replace the sender's record when newer; `Left` drops a crossing record at that
     /// junction (not a state the vehicle has sent since, from its next segment); `Gone`
     /// drops every record of a vehicle that left the network. Grants are not for the view
@@ -251,7 +310,7 @@ impl View {
     /// inflated at amax for the age, and no lane change starting in front of it (stale
     /// data). Safety never rests on its word again; what that costs in liveness, the
     /// attack experiment reports.
-    pub fn take(&mut self, msg: &Message, net: &Network, me: (f64, f64)) -> Result<(), Reject> {
+    pub fn take(&mut self, msg: &Message, net: &Network, me: Here) -> Result<(), Reject> {
         if !matches!(msg, Message::Grant { .. }) && self.suspects.contains(&msg.sender()) {
             return Err(Reject::Distrusted);
         }
@@ -307,21 +366,24 @@ impl View {
             self.suspect(id);
             return Err(Reject::Implausible(why));
         }
-        let from = {
-            let (x, y) = where_is(&rec, net);
-            distance((x, y), me)
-        };
+        let from = distance(where_is(&rec, net), me.at);
+        let slack = slack(from, me.v, rec.speed());
         match held {
             Some(i) => {
-                if let (Some(r), Some(d)) = (self.records.get_mut(i), self.heard_from.get_mut(i)) {
-                    (*r, *d) = (rec, from);
+                if let (Some(r), Some(d), Some(k)) = (
+                    self.records.get_mut(i),
+                    self.heard_from.get_mut(i),
+                    self.slacks.get_mut(i),
+                ) {
+                    (*r, *d, *k) = (rec, from, slack);
                 }
                 Ok(())
             }
-            None if full => self.replace_farthest(rec, net, me),
+            None if full => self.replace_least_relevant(rec, from, slack),
             None => {
                 self.records.push(rec);
                 self.heard_from.push(from);
+                self.slacks.push(slack);
                 self.ids.push(id);
                 Ok(())
             }
@@ -343,40 +405,34 @@ impl View {
         }
     }
 
-    /// A full view takes `rec` in place of its farthest record, if `rec` is nearer (an
-    /// overflow if that one was within the relevance radius); else `rec` is refused, as
-    /// an overflow if it is within the radius itself.
-    fn replace_farthest(
-        &mut self,
-        rec: Record,
-        net: &Network,
-        me: (f64, f64),
-    ) -> Result<(), Reject> {
-        let d = |r: &Record| {
-            let (x, y) = where_is(r, net);
-            distance((x, y), me)
-        };
-        let far = self
-            .records
+    /// A full view takes `rec` (`from` m away, of slack `slack`) in place of its record of
+    /// most slack, if that is more (an overflow if it was ≤ 0); else `rec` is refused, as
+    /// an overflow if its own slack is ≤ 0.
+    fn replace_least_relevant(&mut self, rec: Record, from: f64, slack: f64) -> Result<(), Reject> {
+        let least = self
+            .slacks
             .iter()
+            .copied()
             .enumerate()
-            .map(|(i, r)| (i, d(r)))
             .max_by(|a, b| a.1.total_cmp(&b.1));
-        match far {
-            Some((i, dist)) if d(&rec) < dist => {
-                let from = d(&rec);
-                if let (Some(slot), Some(f), Some(k)) = (
+        match least {
+            Some((i, most)) if slack < most => {
+                if let (Some(r), Some(f), Some(k), Some(id)) = (
                     self.records.get_mut(i),
                     self.heard_from.get_mut(i),
+                    self.slacks.get_mut(i),
                     self.ids.get_mut(i),
                 ) {
-                    (*k, *slot, *f) = (rec.id_stamp().0, rec, from);
+                    (*id, *r, *f, *k) = (rec.id_stamp().0, rec, from, slack);
                 }
-                self.overflowed |= dist <= self.relevant_m;
+                self.overflowed |= most <= 0.0;
                 Ok(())
             }
-            _ if d(&rec) > self.relevant_m => Err(Reject::Far),
-            _ => Err(Reject::Full),
+            _ if slack > 0.0 => Err(Reject::Far),
+            _ => {
+                self.overflowed = true;
+                Err(Reject::Full)
+            }
         }
     }
 

@@ -636,7 +636,10 @@ impl<const N: usize> Vehicle<N> {
     /// its grants; `false` if its view overflowed (it may miss a vehicle near it).
     fn hear(&mut self, ctx: &StepCtx<'_>, inbox: &[Received], counters: &mut Counters) -> bool {
         let net = ctx.net;
-        let me = self.position(net);
+        let me = super::heard::Here {
+            at: self.position(net),
+            v: self.v,
+        };
         let Driver::Planner(b) = &mut self.driver else {
             return true;
         };
