@@ -309,8 +309,68 @@ pub struct GridsReport {
     pub seed: u64,
     /// Failing cases (at most 20), each as its file and the reason.
     pub failing: Vec<super::sweep::Failing>,
+    /// Every case whose due trips did not all finish, with where those vehicles were.
+    pub unfinished: Vec<Unfinished>,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
+}
+
+/// A grid whose due trips did not all finish. A deadlock fails the case (its wait-for
+/// relation is the reason); this is the other way trips stay unfinished in an open
+/// network: every vehicle's wait ends in one that moves, but demand outran what the grid
+/// carried in the time, and the vehicles that arrived were still queued in the network
+/// or at its entries when the run ended.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unfinished {
+    /// Case index.
+    pub case: u64,
+    /// Rows × columns.
+    pub grid: String,
+    /// Lanes per direction.
+    pub lanes: u8,
+    /// Arrivals per boundary inlet (vehicles per hour).
+    pub rate_vph: f64,
+    /// Trips due, and of those completed.
+    pub due: u64,
+    /// Of the due trips, completed.
+    pub due_completed: u64,
+    /// Trips completed per hour (all of them, due or not).
+    pub carried_vph: f64,
+    /// Vehicles in the network at the end.
+    pub in_network: u64,
+    /// Arrivals waiting to enter at the end.
+    pub waiting_outside: u64,
+    /// Why, in words.
+    pub reason: String,
+}
+
+impl Unfinished {
+    /// The account of case `case` (settings `s`, report `r`), if due trips are unfinished
+    /// and it did not deadlock.
+    fn of(case: u64, s: &NetworkSettings, r: &NetworkReport) -> Option<Self> {
+        let completed = (r.due_completed_share * r.trips_due as f64).round() as u64;
+        if completed >= r.trips_due || r.deadlocks > 0 {
+            return None;
+        }
+        let carried_vph = r.trips_completed as f64 * 3600.0 / r.sim_seconds.max(1e-9);
+        Some(Self {
+            case,
+            grid: r.grid.clone(),
+            lanes: s.lanes,
+            rate_vph: s.rate_vph,
+            due: r.trips_due,
+            due_completed: completed,
+            carried_vph,
+            in_network: r.trips_in_progress,
+            waiting_outside: r.waiting_outside,
+            reason: format!(
+                "no deadlock: demand of {:.0} veh/h per inlet outran the {carried_vph:.0} \
+                 veh/h the grid carried; at the end {} vehicles were in the network and {} \
+                 waiting to enter",
+                s.rate_vph, r.trips_in_progress, r.waiting_outside
+            ),
+        })
+    }
 }
 
 /// Case `index` of the grids sweep seeded `seed`, `duration_s` long.
@@ -356,12 +416,14 @@ pub fn grids(cases: u64, first: u64, seed: u64, duration_s: f64, threads: usize)
         max_vehicles: 0,
         seed,
         failing: Vec::new(),
+        unfinished: Vec::new(),
         wall_seconds: 0.0,
     };
     for (index, s, r, deadlock) in runs {
         let reason = match r {
             Err(e) => Some(format!("did not run: {e}")),
             Ok(r) => {
+                g.unfinished.extend(Unfinished::of(index, &s, &r));
                 g.vehicles += r.vehicles_spawned;
                 g.trips_completed += r.trips_completed;
                 g.trips_due += r.trips_due;

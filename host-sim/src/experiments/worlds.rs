@@ -2,8 +2,8 @@
 //! city grid, run on one in-process bus with a radio of limited range — so that a view
 //! that depended on how many vehicles the world holds (a red team found every vehicle
 //! falling back once a world held 258) would show it. Per size: the realtime factor, the
-//! certified-fallback steps and, among them, the *blind* ones (a view that overflowed
-//! within the relevance radius, [`crate::world::heard::View`]), collisions and invariant
+//! certified-fallback steps and, among them, the *blind* ones (a view that could not hold
+//! every vehicle that may matter to its plan, [`crate::world::heard::View`]), collisions and invariant
 //! violations. With `--delay S` each size runs a second time with every message delayed
 //! by S seconds and jittered by up to S more, side by side: the cost of a slow bus per
 //! simulated second, as a ratio to the clean bus.
@@ -150,7 +150,7 @@ pub struct WorldRow {
     pub planner_steps: u64,
     /// Certified-fallback steps.
     pub fallback_steps: u64,
-    /// Of those, blind (the view overflowed within the relevance radius).
+    /// Of those, blind (the view could not hold every vehicle that may matter).
     pub blind_steps: u64,
     /// Collisions (pairs × steps).
     pub collisions: u64,
