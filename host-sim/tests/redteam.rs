@@ -105,6 +105,16 @@ fn random_grids_come_out_clean() {
         assert_eq!(n(&v, key), 0, "{key}: {v}");
     }
     assert!(n(&v, "vehicles") > 0, "{v}");
+    // No unfinished trip without a reason: every due trip not completed is in a case
+    // that says why.
+    let unaccounted = n(&v, "trips_due") - n(&v, "trips_due_completed");
+    let accounted: u64 = v["unfinished"]
+        .as_array()
+        .expect("unfinished[]")
+        .iter()
+        .map(|u| n(u, "due") - n(u, "due_completed"))
+        .sum();
+    assert_eq!(unaccounted, accounted, "{v}");
 }
 
 /// A view holds what matters, however many vehicles the world holds: worlds of 100 and
