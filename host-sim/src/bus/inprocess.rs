@@ -26,6 +26,7 @@
 use super::{Bus, BusError, FaultStats, Faults, Message, Received};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+use smallvec::SmallVec;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, VecDeque};
 
@@ -46,19 +47,18 @@ struct Queue {
 type Wake = Reverse<(Due, u16, u16)>;
 
 /// One stream's deliveries still to come, in send order: their due times and the
-/// sender's stamps apart from the deliveries themselves, so that what every send reads —
-/// the last due time, and the earliest — is a few bytes.
+/// sender's stamps apart from the deliveries themselves and inline, so that what every
+/// send reads and drops — the last due times, and the earliest — lies in the sender's
+/// own table (a stream holds a handful: with a delay jittered over J seconds, about the
+/// logarithm of J / h).
 #[derive(Debug, Clone, Default)]
 struct Stream {
     /// (due, the sender's stamp) of each delivery.
-    steps: VecDeque<(Due, planner_core::Instant)>,
+    steps: SmallVec<[(Due, planner_core::Instant); 8]>,
     /// The deliveries, in the same order.
     msgs: VecDeque<Received>,
     /// The earliest due time of `steps`, if any.
     first: Option<Due>,
-    /// The last of `steps`, if any: what a send compares with, kept where the sender's
-    /// table is (reading the deque's end would miss the cache once per delivery).
-    last: Option<(Due, planner_core::Instant)>,
 }
 
 impl Stream {
@@ -81,34 +81,41 @@ impl Outgoing {
     /// Queues `r`, due at `due`, on its stream to `to` and drops the deliveries of that
     /// stream it overtakes; returns how many it dropped and, if the stream's earliest
     /// delivery changed, when that one is due (a wake-up for the receiver).
-    fn push(&mut self, to: u16, due: Due, r: Received) -> (u64, Option<Due>) {
+    ///
+    /// `next` is where the stream to the previous receiver of this message was, plus one:
+    /// receivers come in the order of the nodes, which is the order of their ids but
+    /// after an id wraps, so the stream sought is usually the next one — the table is
+    /// walked in order, which the processor prefetches, rather than searched.
+    fn push(&mut self, next: &mut usize, to: u16, due: Due, r: Received) -> (u64, Option<Due>) {
         let (subject, stamp) = r.msg.subject();
         let key = (to, subject);
-        let i = match self.keys.binary_search(&key) {
-            Ok(i) => i,
-            Err(i) => {
-                self.keys.insert(i, key);
-                self.streams.insert(i, Stream::default());
-                i
-            }
+        let i = match self.keys.get(*next) {
+            Some(&k) if k == key => *next,
+            _ => match self.keys.binary_search(&key) {
+                Ok(i) => i,
+                Err(i) => {
+                    self.keys.insert(i, key);
+                    self.streams.insert(i, Stream::default());
+                    i
+                }
+            },
         };
+        *next = i + 1;
         let Some(stream) = self.streams.get_mut(i) else {
             return (0, None);
         };
         let before = stream.first;
         let (mut dropped, mut lost_first) = (0, false);
-        while let Some((d, old)) = stream.last {
+        while let Some(&(d, old)) = stream.steps.last() {
             if !(d > due && old <= stamp) {
                 break;
             }
-            stream.steps.pop_back();
+            stream.steps.pop();
             stream.msgs.pop_back();
-            stream.last = stream.steps.back().copied();
             lost_first |= Some(d) == before;
             dropped += 1;
         }
-        stream.steps.push_back((due, stamp));
-        stream.last = Some((due, stamp));
+        stream.steps.push((due, stamp));
         stream.msgs.push_back(r);
         stream.first = if lost_first {
             stream.earliest()
@@ -124,10 +131,9 @@ impl Outgoing {
         let i = self.keys.binary_search(&(to, subject)).ok()?;
         let stream = self.streams.get_mut(i)?;
         let at = stream.steps.iter().position(|e| e.0 == due)?;
-        stream.steps.remove(at)?;
+        stream.steps.remove(at);
         let r = stream.msgs.remove(at)?;
         stream.first = stream.earliest();
-        stream.last = stream.steps.back().copied();
         let next = stream.first;
         if stream.steps.is_empty() {
             self.keys.remove(i);
@@ -362,6 +368,7 @@ impl Bus for InProcessBus {
         let sender = msg.sender();
         let subject = msg.subject().0;
         let out = self.outgoing.entry(sender).or_default();
+        let mut next = 0;
         for i in receivers {
             if self.rng.random_bool(f.loss) {
                 self.stats.lost += 1;
@@ -384,7 +391,7 @@ impl Bus for InProcessBus {
             for t in later {
                 self.sent += 1;
                 let r = Received { msg: *msg, at: t };
-                let (dropped, wake) = out.push(to, (t.to_bits(), self.sent), r);
+                let (dropped, wake) = out.push(&mut next, to, (t.to_bits(), self.sent), r);
                 self.stats.dropped_old += dropped;
                 if let Some(due) = wake {
                     wakes.push(Reverse((due, sender, subject)));
@@ -507,7 +514,7 @@ mod tests {
                 let t: f64 = now + rng.random_range(0.0..2.0);
                 let r = Received { msg, at: t };
                 let due = (t.to_bits(), seq);
-                let (_, wake) = outgoing.entry(id).or_default().push(ME, due, r);
+                let (_, wake) = outgoing.entry(id).or_default().push(&mut 0, ME, due, r);
                 if let Some(w) = wake {
                     wakes.push(Reverse((w, id, msg.subject().0)));
                 }
