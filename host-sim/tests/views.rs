@@ -14,6 +14,15 @@ fn net() -> Network {
     Network::road(2, None, 27.8)
 }
 
+/// The relevance radius of Table I on a road (twice dS(vmax) and a second at vmax, and
+/// 20 m): the radio's range, within which a fixed radius once judged every vehicle.
+const RADIUS_M: f64 = 195.0;
+
+/// The receiver (vehicle 0): at x = 0 in the centre of lane 0, at `v`.
+fn receiver(v: f64) -> Here {
+    Here { at: (0.0, 1.8), v }
+}
+
 /// Vehicle `id` at `x` on lane `lane` at `v`, stamped 1 s.
 fn state(id: u16, x: f64, lane: u8, v: f64) -> Message {
     let mut state = lane_state(id, x, v, 1.0);
@@ -44,16 +53,11 @@ fn reach_is_a_second_and_a_safe_distance_at_the_speed_within_reach() {
 }
 
 /// 1,000 vehicles standing 6 m apart on both lanes, the receiver standing among them:
-/// more than 256 within the old fixed radius (195 m), a few dozen within reach. Every
+/// more than 256 within the old fixed radius (195 m), about twenty within reach. Every
 /// vehicle within reach is kept, and nothing overflows.
 #[test]
 fn a_jam_fills_no_view() {
-    let net = net();
-    let me = Here {
-        at: (0.0, 1.8),
-        v: 0.0,
-    };
-    let mut view = View::new(0, 195.0);
+    let (net, me, mut view) = (net(), receiver(0.0), View::new(0, RADIUS_M));
     let mut near = Vec::new();
     for k in 0..1000u16 {
         let x = -1500.0 + 6.0 * f64::from(k / 2);
@@ -78,12 +82,7 @@ fn a_jam_fills_no_view() {
 /// takes a fast one 90 m away (its slack is negative) in place of the least relevant.
 #[test]
 fn a_fast_vehicle_displaces_standing_ones_that_cannot_matter() {
-    let net = net();
-    let me = Here {
-        at: (0.0, 1.8),
-        v: 0.0,
-    };
-    let mut view = View::new(0, 195.0);
+    let (net, me, mut view) = (net(), receiver(0.0), View::new(0, RADIUS_M));
     for k in 0..VIEW_CAP as u16 {
         let _ = view.take(&state(k + 1, 40.0 + 6.0 * f64::from(k), 0, 0.0), &net, me);
     }
@@ -102,12 +101,7 @@ fn a_fast_vehicle_displaces_standing_ones_that_cannot_matter() {
 /// says so: the receiver cannot know it has every vehicle that matters.
 #[test]
 fn a_view_that_cannot_hold_what_matters_overflows() {
-    let net = net();
-    let me = Here {
-        at: (0.0, 1.8),
-        v: 27.8,
-    };
-    let mut view = View::new(0, 195.0);
+    let (net, me, mut view) = (net(), receiver(27.8), View::new(0, RADIUS_M));
     for k in 0..300u16 {
         let x = -150.0 + f64::from(k);
         let _ = view.take(&state(k + 1, x, (k % 2) as u8, 27.8), &net, me);

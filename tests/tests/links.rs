@@ -48,19 +48,23 @@ fn slug(heading: &str) -> String {
         .collect()
 }
 
+/// The lines of a Markdown page outside fenced code blocks (and not their fences).
+fn prose(text: &str) -> impl Iterator<Item = &str> {
+    let mut fenced = false;
+    text.lines().filter(move |line| {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+            return false;
+        }
+        !fenced
+    })
+}
+
 /// The anchors of a Markdown page: its headings' slugs (outside code blocks), numbered
 /// as GitHub numbers repeats.
 fn anchors(text: &str) -> HashSet<String> {
     let mut out = HashSet::new();
-    let mut fenced = false;
-    for line in text.lines() {
-        if line.trim_start().starts_with("```") {
-            fenced = !fenced;
-            continue;
-        }
-        if fenced || !line.starts_with('#') {
-            continue;
-        }
+    for line in prose(text).filter(|l| l.starts_with('#')) {
         let base = slug(line.trim_start_matches('#').replace('`', "").as_str());
         let mut name = base.clone();
         let mut n = 0;
@@ -76,15 +80,7 @@ fn anchors(text: &str) -> HashSet<String> {
 /// The targets of the inline links `[text](target)` of a page, outside code.
 fn links(text: &str) -> Vec<String> {
     let mut out = Vec::new();
-    let mut fenced = false;
-    for line in text.lines() {
-        if line.trim_start().starts_with("```") {
-            fenced = !fenced;
-            continue;
-        }
-        if fenced {
-            continue;
-        }
+    for line in prose(text) {
         let mut rest = line;
         while let Some(i) = rest.find("](") {
             let after = &rest[i + 2..];

@@ -136,8 +136,7 @@ impl Outgoing {
         stream.first = stream.earliest();
         let next = stream.first;
         if stream.steps.is_empty() {
-            self.keys.remove(i);
-            self.streams.remove(i);
+            self.remove(i);
         }
         Some((r, next))
     }
@@ -145,9 +144,14 @@ impl Outgoing {
     /// Forgets the stream to `to` about `subject` (its receiver left the bus).
     fn forget(&mut self, to: u16, subject: u16) {
         if let Ok(i) = self.keys.binary_search(&(to, subject)) {
-            self.keys.remove(i);
-            self.streams.remove(i);
+            self.remove(i);
         }
+    }
+
+    /// Removes stream `i` and its key.
+    fn remove(&mut self, i: usize) {
+        self.keys.remove(i);
+        self.streams.remove(i);
     }
 }
 

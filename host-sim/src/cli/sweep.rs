@@ -204,17 +204,17 @@ pub fn grids(a: GridsArgs) -> ExitCode {
         let settings = json!({"cases": a.cases, "seed": a.seed, "duration": a.duration});
         return emit("grids", settings, sh, (first, end), &value, exit);
     }
-    if !a.json {
-        let mut text = format!("grids, {} cases:\n{}", a.cases, human(&value));
-        for u in &r.unfinished {
-            text += &format!(
+    let notes: String = r
+        .unfinished
+        .iter()
+        .map(|u| {
+            format!(
                 "\n  case {} ({}, {} lanes): {} of {} due trips done; {}",
                 u.case, u.grid, u.lanes, u.due_completed, u.due, u.reason
-            );
-        }
-        return print_sweep_text(text, &r.failing, exit);
-    }
-    print_sweep("grids", a.cases, a.json, &value, &r.failing, exit)
+            )
+        })
+        .collect();
+    print_sweep("grids", a.cases, a.json, &value, &notes, &r.failing, exit)
 }
 
 /// `host-sim worlds`.
@@ -293,42 +293,30 @@ pub fn worlds(a: WorldsArgs) -> ExitCode {
     }
 }
 
-/// A sweep's report: one JSON object, or its numbers and each failing case's reason and
-/// file.
-/// Prints a sweep's human summary `text` and its failing cases' files.
-fn print_sweep_text(
-    mut text: String,
-    failing: &[host_sim::experiments::sweep::Failing],
-    exit: ExitCode,
-) -> ExitCode {
-    for f in failing {
-        text += &format!(
-            "\n\n# failing case {} ({}): {}\n{}",
-            f.case, f.label, f.reason, f.scenario
-        );
-    }
-    match say(&text) {
-        Ok(()) => exit,
-        Err(c) => c,
-    }
-}
-
+/// A sweep's report: one JSON object, or its numbers, `notes` (lines that say more of
+/// some cases) and each failing case's reason and file.
 fn print_sweep(
     sweep: &str,
     cases: u64,
     json: bool,
     value: &Value,
+    notes: &str,
     failing: &[host_sim::experiments::sweep::Failing],
     exit: ExitCode,
 ) -> ExitCode {
-    if !json {
-        return print_sweep_text(
-            format!("{sweep}, {cases} cases:\n{}", human(value)),
-            failing,
-            exit,
-        );
-    }
-    match print_json(value) {
+    let printed = if json {
+        print_json(value)
+    } else {
+        let mut text = format!("{sweep}, {cases} cases:\n{}{notes}", human(value));
+        for f in failing {
+            text += &format!(
+                "\n\n# failing case {} ({}): {}\n{}",
+                f.case, f.label, f.reason, f.scenario
+            );
+        }
+        say(&text)
+    };
+    match printed {
         Ok(()) => exit,
         Err(c) => c,
     }
@@ -376,7 +364,7 @@ pub fn red_team(a: LivenessArgs, sweep: &'static str) -> ExitCode {
         let settings = json!({"cases": a.cases, "seed": a.seed});
         return emit(sweep, settings, sh, (first, end), &value, exit);
     }
-    print_sweep(sweep, a.cases, a.json, &value, &failing, exit)
+    print_sweep(sweep, a.cases, a.json, &value, "", &failing, exit)
 }
 
 /// A liveness sweep's answer: its shard's JSON, or the report.

@@ -127,6 +127,13 @@ pub struct NetworkReport {
     pub realtime_factor: f64,
 }
 
+impl NetworkReport {
+    /// The due trips completed (the share is what the report keeps).
+    pub fn due_completed(&self) -> u64 {
+        (self.due_completed_share * self.trips_due as f64).round() as u64
+    }
+}
+
 /// Runs the grid of `s` to its end.
 pub fn run(s: &NetworkSettings) -> Result<NetworkReport, String> {
     run_with(s, &mut |_| {})
@@ -348,7 +355,7 @@ impl Unfinished {
     /// The account of case `case` (settings `s`, report `r`), if due trips are unfinished
     /// and it did not deadlock.
     fn of(case: u64, s: &NetworkSettings, r: &NetworkReport) -> Option<Self> {
-        let completed = (r.due_completed_share * r.trips_due as f64).round() as u64;
+        let completed = r.due_completed();
         if completed >= r.trips_due || r.deadlocks > 0 {
             return None;
         }
@@ -427,8 +434,7 @@ pub fn grids(cases: u64, first: u64, seed: u64, duration_s: f64, threads: usize)
                 g.vehicles += r.vehicles_spawned;
                 g.trips_completed += r.trips_completed;
                 g.trips_due += r.trips_due;
-                g.trips_due_completed +=
-                    (r.due_completed_share * r.trips_due as f64).round() as u64;
+                g.trips_due_completed += r.due_completed();
                 g.collisions += r.collisions;
                 g.invariant_violations += r.invariant_violations;
                 g.limit_violations += r.limit_violations;

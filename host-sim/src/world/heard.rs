@@ -370,13 +370,7 @@ impl View {
         let slack = slack(from, me.v, rec.speed());
         match held {
             Some(i) => {
-                if let (Some(r), Some(d), Some(k)) = (
-                    self.records.get_mut(i),
-                    self.heard_from.get_mut(i),
-                    self.slacks.get_mut(i),
-                ) {
-                    (*r, *d, *k) = (rec, from, slack);
-                }
+                self.put(i, rec, from, slack);
                 Ok(())
             }
             None if full => self.replace_least_relevant(rec, from, slack),
@@ -405,6 +399,18 @@ impl View {
         }
     }
 
+    /// Writes record `i`: `rec`, `from` m away, of slack `slack`, and its id.
+    fn put(&mut self, i: usize, rec: Record, from: f64, slack: f64) {
+        if let (Some(r), Some(f), Some(k), Some(id)) = (
+            self.records.get_mut(i),
+            self.heard_from.get_mut(i),
+            self.slacks.get_mut(i),
+            self.ids.get_mut(i),
+        ) {
+            (*id, *r, *f, *k) = (rec.id_stamp().0, rec, from, slack);
+        }
+    }
+
     /// A full view takes `rec` (`from` m away, of slack `slack`) in place of its record of
     /// most slack, if that is more (an overflow if it was ≤ 0); else `rec` is refused, as
     /// an overflow if its own slack is ≤ 0.
@@ -417,14 +423,7 @@ impl View {
             .max_by(|a, b| a.1.total_cmp(&b.1));
         match least {
             Some((i, most)) if slack < most => {
-                if let (Some(r), Some(f), Some(k), Some(id)) = (
-                    self.records.get_mut(i),
-                    self.heard_from.get_mut(i),
-                    self.slacks.get_mut(i),
-                    self.ids.get_mut(i),
-                ) {
-                    (*id, *r, *f, *k) = (rec.id_stamp().0, rec, from, slack);
-                }
+                self.put(i, rec, from, slack);
                 self.overflowed |= most <= 0.0;
                 Ok(())
             }
