@@ -28,7 +28,8 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use smallvec::SmallVec;
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap, VecDeque};
+use std::collections::{BinaryHeap, HashMap};
+use std::rc::Rc;
 
 /// When a delivery is due: (time bits, send order). Delivery times are ≥ 0, so their
 /// bits order as the times do; the send order breaks ties.
@@ -46,17 +47,34 @@ struct Queue {
 /// its send order).
 type Wake = Reverse<(Due, u16, u16)>;
 
-/// One stream's deliveries still to come, in send order: their due times and the
-/// sender's stamps apart from the deliveries themselves and inline, so that what every
-/// send reads and drops — the last due times, and the earliest — lies in the sender's
-/// own table (a stream holds a handful: with a delay jittered over J seconds, about the
+/// One delivery still to come: when it is due, the sender's stamp (what overtaking
+/// compares), and the message — shared by every delivery of one send, so that a stream
+/// holds a pointer where it held a copy of the message in a table of its own (a second
+/// cache miss, and an allocation, per delivery).
+#[derive(Debug, Clone)]
+struct Step {
+    due: Due,
+    stamp: planner_core::Instant,
+    msg: Rc<Message>,
+}
+
+impl Step {
+    /// The delivery: the message, at its due time (the bits it was queued with).
+    fn received(&self) -> Received {
+        Received {
+            msg: *self.msg,
+            at: f64::from_bits(self.due.0),
+        }
+    }
+}
+
+/// One stream's deliveries still to come, in send order, inline, so that what every send
+/// reads and drops — the last due times, and the earliest — lies in the sender's own
+/// table (a stream holds a handful: with a delay jittered over J seconds, about the
 /// logarithm of J / h).
 #[derive(Debug, Clone, Default)]
 struct Stream {
-    /// (due, the sender's stamp) of each delivery.
-    steps: SmallVec<[(Due, planner_core::Instant); 8]>,
-    /// The deliveries, in the same order.
-    msgs: VecDeque<Received>,
+    steps: SmallVec<[Step; 8]>,
     /// The earliest due time of `steps`, if any.
     first: Option<Due>,
 }
@@ -64,7 +82,7 @@ struct Stream {
 impl Stream {
     /// The earliest due time, computed again.
     fn earliest(&self) -> Option<Due> {
-        self.steps.iter().map(|e| e.0).min()
+        self.steps.iter().map(|e| e.due).min()
     }
 }
 
@@ -86,8 +104,14 @@ impl Outgoing {
     /// receivers come in the order of the nodes, which is the order of their ids but
     /// after an id wraps, so the stream sought is usually the next one — the table is
     /// walked in order, which the processor prefetches, rather than searched.
-    fn push(&mut self, next: &mut usize, to: u16, due: Due, r: Received) -> (u64, Option<Due>) {
-        let (subject, stamp) = r.msg.subject();
+    fn push(
+        &mut self,
+        next: &mut usize,
+        to: u16,
+        due: Due,
+        msg: &Rc<Message>,
+    ) -> (u64, Option<Due>) {
+        let (subject, stamp) = msg.subject();
         let key = (to, subject);
         let i = match self.keys.get(*next) {
             Some(&k) if k == key => *next,
@@ -106,17 +130,19 @@ impl Outgoing {
         };
         let before = stream.first;
         let (mut dropped, mut lost_first) = (0, false);
-        while let Some(&(d, old)) = stream.steps.last() {
-            if !(d > due && old <= stamp) {
+        while let Some(last) = stream.steps.last() {
+            if !(last.due > due && last.stamp <= stamp) {
                 break;
             }
+            lost_first |= Some(last.due) == before;
             stream.steps.pop();
-            stream.msgs.pop_back();
-            lost_first |= Some(d) == before;
             dropped += 1;
         }
-        stream.steps.push((due, stamp));
-        stream.msgs.push_back(r);
+        stream.steps.push(Step {
+            due,
+            stamp,
+            msg: Rc::clone(msg),
+        });
         stream.first = if lost_first {
             stream.earliest()
         } else {
@@ -130,9 +156,8 @@ impl Outgoing {
     fn take(&mut self, to: u16, subject: u16, due: Due) -> Option<(Received, Option<Due>)> {
         let i = self.keys.binary_search(&(to, subject)).ok()?;
         let stream = self.streams.get_mut(i)?;
-        let at = stream.steps.iter().position(|e| e.0 == due)?;
-        stream.steps.remove(at);
-        let r = stream.msgs.remove(at)?;
+        let at = stream.steps.iter().position(|e| e.due == due)?;
+        let r = stream.steps.remove(at).received();
         stream.first = stream.earliest();
         let next = stream.first;
         if stream.steps.is_empty() {
@@ -372,6 +397,7 @@ impl Bus for InProcessBus {
         let sender = msg.sender();
         let subject = msg.subject().0;
         let out = self.outgoing.entry(sender).or_default();
+        let shared = Rc::new(*msg);
         let mut next = 0;
         for i in receivers {
             if self.rng.random_bool(f.loss) {
@@ -394,8 +420,7 @@ impl Bus for InProcessBus {
             };
             for t in later {
                 self.sent += 1;
-                let r = Received { msg: *msg, at: t };
-                let (dropped, wake) = out.push(&mut next, to, (t.to_bits(), self.sent), r);
+                let (dropped, wake) = out.push(&mut next, to, (t.to_bits(), self.sent), &shared);
                 self.stats.dropped_old += dropped;
                 if let Some(due) = wake {
                     wakes.push(Reverse((due, sender, subject)));
@@ -518,7 +543,11 @@ mod tests {
                 let t: f64 = now + rng.random_range(0.0..2.0);
                 let r = Received { msg, at: t };
                 let due = (t.to_bits(), seq);
-                let (_, wake) = outgoing.entry(id).or_default().push(&mut 0, ME, due, r);
+                let (_, wake) =
+                    outgoing
+                        .entry(id)
+                        .or_default()
+                        .push(&mut 0, ME, due, &Rc::new(msg));
                 if let Some(w) = wake {
                     wakes.push(Reverse((w, id, msg.subject().0)));
                 }
