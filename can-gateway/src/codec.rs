@@ -212,6 +212,8 @@ impl StateWire {
             beta: lane(self.beta_flags & 0x0F),
             stamp: restore_millis(self.stamp, now),
             cooperative: self.beta_flags & NOT_COOPERATIVE == 0,
+            // Not carried by these frames yet: a follower takes the sender as a wall.
+            brake: None,
         })
     }
 }
@@ -928,6 +930,7 @@ mod tests {
             beta: None,
             stamp: secs(12.34),
             cooperative: true,
+            brake: None,
         }
     }
 

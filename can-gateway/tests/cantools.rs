@@ -112,6 +112,7 @@ fn cantools_decodes_the_gateways_candump_log() {
             beta: (i == 2).then_some(1),
             stamp: ms(12_340 + 1_000 * i as u64),
             cooperative: i != 1,
+            brake: None,
         };
         let frames: Frames<F8> = encode(&Message::State(s), s.id as u8, i as u8).expect("encodes");
         let deg = 180.0 / std::f64::consts::PI;
@@ -228,6 +229,7 @@ fn cantools_decodes_the_gateways_candump_log() {
         beta: Some(1),
         stamp: ms(42_125),
         cooperative: false,
+        brake: None,
     };
     let deg = 180.0 / std::f64::consts::PI;
     let frames: Frames<F8> = encode(

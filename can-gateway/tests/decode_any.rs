@@ -85,7 +85,7 @@ proptest! {
         // Any uptime; the receiver's clock within a day of the stamp either way.
         let stamp = Instant::from_millis(stamp_ms);
         let now = Instant::from_millis(stamp_ms.saturating_add_signed(skew_ms));
-        let s = VehicleState { id, x, y, theta, v, omega, lane, alpha, beta, stamp, cooperative };
+        let s = VehicleState { id, x, y, theta, v, omega, lane, alpha, beta, stamp, cooperative, brake: None };
         let frames: Frames<F8> = encode(&Message::State(s), (id & 0xFF) as u8, counter).expect("in range");
         prop_assert_eq!(frames.len(), MessageKind::State.frames());
         let mut r = Reassembler::<2>::new();

@@ -144,6 +144,7 @@ pub fn approach<const N: usize>(
             stamp: t,
             // A stopped car: whatever drives it, it is not a planner that yields.
             cooperative: false,
+            brake: None,
         };
         let frames: Frames<PlainFrame> =
             encode(&Message::State(leader), 1, (step % 16) as u8).ok()?;

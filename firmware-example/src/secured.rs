@@ -40,6 +40,7 @@ fn state(k: u32) -> Message<f32> {
         stamp: crate::scenarios::CLOCK_START
             .saturating_add(Duration::from_millis(10 * u64::from(k))),
         cooperative: true,
+        brake: None,
     })
 }
 

@@ -77,13 +77,14 @@ fn run_writes_json_trace_and_plots() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("t,id,x,y,theta,v,omega,lane,target_lane,mode,place")
+        Some("t,id,x,y,theta,v,omega,lane,target_lane,mode,place,length,width,brake,invariant")
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     // 10 vehicles × 6000 steps.
     assert_eq!(rows.len(), 60_000);
     for r in &rows {
-        assert_eq!(r.len(), 11);
+        assert_eq!(r.len(), 15);
+        assert_eq!(r[11..], ["4.5", "1.7", "7.9", "paper"], "{r:?}");
         assert_eq!(r[10], "s0", "a straight road is segment 0");
         assert!(r[..7].iter().all(|x| x.parse::<f64>().is_ok()), "{r:?}");
         assert!(

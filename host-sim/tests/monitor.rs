@@ -29,6 +29,8 @@ fn car(x: f64, y: f64, v: f64) -> Truth {
         width: 1.7,
         lane: (y / LANE_WIDTH_M) as u8,
         keeps_invariant: true,
+        leader_aware: false,
+        brake: 7.9,
         v,
         v_before: v,
         mapped: false,
@@ -484,6 +486,7 @@ fn truth(id: u16, at: At, v: f64) -> VehicleTruth {
         planner: true,
         unmet: true,
         target_lane: 0,
+        leader_aware: false,
     }
 }
 

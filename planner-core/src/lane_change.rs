@@ -26,7 +26,7 @@ use crate::planner::{
 };
 use crate::real::Real;
 use crate::reuse::ReusePolicy;
-use crate::safety;
+use crate::safety::{self, Invariant};
 use crate::sensing::{still_unheard, Sensing};
 use crate::solver::{IpmSolver, MpcSolver};
 use crate::unicycle::{lateral_half_extent, step, Pose};
@@ -269,6 +269,8 @@ pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     reference: Option<Reference<F>>,
     /// The lateral QP's storage, here rather than on the stack (issue 19 §4).
     lateral: LateralWork<F>,
+    /// The invariant kept toward the vehicle ahead.
+    invariant: Invariant,
 }
 
 impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
@@ -299,6 +301,7 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
             omega_plan: [F::ZERO; N],
             reference: None,
             lateral: LateralWork::new(),
+            invariant: Invariant::Paper,
         }
     }
 
@@ -326,6 +329,7 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
             omega_plan,
             reference,
             lateral,
+            invariant,
         } = self;
         speed.rebuild(params, weights)?;
         *lateral_weights = LateralWeights::default();
@@ -340,6 +344,7 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
         omega_plan.fill(F::ZERO);
         *reference = None;
         lateral.clear();
+        *invariant = Invariant::Paper;
         Ok(())
     }
 }
@@ -366,6 +371,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             omega_plan: [F::ZERO; N],
             reference: None,
             lateral: LateralWork::new(),
+            invariant: Invariant::Paper,
         })
     }
 
@@ -422,6 +428,22 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         }
         self.resolution = Resolution { position, speed };
         Ok(())
+    }
+
+    /// Chooses the invariant kept toward the vehicle ahead (default
+    /// [`Invariant::Paper`]). Under [`Invariant::LeaderAware`] a vehicle ahead that is
+    /// known over V2V, cooperates, declared its braking limit and was heard within the
+    /// notification bound or [`STALE_AFTER_S`], whichever is longer, is credited with the least
+    /// distance it still travels ([`safety::leader_credit`]); the lane-change checks
+    /// toward vehicles behind, yielding and road ends keep the paper's wall, which
+    /// implies the leader-aware invariant (its wall is never farther).
+    pub fn set_invariant(&mut self, invariant: Invariant) {
+        self.invariant = invariant;
+    }
+
+    /// The invariant kept toward the vehicle ahead.
+    pub fn invariant(&self) -> Invariant {
+        self.invariant
     }
 
     /// The parameters.
@@ -516,7 +538,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             .road
             .end_x
             .map(|xr| xr - F::HALF * p.length() - p.d0() - obs.pose.x);
-        let known = min_gap(end, self.vehicle_gap(obs, select));
+        let known = min_gap(end, self.leader_gap(obs, select, |_| true));
         min_gap(known, self.unknown_ahead())
     }
 
@@ -567,6 +589,51 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             .filter(|c| select(c))
             .map(|c| self.nearest_x(c) - F::HALF * (c.length + len) - p.d0() - obs.pose.x)
             .reduce(|a, b| a.min(b))
+    }
+
+    /// x̄_t − x_t toward the vehicles selected by `select` under the invariant in use:
+    /// [`LanePlanner::vehicle_gap`], those of them `credited` selects credited under
+    /// [`Invariant::LeaderAware`] with [`LanePlanner::credit`].
+    fn leader_gap(
+        &self,
+        obs: &LaneObservation<'_, F>,
+        select: impl Fn(&Other<F>) -> bool,
+        credited: impl Fn(&Other<F>) -> bool,
+    ) -> Option<F> {
+        if self.invariant == Invariant::Paper {
+            return self.vehicle_gap(obs, select);
+        }
+        let p = self.params();
+        let len = p.length() + self.resolution.position;
+        obs.others
+            .iter()
+            .filter(|c| select(c))
+            .map(|c| {
+                let raw = self.nearest_x(c) - F::HALF * (c.length + len) - p.d0() - obs.pose.x;
+                if credited(c) {
+                    raw + self.credit(c, raw)
+                } else {
+                    raw
+                }
+            })
+            .reduce(|a, b| a.min(b))
+    }
+
+    /// What a vehicle ahead at wall distance `raw` is credited with under the
+    /// leader-aware invariant: the least distance it still travels from its stamped
+    /// speed (the speed taken half a bus step lower, as the bus may have rounded it up),
+    /// if it is known over V2V, cooperates, declared its braking limit, was heard
+    /// recently enough, and is ahead (`raw` > 0: a vehicle beside or behind the ego's
+    /// front is no leader, and its stop point says nothing about the ego's way to it).
+    fn credit(&self, c: &Other<F>, raw: F) -> F {
+        let p = self.params();
+        let fresh = c.age <= self.notify.max(F::from_f64(STALE_AFTER_S));
+        match c.brake {
+            Some(b) if !c.sensed && c.cooperative && fresh && raw > F::ZERO && b.is_finite() => {
+                safety::leader_credit(p, c.v - F::HALF * self.resolution.speed, b)
+            }
+            _ => F::ZERO,
+        }
     }
 
     /// Extra room a vehicle at speed `v` needs so that, after `tau` of moving unseen, it
@@ -634,10 +701,15 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
                     || yields_to(&key, alpha, beta, c, self.resolution.position))
         };
         let allowance = self.entry_allowance(obs.v_prev);
+        // A vehicle ahead in ≺ that is in one of my lanes is a leader like any other;
+        // one entering them is checked by its own entry check, which takes me at the
+        // wall: it is not credited.
         let yielding = self
-            .vehicle_gap(obs, |c| {
-                entering(c) || yields_to(&key, alpha, beta, c, self.resolution.position)
-            })
+            .leader_gap(
+                obs,
+                |c| entering(c) || yields_to(&key, alpha, beta, c, self.resolution.position),
+                |c| !entering(c),
+            )
             .map(|g| g - allowance);
         let all = min_gap(safe, yielding);
         (safe, all)
@@ -1359,6 +1431,90 @@ mod tests {
         let want =
             2.0 * e + pl.unaware_margin(v + ev, t) + safety::d_s(&p, v + ev) - safety::d_s(&p, v);
         assert!((pl.entry_allowance(v) - want).abs() < 1e-12);
+    }
+
+    /// A follower at vmax, `gap` m of wall distance behind a leader at vmax, after its
+    /// first steps (so nothing ahead is unheard of): its command under `invariant`.
+    fn follow(
+        invariant: Invariant,
+        gap: f64,
+        leader: impl Fn(&mut Other<f64>),
+    ) -> LaneCommand<f64> {
+        let p = Params::<f64>::table_i();
+        let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
+        pl.set_invariant(invariant);
+        pl.steps = 100;
+        let v = p.v_max();
+        let x_leader = gap + p.length() + p.d0();
+        let mut c = Other::v2v(2, x_leader, v, p.length(), 0, 0.0);
+        c.brake = Some(p.brake());
+        leader(&mut c);
+        let others = [c];
+        let obs = LaneObservation {
+            pose: Pose {
+                x: 0.0,
+                y: 1.8,
+                theta: 0.0,
+            },
+            v_prev: v,
+            omega_prev: 0.0,
+            others: &others,
+            road: Road {
+                lanes: 1,
+                lane_width: 3.6,
+                end_x: None,
+            },
+            target_lane: 0,
+            target: 0.0,
+            v_ref: v,
+        };
+        pl.step(&obs).expect("a valid observation")
+    }
+
+    #[test]
+    fn a_cooperating_leader_is_credited_with_its_least_travel_and_nothing_else_is() {
+        let p = Params::<f64>::table_i();
+        let v = p.v_max();
+        // Half the follower's stopping distance: the paper's invariant is broken.
+        let gap = 0.5 * safety::d_s(&p, v);
+        let paper = follow(Invariant::Paper, gap, |_| {});
+        assert!(matches!(paper.status, StepStatus::Fallback(_)), "{paper:?}");
+        let aware = follow(Invariant::LeaderAware, gap, |_| {});
+        assert!(
+            !matches!(aware.status, StepStatus::Fallback(_)),
+            "{aware:?}"
+        );
+        // What the planner reports is capped where no constraint of the horizon can bind.
+        let free = crate::planner::free_road_gap(&p, 20);
+        let want = (gap + safety::leader_credit(&p, v, p.brake())).min(free);
+        assert!((aware.gap - want).abs() < 1e-9, "{} vs {want}", aware.gap);
+        // No credit for what is not a cooperating leader heard recently that declared
+        // its braking limit, nor for a vehicle whose rear is not ahead.
+        type Case = (&'static str, f64, fn(&mut Other<f64>));
+        let cases: [Case; 5] = [
+            ("no limit declared", gap, |c| c.brake = None),
+            ("not cooperating", gap, |c| c.cooperative = false),
+            ("a sensor return", gap, |c| c.sensed = true),
+            ("silent", gap, |c| c.age = 1.0),
+            ("beside", -1.0, |_| {}),
+        ];
+        for (why, g, f) in cases {
+            let c = follow(Invariant::LeaderAware, g, f);
+            assert!(c.gap <= g + 1e-9, "{why}: gap {} > {g}", c.gap);
+        }
+        // A leader with a weaker brake is taken to brake at the follower's limit: its
+        // stop is placed earlier than it can be, never later (what makes comparing
+        // stopping points enough). A stronger one is credited less.
+        let weak = follow(Invariant::LeaderAware, gap, |c| c.brake = Some(1.0));
+        assert!(
+            (weak.gap - want).abs() < 1e-9,
+            "a weak brake is not credited more"
+        );
+        let strong = follow(Invariant::LeaderAware, gap, |c| c.brake = Some(20.0));
+        // (The leader is also in the yield set (21), whose gap keeps the entry allowance.)
+        let pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
+        let less = gap + safety::leader_credit(&p, v, 20.0) - pl.entry_allowance(v);
+        assert!((strong.gap - less).abs() < 1e-9, "{} vs {less}", strong.gap);
     }
 
     /// The lane [0, 3.6] m and the table's vehicle.

@@ -112,6 +112,9 @@ pub struct Other<F> {
     /// rectangle overlaps (lowest, and the other one if it straddles two), age 0, and no
     /// intention (β) is known from it.
     pub sensed: bool,
+    /// Its braking limit |amin| (m/s², > 0) as it declared it over V2V; `None` if it did
+    /// not (or it is a sensor return): then it is a wall under either invariant.
+    pub brake: Option<F>,
 }
 
 impl<F: Real> Other<F> {
@@ -129,6 +132,7 @@ impl<F: Real> Other<F> {
             age,
             cooperative: true,
             sensed: false,
+            brake: None,
         }
     }
 }

@@ -114,6 +114,56 @@ pub fn invariant_holds<F: Real>(p: &Params<F>, v_prev: F, gap: F) -> bool {
     d_s(p, v_prev) < gap
 }
 
+/// Which safety invariant a vehicle keeps toward the vehicle ahead of it.
+///
+/// Both are the relation S_t of Lemma 3 — "the follower can stop without hitting the
+/// leader whatever the leader does" — and differ in what the leader is credited with.
+/// See docs/spec.md, "The leader-aware invariant", for the proof.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Invariant {
+    /// Lemma 3 as the paper writes it: the leader is a wall that may stop at once.
+    #[default]
+    Paper,
+    /// The leader, when it is known over V2V, cooperates and declared its braking limit,
+    /// is credited with the least distance it can still travel: it never reverses and
+    /// never brakes harder than its limit ([`leader_credit`]). Everywhere else — a
+    /// vehicle known only from the range sensor, stale, not cooperating, a road end, a
+    /// stop line — the wall, as in [`Invariant::Paper`].
+    LeaderAware,
+}
+
+/// The least distance (m) a vehicle of this plant still travels once it has applied
+/// speed `v` over a period, braking at most `brake` (m/s², > 0) from then on: the exact
+/// sum h Σ_{k≥1} max(0, v − brake k h) is v²/(2 brake) − v h / 2 + brake h² r(1−r)/2 with
+/// r the fractional part of v / (brake h), so v²/(2 brake) − v h / 2 bounds it from below
+/// (tight when r = 0). A speed or limit that is not positive gives 0.
+pub fn least_travel<F: Real>(p: &Params<F>, v: F, brake: F) -> F {
+    if !(v > F::ZERO && brake > F::ZERO) {
+        return F::ZERO;
+    }
+    (v * v / (F::TWO * brake) - F::HALF * v * p.h()).max(F::ZERO)
+}
+
+/// The leader-aware credit (m): how far along the road beyond where it was at its stamp
+/// a cooperating leader still travels, at the least — [`least_travel`] from its stamped
+/// speed `v_leader`, braking at b' = max(its limit, the follower's own |amin|), times
+/// cos θmax: its speed is along its heading, and a vehicle changing lanes (or about to)
+/// advances along the road only v cos θ, with |θ| ≤ θmax (a leader turning away at
+/// π/6 is 13 % slower along the road than along its path).
+///
+/// Why the larger of the two: a follower that stops before the leader's stopping point
+/// can still run into it on the way when it brakes harder than the leader and is faster
+/// (a car behind a truck). Taking the leader to brake at b' ≥ the follower's limit
+/// places its stop earlier than it can be, never later, and then a follower that can
+/// stop before that point never reaches the leader while both move: at a first contact
+/// the follower is at least as fast, so its own stopping point would be past the
+/// leader's (docs/spec.md, "The leader-aware invariant").
+pub fn leader_credit<F: Real>(p: &Params<F>, v_leader: F, leader_brake: F) -> F {
+    least_travel(p, v_leader, leader_brake.max(p.brake())) * p.theta_max().cos()
+}
+
 /// The certified fallback of Lemma 2: v_{t+kh} = max(0, v_{t−h} + amin (k+1) h).
 /// While the invariant holds it satisfies every constraint of (10) and reaches 0.
 pub fn max_braking<F: Real, const N: usize>(p: &Params<F>, v_prev: F) -> [F; N] {

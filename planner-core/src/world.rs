@@ -38,6 +38,9 @@ pub struct VehicleState<F> {
     /// The sender follows the protocols (see [`Other::cooperative`]); a scripted or
     /// legacy vehicle says it does not.
     pub cooperative: bool,
+    /// Its braking limit |amin| (m/s²), if it declares one: what a follower keeping the
+    /// leader-aware invariant ([`crate::safety::Invariant::LeaderAware`]) credits it with.
+    pub brake: Option<F>,
 }
 
 /// Why a message was not taken into the view (the view is unchanged).
@@ -184,6 +187,7 @@ mod tests {
             beta: None,
             stamp: Instant::from_millis(stamp_ms),
             cooperative: true,
+            brake: None,
         }
     }
 
@@ -245,6 +249,7 @@ mod tests {
                     beta: None,
                     stamp,
                     cooperative: true,
+                    brake: None,
                 };
                 taken += usize::from(w.update(&s, now).is_ok());
                 w.others(now, F::from_f64(4.5), &mut others);

@@ -88,6 +88,7 @@ fn approach<F: Real>(start: Instant) -> (Vec<u64>, u32) {
             beta: None,
             stamp: now,
             cooperative: false,
+            brake: None,
         };
         let frames: Frames<PlainFrame> =
             encode(&Message::State(leader), 1, (k % 16) as u8).expect("encodes");

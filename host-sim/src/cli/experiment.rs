@@ -1,6 +1,6 @@
 //! `host-sim experiment …`: the paper's figures and the fault experiment.
 
-use super::output::{bad_input, check_duration, draw_plot, finish, plot_output};
+use super::output::{bad_input, check_duration, draw_plot, finish, plot_output, print_json};
 use super::SolverArg;
 use host_sim::bus::Faults;
 use host_sim::experiments::faults::{compare, FaultSettings};
@@ -18,6 +18,10 @@ use std::process::ExitCode;
 /// The experiments.
 #[derive(clap::Subcommand)]
 pub enum Experiment {
+    /// What one lane carries at a speed, flowing and discharging a standing queue, under
+    /// the paper's invariant and the leader-aware one (bench/sumo/lane_capacity.py runs
+    /// the same road in SUMO, side by side).
+    LaneCapacity(LaneCapacityArgs),
     /// Fig. 9: closed system of 8 vehicles at the SPEC §8 intersection; STOP, FIFO, CON,
     /// the starvation-free CON and the pipelined algorithm on identical seeds.
     Throughput {
@@ -307,6 +311,7 @@ pub fn run(e: Experiment) -> ExitCode {
             };
             faults(args, seeds, throughput_seeds, duration, json, shard)
         }
+        Experiment::LaneCapacity(a) => lane_capacity(&a).err().unwrap_or(ExitCode::SUCCESS),
         Experiment::Throughput {
             duration,
             seeds,
@@ -854,4 +859,71 @@ impl std::fmt::Display for AttacksText<'_> {
         }
         Ok(())
     }
+}
+
+/// `host-sim experiment lane-capacity`.
+#[derive(clap::Args)]
+pub struct LaneCapacityArgs {
+    /// Speeds (m/s), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "13.9,27.8")]
+    speeds: Vec<f64>,
+    /// The invariant (default: both, side by side).
+    #[arg(long, value_enum)]
+    invariant: Option<super::InvariantArg>,
+    /// Vehicles per run (the first four are not counted).
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u16).range(6..=200))]
+    vehicles: u16,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `experiment lane-capacity`: every speed, both settings, the invariants asked for.
+fn lane_capacity(a: &LaneCapacityArgs) -> Result<(), ExitCode> {
+    use host_sim::experiments::lane_capacity as lc;
+    let (speeds, invariant, vehicles, json) = (&a.speeds, a.invariant, a.vehicles, a.json);
+    if let Some(v) = speeds.iter().find(|v| !(**v > 0.0 && **v <= 27.8)) {
+        return Err(bad_input(format!(
+            "--speeds: each in (0, 27.8] m/s, got {v}"
+        )));
+    }
+    let invariants: Vec<planner_core::Invariant> = match invariant {
+        Some(i) => vec![i.invariant()],
+        None => vec![
+            planner_core::Invariant::Paper,
+            planner_core::Invariant::LeaderAware,
+        ],
+    };
+    let report = lc::lane_capacity(speeds, &invariants, usize::from(vehicles)).map_err(|e| {
+        eprintln!("error: internal: lane-capacity: {e} (a bug: please report it)");
+        ExitCode::from(super::output::EXIT_INTERNAL)
+    })?;
+    if json {
+        return print_json(&report);
+    }
+    println!("| speed (m/s) | mode | invariant | veh/h | mean headway (s) | collisions | invariant violations | fallback steps |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for r in &report.results {
+        println!(
+            "| {} | {} | {} | {:.0} | {:.3} | {} | {} | {} |",
+            r.speed_mps,
+            r.mode.name(),
+            r.invariant,
+            r.flow_vph,
+            r.mean_headway_s,
+            r.collisions,
+            r.invariant_violations,
+            r.fallback_steps
+        );
+    }
+    let unsafe_runs = report
+        .results
+        .iter()
+        .filter(|r| r.collisions + r.invariant_violations + r.limit_violations > 0)
+        .count();
+    if unsafe_runs > 0 {
+        eprintln!("{unsafe_runs} run(s) with a collision or a violation");
+        return Err(ExitCode::from(super::output::EXIT_UNSAFE));
+    }
+    Ok(())
 }

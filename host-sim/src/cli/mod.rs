@@ -72,6 +72,25 @@ impl PrecisionArg {
     }
 }
 
+/// The invariant kept toward the vehicle ahead.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum InvariantArg {
+    /// Lemma 3 as the paper writes it: the leader may stop at once.
+    Paper,
+    /// A cooperating leader heard over V2V is credited with the least distance it still
+    /// travels at its braking limit (docs/spec.md).
+    LeaderAware,
+}
+
+impl InvariantArg {
+    pub(crate) fn invariant(self) -> planner_core::Invariant {
+        match self {
+            InvariantArg::Paper => planner_core::Invariant::Paper,
+            InvariantArg::LeaderAware => planner_core::Invariant::LeaderAware,
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// The main job: runs a scenario file — a road, an intersection or a network of
@@ -85,7 +104,7 @@ enum Command {
         /// Print one JSON summary object.
         #[arg(long)]
         json: bool,
-        /// Write a CSV trace (t,id,x,y,theta,v,omega,lane,target_lane,mode,place).
+        /// Write a CSV trace (t,id,x,y,theta,v,omega,lane,target_lane,mode,place,length,width,brake,invariant).
         #[arg(long, value_name = "out.csv")]
         trace: Option<PathBuf>,
         /// Draw trajectories and speeds to a .png or .svg file.
@@ -130,6 +149,10 @@ enum Command {
         /// does from 0.
         #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
         clock_start: f64,
+        /// The invariant every planner keeps toward the vehicle ahead, over the
+        /// scenario's `invariant` key (default: the scenario's, else `paper`).
+        #[arg(long, value_enum)]
+        invariant: Option<InvariantArg>,
     },
     /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
     Platoons(sweep::PlatoonsArgs),
@@ -241,6 +264,7 @@ fn dispatch(command: Command) -> ExitCode {
             can_fd,
             precision,
             clock_start,
+            invariant,
         } => run::run(run::RunArgs {
             file,
             seed,
@@ -255,6 +279,7 @@ fn dispatch(command: Command) -> ExitCode {
             can_fd,
             precision: precision.precision(),
             clock_start,
+            invariant: invariant.map(InvariantArg::invariant),
         }),
         Command::Platoons(a) => sweep::platoons(a),
         Command::Traffic(a) => sweep::traffic(a),

@@ -42,6 +42,8 @@ pub struct RunArgs {
     pub precision: host_sim::world::precision::Precision,
     /// Every node's clock at the start (s).
     pub clock_start: f64,
+    /// The invariant, over the scenario's.
+    pub invariant: Option<planner_core::Invariant>,
 }
 
 /// Where a run's rows go, and the staged files they end in (nothing is written to an
@@ -109,6 +111,9 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
     let mut spec = host_sim::scenario::load(&a.file).map_err(bad_input)?;
     spec.clock_start = planner_core::Instant::EPOCH.saturating_add(start);
     spec.precision = a.precision;
+    if let Some(i) = a.invariant {
+        spec.invariant = i;
+    }
     if a.bus != "in-process" {
         super::fleet::fits_the_bus(&a.file, &spec)?;
     }

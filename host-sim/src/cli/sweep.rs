@@ -48,6 +48,9 @@ pub struct TrafficArgs {
     /// planner before issue 19), and report the closed-loop cost given up against it.
     #[arg(long)]
     compare: bool,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, value_enum, default_value = "paper")]
+    invariant: super::InvariantArg,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -79,13 +82,19 @@ pub fn traffic(a: TrafficArgs) -> ExitCode {
         return code;
     }
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
+    let leader_aware = a.invariant == super::InvariantArg::LeaderAware;
     let planning = Planning {
         reuse: a.reuse,
+        leader_aware,
         ..Planning::DEFAULT
     };
     let mut settings = json!({
         "cases": a.cases, "seed": a.seed, "duration": a.duration, "reuse": a.reuse
     });
+    if leader_aware {
+        // Only then: shards of a paper sweep keep their settings as before.
+        settings["invariant"] = json!("leader-aware");
+    }
     if a.compare {
         // Only then: shards of a plain sweep keep their settings as before.
         settings["compare"] = json!(true);

@@ -134,6 +134,7 @@ pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> World
         finish: Finish::Duration,
         clock_start: planner_core::Instant::EPOCH,
         precision: crate::world::precision::Precision::F64,
+        invariant: planner_core::Invariant::Paper,
     }
 }
 

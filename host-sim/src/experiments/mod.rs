@@ -7,6 +7,7 @@ pub mod deadends;
 pub mod demand;
 pub mod fault_grid;
 pub mod faults;
+pub mod lane_capacity;
 pub mod layouts;
 pub mod multilane;
 pub mod network;

@@ -222,6 +222,8 @@ fn initial_platoon(spec: &PlatoonSpec, lim: &Limits, rng: &mut impl Rng) -> Vec<
             width: pf64.width(),
             lane: 0,
             keeps_invariant: i > 0,
+            leader_aware: false,
+            brake: 7.9,
             v,
             v_before: v,
             mapped: false,

@@ -78,6 +78,7 @@ pub fn closed_world(algorithm: Algorithm, seed: u64, duration: f64, faults: Faul
         finish: Finish::Duration,
         clock_start: planner_core::Instant::EPOCH,
         precision: crate::world::precision::Precision::F64,
+        invariant: planner_core::Invariant::Paper,
     }
 }
 

@@ -27,6 +27,10 @@ pub struct Planning {
     pub solver: SolverChoice,
     /// Certified plan reuse ([`planner_core::ReusePolicy::default`]) on.
     pub reuse: bool,
+    /// The leader-aware invariant ([`planner_core::Invariant::LeaderAware`]) instead of
+    /// the paper's.
+    #[serde(default)]
+    pub leader_aware: bool,
 }
 
 impl Planning {
@@ -34,11 +38,13 @@ impl Planning {
     pub const DEFAULT: Self = Self {
         solver: SolverChoice::Ours,
         reuse: false,
+        leader_aware: false,
     };
     /// The every-step baseline: the interior-point method alone, no reuse.
     pub const EVERY_STEP: Self = Self {
         solver: SolverChoice::OursInteriorPoint,
         reuse: false,
+        leader_aware: false,
     };
 }
 
@@ -106,7 +112,10 @@ impl TrafficReport {
 
 /// One case run to its end: its summary and the planners' counters.
 fn run_case(seed: u64, duration_s: f64, planning: Planning) -> (Summary, Counters) {
-    let spec = random_traffic(seed, 30, duration_s).world();
+    let mut spec = random_traffic(seed, 30, duration_s).world();
+    if planning.leader_aware {
+        spec.invariant = planner_core::Invariant::LeaderAware;
+    }
     let mut w = World::<20>::new(spec, planning.solver, None);
     w.set_reuse(planning.reuse.then(planner_core::ReusePolicy::default));
     let summary = run_world(&mut w, &mut |_| {});
@@ -211,8 +220,16 @@ pub fn traffic_compare(
     threads: usize,
     planning: Planning,
 ) -> TrafficComparison {
-    let every_step =
-        traffic_sweep_with(cases, first_seed, duration_s, threads, Planning::EVERY_STEP);
+    let every_step = traffic_sweep_with(
+        cases,
+        first_seed,
+        duration_s,
+        threads,
+        Planning {
+            leader_aware: planning.leader_aware,
+            ..Planning::EVERY_STEP
+        },
+    );
     let current = traffic_sweep_with(cases, first_seed, duration_s, threads, planning);
     TrafficComparison::of(current, every_step)
 }

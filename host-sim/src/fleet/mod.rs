@@ -574,6 +574,7 @@ impl<const N: usize> Harness<N> {
             reuse: None,
             precision: self.spec.precision,
             relevant_m: crate::world::heard::relevance_radius(&self.spec.network, self.lim.v_max),
+            invariant: self.spec.invariant,
         }
     }
 

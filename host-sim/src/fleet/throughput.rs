@@ -51,6 +51,7 @@ fn state(sa: u8, now: At) -> wire::Message<f64> {
         beta: None,
         stamp: now,
         cooperative: true,
+        brake: None,
     })
 }
 

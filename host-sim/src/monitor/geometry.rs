@@ -63,6 +63,8 @@ mod tests {
             width: 1.7,
             lane: 0,
             keeps_invariant: true,
+            leader_aware: false,
+            brake: 7.9,
             v: 0.0,
             v_before: 0.0,
             mapped: false,

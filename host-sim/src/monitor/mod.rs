@@ -76,6 +76,11 @@ pub struct Truth {
     /// Whether this vehicle is responsible for the invariant toward its leader (planner
     /// driven); scripted drivers lead their lanes and are not.
     pub keeps_invariant: bool,
+    /// It keeps the leader-aware invariant toward a leader that keeps one too (a
+    /// cooperating vehicle); else the paper's.
+    pub leader_aware: bool,
+    /// Its braking limit |amin| (m/s²).
+    pub brake: f64,
     /// Speed applied over the last period, v_{t−h} (m/s).
     pub v: f64,
     /// Speed applied over the period before, v_{t−2h} (m/s).

@@ -35,6 +35,37 @@ pub fn collisions(all: &[Truth]) -> u64 {
     n
 }
 
+/// Whether follower `b`, `gap` (m, bumper to bumper) behind `a`, keeps its invariant
+/// toward it. Lemma 3's, extent-adjusted: x_f < x̄ − dS(v_{t−h}(f)). The leader-aware
+/// one, when `b` keeps it and `a` is a cooperating vehicle: the same with x̄ moved ahead
+/// by the exact least distance `a` still travels braking at the larger of the two limits
+/// ([`least_travel`]) times cos θmax (along the road), and `b` behind `a` by more than
+/// d0.
+pub fn keeps_invariant(lim: &Limits, b: &Truth, a: &Truth, gap: f64) -> bool {
+    let room = gap - lim.d0;
+    let credit = if b.leader_aware && a.keeps_invariant && room > 0.0 {
+        // Along the road: its heading stays within θmax.
+        least_travel(a.v, a.brake.max(b.brake), lim.h) * lim.theta_max.cos()
+    } else {
+        0.0
+    };
+    room + credit > lim.safe_distance(b.v)
+}
+
+/// The least distance a vehicle of this plant (speed constant over each period) still
+/// travels once it has applied speed `v` over a period, braking at `brake` at most:
+/// h Σ_{k≥1} max(0, v − brake k h), summed in closed form. Exact, where the planners
+/// use a lower bound of it (planner_core::safety::least_travel): the monitor judges
+/// the guarantee itself, not the planners' arithmetic.
+pub fn least_travel(v: f64, brake: f64, h: f64) -> f64 {
+    if !(v > 0.0 && brake > 0.0 && h > 0.0) {
+        return 0.0;
+    }
+    let u = v / (brake * h);
+    let n = u.floor();
+    brake * h * h * (n * u - n * (n + 1.0) / 2.0)
+}
+
 /// The lanes of a road of `lanes` lanes ending at `end_x` (if it does), with its
 /// vehicles `all` in its frame: the invariant between consecutive vehicles of each lane
 /// (unless both are `mapped`: the junction's monitor judges those), the smallest gap,
@@ -62,8 +93,7 @@ pub fn lanes(f: &mut Findings, lim: &Limits, all: &[Truth], end_x: Option<f64>, 
             }
             let gap = a.x - b.x - 0.5 * (a.length + b.length);
             f.min_gap_m = f.min_gap_m.min(gap);
-            // Lemma 3's invariant, extent-adjusted (SPEC §1): x_f < x̄ − dS(v_{t−h}(f)).
-            if b.keeps_invariant && gap - lim.d0 <= lim.safe_distance(b.v) {
+            if b.keeps_invariant && !keeps_invariant(lim, b, a, gap) {
                 f.invariant_violations += 1;
             }
         }

@@ -1,19 +1,24 @@
 //! `--trace out.csv`: one row per vehicle per step, for every kind of world.
 //!
-//! Columns: `t,id,x,y,theta,v,omega,lane,target_lane,mode,place` — the state at time t
+//! Columns: `t,id,x,y,theta,v,omega,lane,target_lane,mode,place,length,width,brake,invariant`
+//! — the state at time t
 //! (s; x, y in m in the world — a straight road's own frame; theta in rad, relative to
 //! the road on a segment, in the world at an intersection), the speed v (m/s) and yaw
 //! rate omega (rad/s) commanded for [t, t+h), the lane and target lane (on a segment
 //! 0 = rightmost; at an intersection its inlet lane, 0 = inner), the mode (cruise,
 //! lane_change, yield, fallback, waiting, crossing, done), and where it is: `s<id>` on
-//! segment id (a straight road is `s0`), `j<id>` at intersection id.
+//! segment id (a straight road is `s0`), `j<id>` at intersection id; then what an outside
+//! checker needs to judge mixed vehicles: the vehicle's length and width (m), its braking
+//! limit (m/s²), and the invariant it keeps toward a cooperating vehicle ahead (`paper` or
+//! `leader-aware`; toward anything else, the paper's).
 
 use crate::world::network::{Network, Place};
 use crate::world::TraceRow;
 use std::io::{self, Write};
 
 /// The CSV header.
-pub const HEADER: &str = "t,id,x,y,theta,v,omega,lane,target_lane,mode,place";
+pub const HEADER: &str =
+    "t,id,x,y,theta,v,omega,lane,target_lane,mode,place,length,width,brake,invariant";
 
 /// The `place` column of a place in `net`.
 pub fn place_name(net: &Network, p: Place) -> String {
@@ -61,7 +66,7 @@ impl<W: Write> TraceWriter<W> {
         .map_or("?", String::as_str);
         if let Err(e) = writeln!(
             self.out,
-            "{:.2},{},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{}",
+            "{:.2},{},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{},{},{},{},{},{}",
             r.t,
             r.id,
             r.x,
@@ -72,7 +77,11 @@ impl<W: Write> TraceWriter<W> {
             r.lane,
             r.target_lane,
             r.mode.as_str(),
-            place
+            place,
+            r.length,
+            r.width,
+            r.brake,
+            crate::world::invariant_name(r.invariant),
         ) {
             self.error = Some(e);
         }

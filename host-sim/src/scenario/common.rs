@@ -6,7 +6,7 @@ use super::error::Errors;
 use super::ScenarioError;
 use crate::bus::Faults;
 use crate::monitor::liveness::DEADLOCK_WINDOW_S;
-use planner_core::{Params, Real, Sensing};
+use planner_core::{Invariant, Params, Real, Sensing};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use toml::Spanned;
@@ -81,6 +81,8 @@ pub struct RawHeader {
     pub sensing: Option<Spanned<SensingToml>>,
     /// `deadlock_s`.
     pub deadlock_s: Option<Spanned<f64>>,
+    /// `invariant`.
+    pub invariant: Option<Spanned<String>>,
 }
 
 /// The header, validated.
@@ -98,6 +100,8 @@ pub struct Header {
     pub sensing: Option<Sensing<f64>>,
     /// No vehicle moving this long while goals remain is a deadlock (s).
     pub deadlock_window_s: f64,
+    /// The invariant kept toward the vehicle ahead.
+    pub invariant: Invariant,
 }
 
 fn span<T>(s: &Option<Spanned<T>>) -> Option<Range<usize>> {
@@ -158,6 +162,10 @@ impl RawHeader {
                 ))
             }
         };
+        let invariant = match &self.invariant {
+            None => Invariant::Paper,
+            Some(i) => parse_invariant(i.get_ref()).map_err(|m| e.at(Some(i.span()), m))?,
+        };
         Ok(Header {
             duration_s,
             horizon,
@@ -165,6 +173,7 @@ impl RawHeader {
             faults,
             sensing,
             deadlock_window_s,
+            invariant,
         })
     }
 
@@ -212,6 +221,17 @@ impl RawHeader {
             )
         })?;
         Ok(Some(s))
+    }
+}
+
+/// The invariant named `name` (`"paper"` or `"leader-aware"`), or why not.
+pub fn parse_invariant(name: &str) -> Result<Invariant, String> {
+    match name {
+        "paper" => Ok(Invariant::Paper),
+        "leader-aware" => Ok(Invariant::LeaderAware),
+        _ => Err(format!(
+            "invariant must be \"paper\" or \"leader-aware\", got {name:?}"
+        )),
     }
 }
 

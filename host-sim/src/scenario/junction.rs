@@ -219,6 +219,8 @@ struct RawJunction {
     sensing: Option<Spanned<SensingToml>>,
     #[serde(default)]
     deadlock_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    invariant: Option<Spanned<String>>,
 }
 
 /// A vehicle placed on a route.
@@ -363,6 +365,7 @@ impl JunctionScenario {
             faults: raw.faults.clone(),
             sensing: raw.sensing.clone(),
             deadlock_s: raw.deadlock_s.clone(),
+            invariant: raw.invariant.clone(),
             ..RawHeader::default()
         }
         .validate(&e)?;
@@ -421,6 +424,7 @@ impl JunctionScenario {
                 faults: Faults::NONE,
                 sensing: None,
                 deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
+                invariant: planner_core::Invariant::Paper,
             },
             algorithm,
             layout: build_layout(&lt).map_err(|m| m.to_string())?,
@@ -462,6 +466,7 @@ impl JunctionScenario {
             finish: Finish::Duration,
             clock_start: planner_core::Instant::EPOCH,
             precision: crate::world::precision::Precision::F64,
+            invariant: self.header.invariant,
         }
     }
 

@@ -199,6 +199,8 @@ struct RawNetwork {
     sensing: Option<Spanned<SensingToml>>,
     #[serde(default)]
     deadlock_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    invariant: Option<Spanned<String>>,
 }
 
 fn pipelined() -> AlgorithmToml {
@@ -233,6 +235,7 @@ impl NetworkScenario {
             faults: raw.faults.clone(),
             sensing: raw.sensing.clone(),
             deadlock_s: raw.deadlock_s.clone(),
+            invariant: raw.invariant.clone(),
             ..RawHeader::default()
         }
         .validate(&e)?;
@@ -349,6 +352,7 @@ impl NetworkScenario {
             finish: Finish::Duration,
             clock_start: planner_core::Instant::EPOCH,
             precision: crate::world::precision::Precision::F64,
+            invariant: self.header.invariant,
         }
     }
 }

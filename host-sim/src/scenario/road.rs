@@ -108,6 +108,8 @@ struct RawScenario {
     deadline_s: Option<Spanned<f64>>,
     #[serde(default)]
     deadlock_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    invariant: Option<Spanned<String>>,
     road: Spanned<Road>,
     #[serde(rename = "vehicle")]
     vehicles: Vec<Spanned<RoadVehicle>>,
@@ -161,6 +163,7 @@ impl RoadScenario {
             faults: raw.faults.clone(),
             sensing: raw.sensing.clone(),
             deadlock_s: raw.deadlock_s.clone(),
+            invariant: raw.invariant.clone(),
         }
         .validate(&e)?;
         let road_span = raw.road.span();
@@ -195,7 +198,8 @@ impl RoadScenario {
         if let Some(end) = road.end_x {
             check_commitment(&vehicles, &road, end).map_err(|(span, p)| e.at(Some(span), p))?;
         }
-        check_lanes(&vehicles, road.lanes).map_err(|(span, p)| e.at(Some(span), p))?;
+        check_lanes(&vehicles, road.lanes, header.invariant)
+            .map_err(|(span, p)| e.at(Some(span), p))?;
         Ok(Self {
             name: raw.name,
             seed: raw.seed,
@@ -223,6 +227,7 @@ impl RoadScenario {
                 faults: Faults::NONE,
                 sensing: None,
                 deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
+                invariant: planner_core::Invariant::Paper,
             },
             road,
             vehicles,
@@ -247,6 +252,7 @@ impl RoadScenario {
             finish: Finish::Duration,
             clock_start: planner_core::Instant::EPOCH,
             precision: crate::world::precision::Precision::F64,
+            invariant: self.header.invariant,
         }
     }
 
@@ -433,14 +439,17 @@ fn check_commitment(
     Ok(())
 }
 
-/// Per lane, front to back: no overlap, the invariant for every planner-driven follower,
+/// Per lane, front to back: no overlap, the invariant in use for every planner-driven
+/// follower (the leader-aware one credits a planner-driven leader with its least travel),
 /// and scripted/random drivers only at the front of their lane (they do not keep the
 /// invariant themselves).
 fn check_lanes(
     vehicles: &[(RoadVehicle, Range<usize>)],
     lanes: u8,
+    invariant: planner_core::Invariant,
 ) -> Result<(), (Range<usize>, String)> {
     let lim = Limits::table_i();
+    let p = Params::<f64>::table_i();
     for lane in 0..lanes {
         let mut in_lane: Vec<&(RoadVehicle, Range<usize>)> =
             vehicles.iter().filter(|(v, _)| v.lane == lane).collect();
@@ -461,14 +470,20 @@ fn check_lanes(
                     follow.id, follow.driver, lead.id
                 ));
             }
-            let need = lim.safe_distance(follow.v) + START_MARGIN_M;
-            if !(gap - lim.d0 > need) {
+            let credit = match invariant {
+                planner_core::Invariant::LeaderAware if lead.driver == DriverKind::Planner => {
+                    planner_core::safety::leader_credit(&p, lead.v, p.brake())
+                }
+                _ => 0.0,
+            };
+            let need = lim.safe_distance(follow.v) + START_MARGIN_M - credit;
+            if !(gap - lim.d0 > need.max(START_MARGIN_M)) {
                 return fail(format!(
                     "vehicle {} violates the safety invariant behind vehicle {}: bumper gap \
-                     {gap:.3} m, needs more than d0 + dS(v) = {:.3} m",
+                     {gap:.3} m, needs more than d0 + dS(v) - credit = {:.3} m",
                     follow.id,
                     lead.id,
-                    lim.d0 + need
+                    lim.d0 + need.max(START_MARGIN_M)
                 ));
             }
         }

@@ -459,6 +459,7 @@ impl View {
                     alpha: s.alpha,
                     beta: s.beta,
                     cooperative: s.cooperative,
+                    brake: s.brake,
                     ..Other::v2v(s.id, s.x, s.v, length, s.lane, now.since(s.stamp).as_secs())
                 },
                 Record::Crossing {

@@ -173,6 +173,14 @@ impl<const N: usize> MpcSolver<f64, N> for AnySolver<N> {
     }
 }
 
+/// The name of an invariant in scenario files, reports, traces and on the command line.
+pub fn invariant_name(i: planner_core::Invariant) -> &'static str {
+    match i {
+        planner_core::Invariant::LeaderAware => "leader-aware",
+        _ => "paper",
+    }
+}
+
 /// One row of the trace: the state at `t` and the command for [t, t+h).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TraceRow {
@@ -201,6 +209,14 @@ pub struct TraceRow {
     /// At a junction: whether it holds its manager's permission (the trace file leaves
     /// this out; the viewer shows it).
     pub granted: Option<bool>,
+    /// Its length (m).
+    pub length: f64,
+    /// Its width (m).
+    pub width: f64,
+    /// Its braking limit |amin| (m/s²).
+    pub brake: f64,
+    /// The invariant it keeps toward a cooperating vehicle ahead.
+    pub invariant: planner_core::Invariant,
 }
 
 /// Everything a world is made of, validated (a scenario file loads into one).
@@ -236,6 +252,9 @@ pub struct WorldSpec {
     /// The precision of every planner, manager and codec ([`precision`]; `host-sim run
     /// --precision`).
     pub precision: precision::Precision,
+    /// The invariant every planner keeps toward the vehicle ahead (scenario key
+    /// `invariant`, `--invariant`): the paper's wall unless asked.
+    pub invariant: planner_core::Invariant,
 }
 
 /// When a run ends before its duration (besides a deadlock, which always ends it).
@@ -348,6 +367,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             reuse: None,
             precision: spec.precision,
             relevant_m: heard::relevance_radius(&spec.network, lim.v_max),
+            invariant: spec.invariant,
         };
         let net = spec.network.clone();
         let vehicles = spec

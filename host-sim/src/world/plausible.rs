@@ -148,6 +148,7 @@ mod tests {
             beta: None,
             stamp,
             cooperative: true,
+            brake: None,
         }
     }
 

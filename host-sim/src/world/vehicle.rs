@@ -78,6 +78,8 @@ pub struct PlannerSetup {
     /// Beyond this distance (m) no vehicle can matter to a plan
     /// ([`super::heard::relevance_radius`]).
     pub relevant_m: f64,
+    /// The invariant kept toward the vehicle ahead.
+    pub invariant: planner_core::Invariant,
 }
 
 /// A vehicle's multi-lane planner, in the setup's precision.
@@ -317,6 +319,8 @@ pub struct VehicleTruth {
     pub unmet: bool,
     /// Its target lane (for the wait-for relation).
     pub target_lane: u8,
+    /// It keeps the leader-aware invariant toward a cooperating leader.
+    pub leader_aware: bool,
 }
 
 impl VehicleTruth {
@@ -339,6 +343,8 @@ pub fn announce(
     cooperative: bool,
     now: Instant,
 ) -> Message {
+    // Every vehicle of this world brakes at Table I's limit, and says so.
+    let brake = Some(Params::<f64>::table_i().brake());
     match at {
         At::Lane {
             seg,
@@ -361,6 +367,7 @@ pub fn announce(
                 beta,
                 stamp: now,
                 cooperative,
+                brake,
             },
             segment: seg,
         },
@@ -516,6 +523,7 @@ impl<const N: usize> Brain<N> {
         let _ = p.set_bus_resolution(pos, speed);
         let _ = p.set_sensing(self.setup.sensing);
         let _ = p.set_reuse(self.setup.reuse);
+        p.set_invariant(self.setup.invariant);
         LaneBrain::F64(Box::new(p))
     }
 
@@ -527,6 +535,7 @@ impl<const N: usize> Brain<N> {
         let (pos, speed) = self.setup.resolution;
         let _ = p.set_bus_resolution(pos as f32, speed as f32);
         let _ = p.set_sensing(self.setup.sensing.map(sensing32));
+        p.set_invariant(self.setup.invariant);
         LaneF32::new(p)
     }
 
@@ -616,6 +625,8 @@ impl<const N: usize> Vehicle<N> {
             planner: self.is_planner(),
             unmet: super::step::unmet(self, net),
             target_lane: self.trip.target_lane,
+            leader_aware: matches!(&self.driver,
+                Driver::Planner(b) if b.setup.invariant == planner_core::Invariant::LeaderAware),
         }
     }
 
@@ -1067,6 +1078,13 @@ impl<const N: usize> Vehicle<N> {
             granted: match self.at {
                 At::Crossing { .. } => self.granted,
                 At::Lane { .. } => None,
+            },
+            length: LENGTH_M,
+            width: super::WIDTH_M,
+            brake: ctx.lim.brake,
+            invariant: match &self.driver {
+                Driver::Planner(b) => b.setup.invariant,
+                _ => planner_core::Invariant::Paper,
             },
         }
     }

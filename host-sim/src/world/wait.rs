@@ -263,6 +263,7 @@ mod tests {
             planner: true,
             unmet: true,
             target_lane: lane,
+            leader_aware: false,
         }
     }
 
