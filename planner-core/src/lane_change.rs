@@ -629,8 +629,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let p = self.params();
         let fresh = c.age <= self.notify.max(F::from_f64(STALE_AFTER_S));
         match c.brake {
-            Some(b) if !c.sensed && c.cooperative && fresh && raw > F::ZERO && b.is_finite() => {
-                safety::leader_credit(p, c.v - F::HALF * self.resolution.speed, b)
+            Some(b) if !c.sensed && c.cooperative && fresh && raw > F::ZERO => {
+                safety::leader_credit(p, c.v - F::HALF * self.resolution.speed, b.mps2())
             }
             _ => F::ZERO,
         }
@@ -1447,7 +1447,7 @@ mod tests {
         let v = p.v_max();
         let x_leader = gap + p.length() + p.d0();
         let mut c = Other::v2v(2, x_leader, v, p.length(), 0, 0.0);
-        c.brake = Some(p.brake());
+        c.brake = safety::BrakeLimit::from_mps2(p.brake());
         leader(&mut c);
         let others = [c];
         let obs = LaneObservation {
@@ -1505,12 +1505,16 @@ mod tests {
         // A leader with a weaker brake is taken to brake at the follower's limit: its
         // stop is placed earlier than it can be, never later (what makes comparing
         // stopping points enough). A stronger one is credited less.
-        let weak = follow(Invariant::LeaderAware, gap, |c| c.brake = Some(1.0));
+        let weak = follow(Invariant::LeaderAware, gap, |c| {
+            c.brake = safety::BrakeLimit::from_mps2(1.0)
+        });
         assert!(
             (weak.gap - want).abs() < 1e-9,
             "a weak brake is not credited more"
         );
-        let strong = follow(Invariant::LeaderAware, gap, |c| c.brake = Some(20.0));
+        let strong = follow(Invariant::LeaderAware, gap, |c| {
+            c.brake = safety::BrakeLimit::from_mps2(20.0)
+        });
         // (The leader is also in the yield set (21), whose gap keeps the entry allowance.)
         let pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
         let less = gap + safety::leader_credit(&p, v, 20.0) - pl.entry_allowance(v);

@@ -114,7 +114,7 @@ pub struct Other<F> {
     pub sensed: bool,
     /// Its braking limit |amin| (m/s², > 0) as it declared it over V2V; `None` if it did
     /// not (or it is a sensor return): then it is a wall under either invariant.
-    pub brake: Option<F>,
+    pub brake: Option<crate::safety::BrakeLimit>,
 }
 
 impl<F: Real> Other<F> {

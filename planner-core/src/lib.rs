@@ -70,7 +70,7 @@ pub use planner::{
 };
 pub use real::Real;
 pub use reuse::ReusePolicy;
-pub use safety::Invariant;
+pub use safety::{BrakeLimit, Invariant};
 pub use sensing::Sensing;
 pub use slot::{LanePlannerSlot, PlannerSlot, Slot};
 pub use solver::{IpmSolver, Method, MpcSolver, Settings, Solution, SolveError};

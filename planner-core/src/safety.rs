@@ -134,6 +134,51 @@ pub enum Invariant {
     LeaderAware,
 }
 
+/// A vehicle's braking limit |amin| as it declares it over V2V: in steps of 0.1 m/s²,
+/// from 0.1 to 25.5 m/s² — one byte, as a CAN signal carries it, and the state message
+/// stays the size it was (the firmware's stack is counted).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BrakeLimit(u8);
+
+impl BrakeLimit {
+    /// The step (m/s²).
+    pub const STEP_MPS2: f64 = 0.1;
+
+    /// `b` m/s² rounded *up* to the next step (within 1e-5 m/s², so that 7.9 in f32 stays
+    /// 7.9): a follower credits a leader less the harder it says it brakes, so rounding
+    /// up never credits more than the truth. `None` unless 0 < b ≤ 25.5 m/s².
+    pub fn from_mps2<F: Real>(b: F) -> Option<Self> {
+        let tenths = b.to_f64() / Self::STEP_MPS2;
+        if !(tenths > 0.0 && tenths <= 255.0 + 1e-4) {
+            return None;
+        }
+        // Truncation toward zero, then up unless already (all but) on a step.
+        let down = tenths as u32;
+        let up = if tenths - f64::from(down) > 1e-4 {
+            down + 1
+        } else {
+            down
+        };
+        u8::try_from(up).ok().filter(|&t| t > 0).map(Self)
+    }
+
+    /// From its wire value, tenths of m/s²; `None` for 0 (no limit declared).
+    pub fn from_tenths(tenths: u8) -> Option<Self> {
+        (tenths > 0).then_some(Self(tenths))
+    }
+
+    /// Its wire value, tenths of m/s² (1–255).
+    pub fn tenths(self) -> u8 {
+        self.0
+    }
+
+    /// In m/s².
+    pub fn mps2<F: Real>(self) -> F {
+        F::from_f64(f64::from(self.0) * Self::STEP_MPS2)
+    }
+}
+
 /// The least distance (m) a vehicle of this plant still travels once it has applied
 /// speed `v` over a period, braking at most `brake` (m/s², > 0) from then on: the exact
 /// sum h Σ_{k≥1} max(0, v − brake k h) is v²/(2 brake) − v h / 2 + brake h² r(1−r)/2 with
@@ -257,5 +302,33 @@ mod tests {
         assert_eq!(mb[299], 0.0);
         assert!((mb[0] - 19.921).abs() < 1e-12);
         assert_eq!(max_braking_command(&p, 0.05), 0.0);
+    }
+
+    #[test]
+    fn a_braking_limit_is_declared_in_tenths_rounded_up() {
+        assert_eq!(
+            BrakeLimit::from_mps2(7.9f32).map(BrakeLimit::tenths),
+            Some(79)
+        );
+        assert_eq!(
+            BrakeLimit::from_mps2(7.9f64).map(BrakeLimit::tenths),
+            Some(79)
+        );
+        assert_eq!(
+            BrakeLimit::from_mps2(7.91).map(BrakeLimit::tenths),
+            Some(80)
+        );
+        assert_eq!(BrakeLimit::from_mps2(4.5).map(BrakeLimit::tenths), Some(45));
+        assert_eq!(BrakeLimit::from_mps2(0.01).map(BrakeLimit::tenths), Some(1));
+        assert_eq!(
+            BrakeLimit::from_mps2(25.5).map(BrakeLimit::tenths),
+            Some(255)
+        );
+        for bad in [0.0, -1.0, 25.6, f64::NAN, f64::INFINITY] {
+            assert_eq!(BrakeLimit::from_mps2(bad), None, "{bad}");
+        }
+        assert_eq!(BrakeLimit::from_tenths(0), None);
+        let b = BrakeLimit::from_tenths(45).expect("valid");
+        assert!((b.mps2::<f64>() - 4.5).abs() < 1e-12);
     }
 }

@@ -40,7 +40,7 @@ pub struct VehicleState<F> {
     pub cooperative: bool,
     /// Its braking limit |amin| (m/s²), if it declares one: what a follower keeping the
     /// leader-aware invariant ([`crate::safety::Invariant::LeaderAware`]) credits it with.
-    pub brake: Option<F>,
+    pub brake: Option<crate::safety::BrakeLimit>,
 }
 
 /// Why a message was not taken into the view (the view is unchanged).
@@ -151,6 +151,7 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
                 alpha: s.alpha,
                 beta: s.beta,
                 cooperative: s.cooperative,
+                brake: s.brake,
                 ..Other::v2v(s.id, s.x, s.v, length, s.lane, now.since(s.stamp).as_secs())
             });
         }

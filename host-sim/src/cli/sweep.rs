@@ -159,17 +159,32 @@ pub struct LivenessArgs {
     /// Run only shard I of N (0-based) and print it as JSON for `host-sim merge`.
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
+    /// The invariant every planner keeps toward the vehicle ahead (deadends; the
+    /// crossing planners of `crossings` keep the paper's).
+    #[arg(long, value_enum, default_value = "paper")]
+    invariant: super::InvariantArg,
 }
 
 /// Theorem 3 sweep.
 pub fn deadends(a: LivenessArgs) -> ExitCode {
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
-    let r = host_sim::experiments::deadends::sweep(end - first, first, a.seed, 0);
+    let r = host_sim::experiments::deadends::sweep_with(
+        end - first,
+        first,
+        a.seed,
+        0,
+        a.invariant.invariant(),
+    );
     liveness("deadends", &a, (first, end), &r, &r.totals, &r.failing)
 }
 
 /// Theorems 4–5 sweep.
 pub fn crossings(a: LivenessArgs) -> ExitCode {
+    if a.invariant != super::InvariantArg::Paper {
+        return super::output::bad_input(
+            "--invariant: the crossing planners keep the paper's invariant (only deadends takes it)",
+        );
+    }
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
     let r = host_sim::experiments::crossings::sweep(end - first, first, a.seed, 0);
     liveness("crossings", &a, (first, end), &r, &r.totals, &r.failing)
@@ -387,7 +402,10 @@ fn liveness<T: serde::Serialize + std::fmt::Debug>(
 ) -> ExitCode {
     match a.shard {
         Some(sh) => {
-            let settings = json!({"cases": a.cases, "seed": a.seed});
+            let mut settings = json!({"cases": a.cases, "seed": a.seed});
+            if a.invariant == super::InvariantArg::LeaderAware {
+                settings["invariant"] = json!("leader-aware");
+            }
             emit(sweep, settings, sh, range, r, liveness_code(t))
         }
         None => report(r, a.json, t, failing),

@@ -110,18 +110,37 @@ pub fn case(seed: u64, index: u64) -> RoadScenario {
 
 /// Runs `cases` cases from index `first` of the sweep seeded `seed` on `threads` threads.
 pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> DeadendsReport {
+    sweep_with(cases, first, seed, threads, planner_core::Invariant::Paper)
+}
+
+/// [`sweep`], every planner keeping `invariant` (a failing case's scenario names it).
+pub fn sweep_with(
+    cases: u64,
+    first: u64,
+    seed: u64,
+    threads: usize,
+    invariant: planner_core::Invariant,
+) -> DeadendsReport {
     let t0 = std::time::Instant::now();
     let results: Vec<Case> = super::par::map_indexed(cases as usize, threads, |i| {
         let index = first + i as u64;
         let sc = case(seed, index);
         let mut world = sc.world();
         world.finish = Finish::GoalsMetAndStill;
+        world.invariant = invariant;
+        let named = match invariant {
+            planner_core::Invariant::Paper => String::new(),
+            _ => format!(
+                "invariant = \"{}\"\n",
+                crate::world::invariant_name(invariant)
+            ),
+        };
         Case {
             index,
             seed: case_seed(seed, index),
             label: "deadend",
             summary: sweep::run(world),
-            scenario: sc.to_toml(),
+            scenario: named + &sc.to_toml(),
         }
     });
     DeadendsReport {

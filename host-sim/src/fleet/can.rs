@@ -734,7 +734,7 @@ fn state_as<A: Copy, B>(
         beta: s.beta,
         stamp: s.stamp,
         cooperative: s.cooperative,
-        brake: s.brake.map(f),
+        brake: s.brake,
     }
 }
 

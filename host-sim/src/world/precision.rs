@@ -140,7 +140,7 @@ fn other32(o: &Other<f64>) -> Other<f32> {
         alpha: o.alpha,
         beta: o.beta,
         cooperative: o.cooperative,
-        brake: o.brake.map(r),
+        brake: o.brake,
         sensed: o.sensed,
     }
 }

@@ -344,7 +344,7 @@ pub fn announce(
     now: Instant,
 ) -> Message {
     // Every vehicle of this world brakes at Table I's limit, and says so.
-    let brake = Some(Params::<f64>::table_i().brake());
+    let brake = planner_core::safety::BrakeLimit::from_mps2(Params::<f64>::table_i().brake());
     match at {
         At::Lane {
             seg,
