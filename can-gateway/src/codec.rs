@@ -212,7 +212,8 @@ impl StateWire {
             beta: lane(self.beta_flags & 0x0F),
             stamp: restore_millis(self.stamp, now),
             cooperative: self.beta_flags & NOT_COOPERATIVE == 0,
-            // Not carried by these frames yet: a follower takes the sender as a wall.
+            // `State` has no room for it (`Located` sets it): a follower takes the sender
+            // as a wall.
             brake: None,
         })
     }
@@ -238,12 +239,15 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
             w.put(&q.stamp.to_le_bytes());
         }
         Message::Located { segment, state: s } => {
-            // Frame 0: id, segment, lanes, β and flags | 1: x, y | 2: heading, speed, yaw
-            // rate | 3: stamp, CRC (padding keeps every field in one frame).
+            // Frame 0: id, segment, lanes, β and flags, braking limit | 1: x, y | 2:
+            // heading, speed, yaw rate | 3: stamp, CRC (padding keeps every field in one
+            // frame). The braking limit took frame 0's padding byte: 0, as an older
+            // sender wrote it, reads as "not declared".
             let q = StateWire::of(s)?;
             w.put(&s.id.to_le_bytes());
             w.put(&segment.to_le_bytes());
-            w.put(&[q.lanes, q.beta_flags, 0]);
+            let brake = s.brake.map_or(0, planner_core::BrakeLimit::tenths);
+            w.put(&[q.lanes, q.beta_flags, brake]);
             w.put(&q.x.to_le_bytes());
             w.put(&q.y.to_le_bytes());
             w.put(&[0]);
@@ -836,17 +840,20 @@ fn decode_body<F: Real>(
         ),
         MessageKind::Located => Message::Located {
             segment: rd_u16(b, 2),
-            state: StateWire {
-                lanes: byte(4),
-                beta_flags: byte(5),
-                x: rd_u32(b, 7) as i32,
-                y: rd_u16(b, 11) as i16,
-                heading: rd_u16(b, 14) as i16,
-                speed: rd_u16(b, 16),
-                yaw: rd_u16(b, 18) as i16,
-                stamp: rd_u32(b, 21),
-            }
-            .state(rd_u16(b, 0), now)?,
+            state: VehicleState {
+                brake: planner_core::BrakeLimit::from_tenths(byte(6)),
+                ..StateWire {
+                    lanes: byte(4),
+                    beta_flags: byte(5),
+                    x: rd_u32(b, 7) as i32,
+                    y: rd_u16(b, 11) as i16,
+                    heading: rd_u16(b, 14) as i16,
+                    speed: rd_u16(b, 16),
+                    yaw: rd_u16(b, 18) as i16,
+                    stamp: rd_u32(b, 21),
+                }
+                .state(rd_u16(b, 0), now)?
+            },
         },
         MessageKind::JunctionRequest => {
             let (inlet, outlet) = (track_of(byte(3))?, track_of(byte(4))?);
@@ -1861,6 +1868,46 @@ mod tests {
                 state: st,
             };
             assert_eq!(push_all(&mut r, &older, 7, 2), Err(DecodeError::Stale));
+        }
+
+        #[test]
+        fn a_located_state_carries_its_braking_limit_and_a_plain_one_cannot() {
+            let mut st = state();
+            st.id = 7;
+            st.brake = planner_core::BrakeLimit::from_mps2(4.5);
+            let located = Message::Located {
+                segment: 1,
+                state: st,
+            };
+            let mut r = Reassembler::<8>::new();
+            let Ok(Some(Message::Located { state: got, .. })) = push_all(&mut r, &located, 7, 1)
+            else {
+                panic!("a located state");
+            };
+            assert_eq!(got.brake, st.brake);
+            // An older sender's zero byte: not declared.
+            st.brake = None;
+            st.stamp = st
+                .stamp
+                .saturating_add(planner_core::Duration::from_millis(10));
+            let older = Message::Located {
+                segment: 1,
+                state: st,
+            };
+            let Ok(Some(Message::Located { state: got, .. })) = push_all(&mut r, &older, 7, 2)
+            else {
+                panic!("a located state");
+            };
+            assert_eq!(got.brake, None);
+            // `State` has no room for it: the follower takes the sender as a wall.
+            let mut plain = state();
+            plain.brake = planner_core::BrakeLimit::from_mps2(4.5);
+            let mut r = Reassembler::<8>::new();
+            let Ok(Some(Message::State(got))) = push_all(&mut r, &Message::State(plain), 7, 1)
+            else {
+                panic!("a state");
+            };
+            assert_eq!(got.brake, None);
         }
 
         #[test]

@@ -229,7 +229,7 @@ fn cantools_decodes_the_gateways_candump_log() {
         beta: Some(1),
         stamp: ms(42_125),
         cooperative: false,
-        brake: None,
+        brake: planner_core::BrakeLimit::from_mps2(4.5),
     };
     let deg = 180.0 / std::f64::consts::PI;
     let frames: Frames<F8> = encode(
@@ -251,6 +251,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                 ("LaneChangeTo", 15.0),
                 ("IntendedLane", 1.0),
                 ("NotCooperative", 1.0),
+                ("BrakeLimit", 4.5),
             ],
             vec![("X", st.x), ("Y", st.y)],
             vec![
