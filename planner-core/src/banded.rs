@@ -8,16 +8,16 @@
 use crate::real::Real;
 
 /// A symmetric N×N matrix with bandwidth 2: `d[j] = M[j][j]`, `e1[j] = M[j][j−1]`,
-/// `e2[j] = M[j][j−2]` (entries e1[0], e2[0], e2[1] are unused and kept at 0).
+/// `e2[j] = M[j][j−2]` (entries `e1[0]`, `e2[0]`, `e2[1]` are unused and kept at 0).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Penta<F, const N: usize> {
     /// Main diagonal.
     pub d: [F; N],
-    /// First sub-diagonal, M[j][j−1].
+    /// First sub-diagonal, `M[j][j−1]`.
     pub e1: [F; N],
-    /// Second sub-diagonal, M[j][j−2].
+    /// Second sub-diagonal, `M[j][j−2]`.
     pub e2: [F; N],
-    /// After [`Penta::factor`]: 1 / D[j] (multiplying is far cheaper than dividing).
+    /// After [`Penta::factor`]: `1 / D[j]` (multiplying is far cheaper than dividing).
     pub dinv: [F; N],
 }
 
@@ -85,7 +85,7 @@ impl<F: Real, const N: usize> Penta<F, N> {
     }
 
     /// Factorises in place into L D Lᵀ (unit lower L with bandwidth 2): afterwards `d`
-    /// holds D, `e1[j]` = L[j][j−1], `e2[j]` = L[j][j−2].
+    /// holds D, `e1[j]` = `L[j][j−1]`, `e2[j]` = `L[j][j−2]`.
     ///
     /// Dynamic regularisation: the matrices factorised here are positive definite in
     /// exact arithmetic, but interior-point weights λ/s reach 1e15 near the optimum and

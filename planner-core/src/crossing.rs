@@ -551,8 +551,9 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     ///
     /// Every algorithm but [`Algorithm::Concurrent`] (kept exactly as the paper writes
     /// it) orders vehicles consistently with their order on each inlet lane and gives
-    /// up a permission that a vehicle cannot use; see [`Manager::priority`] and
-    /// [`Manager::revoke_blocked`] for why both are needed for liveness.
+    /// up a permission that a vehicle cannot use; see `Manager::priority` and
+    /// `Manager::revoke_blocked` (private; their comments in the source) for why both are
+    /// needed for liveness.
     pub fn update(&mut self, now: Instant) {
         let t0 = *self.started.get_or_insert(now);
         if now < t0.saturating_add(self.lease.quiet()) {

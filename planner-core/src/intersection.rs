@@ -253,9 +253,9 @@ pub struct Layout<F> {
     /// The routes, indexed by [`Layout::route_index`]; the index is also the fixed
     /// route order Ψ of the FIFO tie-break.
     pub routes: Vec<Route<F>, MAX_ROUTES>,
-    /// conflicts[i] bit j: γ_i ⊗ γ_j.
+    /// `conflicts[i]` bit j: γ_i ⊗ γ_j.
     pub conflicts: [u32; MAX_ROUTES],
-    /// zone_end[i][j]: along route i (distance from its A_S entry), where the part of its
+    /// `zone_end[i][j]`: along route i (distance from its A_S entry), where the part of its
     /// path whose footprint meets route j's swept area ends; NEG if none.
     pub zone_end: [[F; MAX_ROUTES]; MAX_ROUTES],
 }

@@ -831,7 +831,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// plus the notification latency beyond one period (SPEC §9: at most amax faster, see
     /// `unaware_reach`), and the free-space condition of Lemma 8 for the widened band.
     /// A vehicle that does not cooperate will not hear the change: toward it (17) must
-    /// hold as if the ego entered its lane now ([`LanePlanner::entry_ok`]'s test).
+    /// hold as if the ego entered its lane now (the test of the private
+    /// `LanePlanner::entry_ok`).
     /// `Ok` when a change into `m` may start now; otherwise the first condition that fails.
     pub fn start_check(&self, obs: &LaneObservation<'_, F>, m: u8) -> Result<(), StartBlock> {
         let p = self.params();

@@ -77,3 +77,9 @@ pub use solver::{IpmSolver, Method, MpcSolver, Settings, Solution, SolveError};
 pub use time::{Duration, Instant};
 pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};
+
+/// The `heapless` this crate's API is written in ([`WorldView::others`] and
+/// [`WorldView::lane_vehicles`] fill a `heapless::Vec`): name it as
+/// `planner_core::heapless::Vec` and the versions always agree (a different `heapless` in
+/// the user's crate is a different type).
+pub use heapless;
