@@ -20,6 +20,7 @@ pub type Frames<Fr> = Vec<Fr, MAX_FRAMES>;
 
 /// Which field could not be encoded or was implausible on decoding.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Field {
     /// x.
     X,
@@ -47,6 +48,7 @@ const NOT_COOPERATIVE: u8 = 0x10;
 
 /// Why a message could not be encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum EncodeError {
     /// A value is NaN, infinite or outside what its field can carry.
     OutOfRange(Field),
@@ -56,6 +58,7 @@ pub enum EncodeError {
 
 /// Why a frame was rejected (the reassembler is unchanged).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum DecodeError {
     /// A standard (11-bit) identifier or a remote frame: not ours.
     NotOurs,

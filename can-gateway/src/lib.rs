@@ -13,6 +13,10 @@
 //! - [`secoc`]: SecOC-style authentication (AES-128-CMAC, time-based freshness).
 //!
 //! `can-gateway.dbc` (in this crate) describes every frame for standard tools.
+//!
+//! Feature `defmt`: [`Message`], the wire's values and every error implement
+//! `defmt::Format` (and planner-core's types, through its own `defmt` feature), so
+//! firmware logs a refused frame's [`DecodeError`] as it is.
 #![no_std]
 #![deny(missing_docs)]
 #![cfg_attr(

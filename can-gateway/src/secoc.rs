@@ -78,6 +78,7 @@ impl core::fmt::Debug for Key {
 
 /// Why a secured message was rejected (nothing was recorded).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum AuthError {
     /// No key for the sender's address.
     UnknownKey,

@@ -97,6 +97,7 @@ pub const SPEED_LIMIT: f64 = 100.0;
 
 /// Message kinds and their codes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum MessageKind {
     /// V2V vehicle state (3 frames).
     State = 1,
@@ -147,6 +148,7 @@ impl MessageKind {
 
 /// An intersection track: heading of travel (0 east … 3 south) and lane (0 inner).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TrackWire {
     /// Heading, 0–3.
     pub heading: u8,
@@ -156,6 +158,7 @@ pub struct TrackWire {
 
 /// A registration / crossing request (V2I).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Request<F> {
     /// The vehicle.
     pub id: u16,
@@ -173,6 +176,7 @@ pub struct Request<F> {
 
 /// Every message the planners exchange.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Message<F> {
     /// Vehicle state (V2V).
     State(VehicleState<F>),
