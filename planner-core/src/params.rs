@@ -68,8 +68,6 @@ pub enum ParamsError {
     NegativeStandstillMargin,
 }
 
-impl core::error::Error for ParamsError {}
-
 /// Names of [`ParamsSpec`] fields, for error reporting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
