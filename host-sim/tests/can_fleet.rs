@@ -201,6 +201,7 @@ fn can_bus_refuses_what_it_cannot_carry() {
         s: 1.0,
         v: 1.0,
         length: 4.5,
+        brake: None,
     };
     // A road has no junction whose routes could carry a crossing report.
     let msg = host_sim::bus::Message::Crossing {

@@ -107,6 +107,7 @@ fn crossing_reports_map_onto_requests_and_back() {
             s: 12.345,
             v: 9.87,
             length: LENGTH_M,
+            brake: None,
         };
         let m = map.to_wire(&report(r), common::secs(3.25)).expect("maps");
         let wire::Message::Request(q) = m else {
@@ -137,11 +138,13 @@ fn crossing_reports_map_onto_requests_and_back() {
         s: 1.0,
         v: 1.0,
         length: LENGTH_M,
+        brake: None,
     };
     assert!(map.to_wire(&report(bad_route), common::secs(0.0)).is_err());
     let long = CrossingReport {
         route: 0,
         length: LENGTH_M + 1.0,
+        brake: None,
         ..bad_route
     };
     assert!(map.to_wire(&report(long), common::secs(0.0)).is_err());

@@ -315,6 +315,8 @@ fn on(id: u16, route: u8, s: f64, v: f64) -> OnRoute {
         s,
         v,
         length: LENGTH_M,
+        leader_aware: false,
+        brake: lim().brake,
     }
 }
 
@@ -703,4 +705,60 @@ fn the_swept_collision_count_is_every_pairs() {
         total += every;
     }
     assert!(total > 1000, "the crowds collide: {total} pairs");
+}
+
+/// At a junction, a leader-aware follower is judged with its leader's exact least travel
+/// along the path (braking at the harder of the two limits), and only when it is behind
+/// by more than d0; the paper's follower with the wall.
+#[test]
+fn a_leader_aware_follower_at_a_junction_is_judged_with_the_leaders_least_travel() {
+    use host_sim::monitor::road::least_travel;
+    let w = JunctionWatch::default();
+    let lim = lim();
+    let r = 0u8;
+    let aware = |id: u16, s: f64, v: f64, brake: f64| OnRoute {
+        leader_aware: true,
+        brake,
+        ..on(id, r, s, v)
+    };
+    // The leader at 10 m/s braking at 4.5, the follower at 10 m/s braking at 7.9: the
+    // leader still travels least_travel(10, 7.9) along the path.
+    let credit = least_travel(10.0, lim.brake, lim.h);
+    assert!(credit > 5.0);
+    let need = LENGTH_M + boundary(10.0) - credit;
+    let leader = |id| OnRoute {
+        brake: 4.5,
+        ..on(id, r, 60.0, 10.0)
+    };
+    for (gap, violations) in [(need - MM, 1), (need + MM, 0)] {
+        let cars = [leader(1), aware(2, 60.0 - gap, 10.0, lim.brake)];
+        assert_eq!(
+            junction(&w, &cars).invariant_violations,
+            violations,
+            "{gap}"
+        );
+    }
+    // The same follower under the paper's invariant: the wall.
+    let cars = [leader(1), on(2, r, 60.0 - need - MM, 10.0)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 1);
+    // A follower that brakes softer than the leader is judged at the leader's limit.
+    let soft = least_travel(10.0, 4.5, lim.h);
+    let strong = OnRoute {
+        brake: 9.0,
+        ..on(1, r, 60.0, 10.0)
+    };
+    let gap = LENGTH_M + lim.d0 + lim.safe_distance(10.0) - least_travel(10.0, 9.0, lim.h);
+    let cars = [strong, aware(2, 60.0 - gap - MM, 10.0, 4.5)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 0, "{soft}");
+    let cars = [strong, aware(2, 60.0 - gap + MM, 10.0, 4.5)];
+    assert_eq!(junction(&w, &cars).invariant_violations, 1);
+    // No credit within d0 of the leader, however fast it goes.
+    let cars = [
+        OnRoute {
+            v: 13.9,
+            ..leader(1)
+        },
+        aware(2, 60.0 - LENGTH_M - lim.d0 + MM, 0.0, lim.brake),
+    ];
+    assert_eq!(junction(&w, &cars).invariant_violations, 1);
 }

@@ -5,11 +5,12 @@
 //! Sans-IO and bounded: the manager is fed vehicle reports and the time, and answers
 //! which vehicles hold a permission; it tracks at most `CAP` vehicles.
 
-use crate::intersection::{Layout, CONFLICT_SAMPLE_M};
+use crate::intersection::{Layout, CONFLICT_SAMPLE_M, MAX_ROUTES};
+use crate::lane_change::STALE_AFTER_S;
 use crate::params::Params;
 use crate::planner::ConfigError;
 use crate::real::Real;
-use crate::safety;
+use crate::safety::{self, BrakeLimit, Invariant};
 use crate::sensing::{still_unheard, Sensing};
 use crate::time::{Duration, Instant};
 use core::cmp::Ordering;
@@ -54,16 +55,33 @@ pub enum Algorithm {
     /// followers on one route, which Theorem 1 covers; every other guarantee (the stop
     /// line, Spaciousness, the outlet invariant) is the paper's.
     Pipelined,
+    /// Beyond the paper: [`Algorithm::Pipelined`] with platoons — the green wave of a
+    /// signal, without its fixed phases. A vehicle that follows, within
+    /// [`PLATOON_SPACING_M`], a vehicle on its own inlet lane that holds a permission may
+    /// be granted ahead of an earlier vehicle waiting on a conflicting route — as long as
+    /// every such waiting vehicle has waited less than [`PLATOON_MAX_WAIT`]. Every
+    /// grant still passes the pipelined admissibility test (no route held by another
+    /// vehicle conflicts, but for followers on one route), so the safety argument is
+    /// [`Algorithm::Pipelined`]'s word for word; only the order changes.
+    ///
+    /// Why: under the fair scan a queue discharges one vehicle per turn, alternating with
+    /// every conflicting lane, and each turn starts from a standstill at the stop line —
+    /// a signal whose phases last one vehicle. A platoon keeps its lane moving at speed
+    /// while its followers are close; the bound on waiting keeps it starvation-free
+    /// (docs/spec.md, Theorem 5: once a vehicle has waited [`PLATOON_MAX_WAIT`] as its
+    /// lane's head, nothing conflicting with it is granted out of order).
+    Platoon,
 }
 
 impl Algorithm {
     /// Every algorithm, in the order of the paper's Fig. 9 plus ours.
-    pub const ALL: [Algorithm; 5] = [
+    pub const ALL: [Algorithm; 6] = [
         Algorithm::AllWayStop,
         Algorithm::Fifo,
         Algorithm::Concurrent,
         Algorithm::ConcurrentFair,
         Algorithm::Pipelined,
+        Algorithm::Platoon,
     ];
     /// Short name.
     pub fn name(self) -> &'static str {
@@ -73,9 +91,27 @@ impl Algorithm {
             Algorithm::Concurrent => "CON",
             Algorithm::ConcurrentFair => "CON-fair",
             Algorithm::Pipelined => "PIPE",
+            Algorithm::Platoon => "PLATOON",
         }
     }
+
+    /// It takes the pipelined relaxations (1–4 of [`Algorithm::Pipelined`]).
+    pub fn pipelined(self) -> bool {
+        matches!(self, Algorithm::Pipelined | Algorithm::Platoon)
+    }
 }
+
+/// Under [`Algorithm::Platoon`], the farthest (m, centre to centre, along the inlet) a
+/// vehicle may be behind the vehicle it follows on its inlet lane to be granted as part of
+/// that vehicle's platoon: 25 m is the wall invariant's spacing at vImax (L + d0 +
+/// dS(13.9) ≈ 17.5 m) with room for the lag of a queue starting up, and under 2 s at
+/// vImax — a signal's gap-out.
+pub const PLATOON_SPACING_M: f64 = 25.0;
+
+/// Under [`Algorithm::Platoon`], how long a lane's head may wait while platoons on
+/// conflicting routes go ahead of it: past this, nothing that conflicts with it is granted
+/// out of order (a signal's maximum green).
+pub const PLATOON_MAX_WAIT: Duration = Duration::from_millis(60_000);
 
 /// Distance (m) from the stop line within which a vehicle competes for a permission
 /// under [`Algorithm::Pipelined`]: 30 m is dS(vImax) ≈ 12.4 m plus ~1.2 s at vImax, so a
@@ -101,6 +137,10 @@ pub struct CrossingReport<F> {
     pub v: F,
     /// Its length (m).
     pub length: F,
+    /// Its braking limit |amin|, if it declares one: a follower under
+    /// [`Invariant::LeaderAware`] credits it with the distance it still travels braking no
+    /// harder ([`safety::leader_credit`]); one that declares none is taken as a wall.
+    pub brake: Option<BrakeLimit>,
 }
 
 /// Why a report was not taken.
@@ -161,6 +201,9 @@ pub struct Entry<F> {
     /// Its centre's distance past the A_S entry as the manager's roadside sensor last
     /// measured it ([`Manager::measure`]), if it has one and has seen it.
     pub measured: Option<F>,
+    /// When the fair scan first refused it as its lane's head (it then held back every
+    /// route conflicting with its own); the bound of [`Algorithm::Platoon`].
+    pub waiting_since: Option<Instant>,
 }
 
 /// The terms of a manager's permissions (IC Protocol (iii)): every permission is a lease
@@ -532,6 +575,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                         heard_at: now,
                         suspect: false,
                         measured: None,
+                        waiting_since: None,
                     })
                     .map_err(|_| ManagerError::Full)?;
             }
@@ -586,48 +630,107 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                     e.permitted = true;
                 }
             }
-            Algorithm::Concurrent | Algorithm::ConcurrentFair | Algorithm::Pipelined => {
-                // Step 1: the permitted keep their permission (they are still in C^I_t).
-                // Step 2: the rest in priority order (FIFO; lane-consistent but for CON).
-                let order = self.priority(as_written);
-                // Steps 3–5.
-                let mut waiting: u32 = 0;
-                let mut grant: Vec<usize, CAP> = Vec::new();
-                for &i in order.iter() {
-                    let Some(c) = self.entries.get(i) else {
-                        continue;
-                    };
-                    if c.holds() || c.suspect {
-                        continue;
-                    }
-                    if self.algorithm == Algorithm::Pipelined
-                        && (!(c.to_line <= F::from_f64(REQUEST_DISTANCE_M))
-                            || self.queued_behind(c, &grant))
-                    {
-                        continue;
-                    }
-                    let ok = self.admissible(c, &grant) && {
-                        let fair = self.algorithm != Algorithm::Concurrent;
-                        !(fair
-                            && self
-                                .layout
-                                .conflicts
-                                .get(usize::from(c.route))
-                                .is_some_and(|m| m & waiting != 0))
-                    };
-                    if ok {
-                        let _ = grant.push(i);
-                    } else {
-                        waiting |= 1 << c.route;
-                    }
+            Algorithm::Concurrent
+            | Algorithm::ConcurrentFair
+            | Algorithm::Pipelined
+            | Algorithm::Platoon => self.scan(now, as_written),
+        }
+    }
+
+    /// Steps 3–5 of Concurrent Crossing over the vehicles in priority order (Step 1: the
+    /// permitted keep their permission, they are still in C^I_t; Step 2: the rest in
+    /// priority order — FIFO, lane-consistent but for CON), with the pipelined and
+    /// platoon relaxations where chosen.
+    fn scan(&mut self, now: Instant, as_written: bool) {
+        let order = self.priority(as_written);
+        // Routes of the vehicles refused so far, and since when each has waited at most.
+        let mut waiting: u32 = 0;
+        let mut since = [now; MAX_ROUTES];
+        let mut grant: Vec<usize, CAP> = Vec::new();
+        let mut refused: Vec<usize, CAP> = Vec::new();
+        for &i in order.iter() {
+            let Some(c) = self.entries.get(i) else {
+                continue;
+            };
+            if c.holds() || c.suspect {
+                continue;
+            }
+            if self.algorithm.pipelined()
+                && (!(c.to_line <= F::from_f64(REQUEST_DISTANCE_M))
+                    || self.queued_behind(c, &grant))
+            {
+                continue;
+            }
+            let blocking = self
+                .layout
+                .conflicts
+                .get(usize::from(c.route))
+                .map_or(0, |m| m & waiting);
+            let fair = self.algorithm == Algorithm::Concurrent || blocking == 0;
+            let ok = self.admissible(c, &grant)
+                && (fair || self.extends_platoon(c, &grant, blocking, &since, now));
+            if ok {
+                let _ = grant.push(i);
+            } else {
+                waiting |= 1 << c.route;
+                let r = usize::from(c.route);
+                if let Some(t) = since.get_mut(r) {
+                    *t = (*t).min(c.waiting_since.unwrap_or(now));
                 }
-                for i in grant {
-                    if let Some(e) = self.entries.get_mut(i) {
-                        e.permitted = true;
-                    }
-                }
+                let _ = refused.push(i);
             }
         }
+        for i in grant {
+            if let Some(e) = self.entries.get_mut(i) {
+                e.permitted = true;
+            }
+        }
+        for i in refused {
+            if let Some(e) = self.entries.get_mut(i) {
+                e.waiting_since.get_or_insert(now);
+            }
+        }
+    }
+
+    /// [`Algorithm::Platoon`]'s exception to fairness: `c` follows, within
+    /// [`PLATOON_SPACING_M`], the nearest vehicle ahead of it on its inlet lane, that one
+    /// holds a permission (or is granted in this scan), and every waiting route `c`
+    /// conflicts with (`blocking`) has waited less than [`PLATOON_MAX_WAIT`] (`since`:
+    /// the earliest a vehicle refused on each route began to wait).
+    fn extends_platoon(
+        &self,
+        c: &Entry<F>,
+        granted_now: &[usize],
+        blocking: u32,
+        since: &[Instant; MAX_ROUTES],
+        now: Instant,
+    ) -> bool {
+        if self.algorithm != Algorithm::Platoon {
+            return false;
+        }
+        let impatient = since
+            .iter()
+            .enumerate()
+            .any(|(r, t)| blocking & (1 << r) != 0 && now.since(*t) >= PLATOON_MAX_WAIT);
+        if impatient {
+            return false;
+        }
+        let inlet = self.inlet_of(c);
+        let leader = self
+            .entries
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| l.id != c.id && self.inlet_of(l) == inlet && l.progress > c.progress)
+            .min_by(|(_, a), (_, b)| {
+                a.progress
+                    .partial_cmp(&b.progress)
+                    .unwrap_or(Ordering::Equal)
+            });
+        leader.is_some_and(|(i, l)| {
+            (l.holds() || granted_now.contains(&i))
+                && !l.suspect
+                && l.progress - c.progress <= F::from_f64(PLATOON_SPACING_M)
+        })
     }
 
     /// The inlet lane of entry `e`, as an index in Ψ's order ([`Layout::inlet_index`]).
@@ -766,7 +869,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             if !self.layout.conflict(hr, cr) {
                 continue;
             }
-            if self.algorithm == Algorithm::Pipelined {
+            if self.algorithm.pipelined() {
                 if hr == cr && h.progress > c.progress {
                     // 1: following on the same route, behind the holder.
                     continue;
@@ -819,6 +922,13 @@ fn plausible<F: Real>(
     v <= p.v_max() + F::from_f64(PLAUSIBLE_SPEED_MPS) && moved <= reach && moved >= -margin
 }
 
+/// Another vehicle's newest report, as a crossing vehicle keeps it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Heard<F> {
+    report: CrossingReport<F>,
+    stamp: Instant,
+}
+
 /// The vehicle side of the Intersection-Crossing Protocol: one vehicle's planner along
 /// its route's path (inlet track, route through A_S, outlet track), fed with what it
 /// hears (other vehicles' reports, permissions, departures).
@@ -848,8 +958,12 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     sensing: Option<Sensing<F>>,
     /// Steps planned so far (saturating).
     steps: u32,
-    /// Reports heard: (id, route, s, stamp).
-    others: Vec<(u16, u8, F, Instant), CAP>,
+    /// Reports heard, the newest of each vehicle.
+    others: Vec<Heard<F>, CAP>,
+    /// Step to which others' reported speeds were rounded (0: exact).
+    speed_step: F,
+    /// The invariant kept toward the vehicles ahead on its path.
+    invariant: Invariant,
     /// A report could not be kept (`CAP` vehicles already known): until the reports are
     /// cleared, some vehicle may be unknown, and the path is taken as blocked.
     overflowed: bool,
@@ -870,6 +984,8 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             length,
             lease_until: None,
             position_step: F::ZERO,
+            speed_step: F::ZERO,
+            invariant: Invariant::Paper,
             notify: planner.params().h(),
             sensing: None,
             steps: 0,
@@ -941,17 +1057,52 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         self.route
     }
 
-    /// Others' reports arrive with positions rounded to `position` (m), e.g. by a CAN
-    /// codec: each reported vehicle may be up to half a step further back or ahead, so
-    /// it is taken as an obstacle one step longer (half a step at each end), which keeps
-    /// (2) and the invariant on the true positions. Zero (the default) takes reports as
-    /// exact.
-    pub fn set_bus_resolution(&mut self, position: F) -> Result<(), ConfigError> {
-        if !valid_resolution(position) {
+    /// Others' reports arrive with positions rounded to `position` (m) and speeds to
+    /// `speed` (m/s), e.g. by a CAN codec: each reported vehicle may be up to half a step
+    /// further back or ahead, so it is taken as an obstacle one step longer (half a step
+    /// at each end), which keeps (2) and the invariant on the true positions; under
+    /// [`Invariant::LeaderAware`] a leader is credited from its speed half a step lower.
+    /// Zero (the default) takes reports as exact. A bad value changes nothing.
+    pub fn set_bus_resolution(&mut self, position: F, speed: F) -> Result<(), ConfigError> {
+        if !(valid_resolution(position) && valid_resolution(speed)) {
             return Err(ConfigError::InvalidResolution);
         }
         self.position_step = position;
+        self.speed_step = speed;
         Ok(())
+    }
+
+    /// Chooses the invariant kept toward the vehicles ahead on its path (default
+    /// [`Invariant::Paper`]). Under [`Invariant::LeaderAware`] a vehicle ahead whose
+    /// report was heard within the notification bound or [`STALE_AFTER_S`], whichever is
+    /// longer, and that declared its braking limit, is credited with the least distance
+    /// it still travels ([`safety::leader_credit`]); sensor returns, vehicles known from
+    /// other frames, unknown space and the stop line stay walls. Every vehicle at a
+    /// crossing plans with a planner and reports itself, so all of them cooperate.
+    pub fn set_invariant(&mut self, invariant: Invariant) {
+        self.invariant = invariant;
+    }
+
+    /// The invariant kept toward the vehicles ahead on its path.
+    pub fn invariant(&self) -> Invariant {
+        self.invariant
+    }
+
+    /// How far past its reported centre a vehicle ahead, at `wall` (the distance from this
+    /// vehicle's centre to its reported centre), heard `age` ago, is credited under the
+    /// invariant in use (see [`CrossingPlanner::set_invariant`]): nothing unless it is
+    /// ahead by more than both half-lengths and d0 (a vehicle beside this one is no
+    /// leader).
+    fn credit(&self, r: &CrossingReport<F>, wall: F, age: F) -> F {
+        let p = self.planner.params();
+        let fresh = age <= self.notify.max(F::from_f64(STALE_AFTER_S));
+        let ahead = wall - F::HALF * (r.length + self.length + self.position_step) - p.d0();
+        match r.brake {
+            Some(b) if self.invariant == Invariant::LeaderAware && fresh && ahead > F::ZERO => {
+                safety::leader_credit(p, r.v - F::HALF * self.speed_step, b.mps2())
+            }
+            _ => F::ZERO,
+        }
     }
 
     /// Takes another vehicle's report stamped `stamp`; older or duplicate reports and
@@ -964,17 +1115,18 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         if r.id == self.id {
             return Ok(());
         }
-        if !r.s.is_finite() {
+        if !(r.s.is_finite() && r.v.is_finite() && r.length.is_finite()) {
             return Err(ManagerError::BadValue);
         }
-        match self.others.iter_mut().find(|o| o.0 == r.id) {
+        let heard = Heard { report: *r, stamp };
+        match self.others.iter_mut().find(|o| o.report.id == r.id) {
             Some(o) => {
-                if stamp > o.3 {
-                    *o = (r.id, r.route, r.s, stamp);
+                if stamp > o.stamp {
+                    *o = heard;
                 }
                 Ok(())
             }
-            None => self.others.push((r.id, r.route, r.s, stamp)).map_err(|_| {
+            None => self.others.push(heard).map_err(|_| {
                 self.overflowed = true;
                 ManagerError::Full
             }),
@@ -997,7 +1149,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
 
     /// Vehicle `id` has left the area.
     pub fn hear_left(&mut self, id: u16) {
-        self.others.retain(|o| o.0 != id);
+        self.others.retain(|o| o.report.id != id);
     }
 
     /// `true` if, at `now` and position `s`, the vehicle may be in A_S.
@@ -1024,7 +1176,9 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         let half = F::HALF * self.length;
         let p = *self.planner.params();
         self.obstacles.clear();
-        for &(_, r, x, stamp) in self.others.iter() {
+        for heard in self.others.iter() {
+            let (rep, stamp) = (&heard.report, heard.stamp);
+            let (r, x) = (rep.route, rep.s);
             let Some(other) = layout.route(usize::from(r)) else {
                 continue;
             };
@@ -1048,9 +1202,11 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
                 None
             };
             if let Some(x) = on_my_path {
+                // Ahead of this vehicle: credited under the leader-aware invariant.
+                let credit = self.credit(rep, x - s, age);
                 let _ = self.obstacles.push(crate::planner::Vehicle {
-                    x,
-                    length: self.length + self.position_step,
+                    x: x + credit,
+                    length: rep.length + self.position_step,
                 });
             }
         }
@@ -1154,7 +1310,18 @@ mod tests {
             s,
             v: 5.0,
             length: 4.5,
+            brake: None,
         }
+    }
+
+    /// What `c` keeps of the reports heard: (id, route, s, stamp).
+    fn kept<const CAP: usize>(
+        c: &CrossingPlanner<f64, 20, CAP>,
+    ) -> Vec<(u16, u8, f64, Instant), CAP> {
+        c.others
+            .iter()
+            .map(|o| (o.report.id, o.report.route, o.report.s, o.stamp))
+            .collect()
     }
 
     #[test]
@@ -1201,6 +1368,95 @@ mod tests {
     }
 
     #[test]
+    fn a_bad_bus_resolution_changes_nothing() {
+        let mut c: Car = car(1, 0);
+        c.set_bus_resolution(0.1, 0.02).expect("valid");
+        for (pos, speed) in [(f64::NAN, 0.0), (0.0, -0.1), (0.0, 1.0), (1.5, 0.0)] {
+            assert_eq!(
+                c.set_bus_resolution(pos, speed),
+                Err(ConfigError::InvalidResolution)
+            );
+            assert_eq!((c.position_step, c.speed_step), (0.1, 0.02));
+        }
+    }
+
+    /// A leader 20 m ahead at 10 m/s that says it brakes at 4.5 m/s².
+    fn leader(brake: Option<f64>) -> CrossingReport<f64> {
+        CrossingReport {
+            id: 2,
+            route: 0,
+            s: 20.0,
+            v: 10.0,
+            length: 4.5,
+            brake: brake.and_then(BrakeLimit::from_mps2),
+        }
+    }
+
+    #[test]
+    fn the_leader_aware_credit_is_the_leaders_least_travel_when_it_may_be_given() {
+        let p = Params::<f64>::table_i();
+        let mut c: Car = car(1, 0);
+        assert_eq!(c.invariant(), Invariant::Paper);
+        let l = leader(Some(4.5));
+        assert_eq!(c.credit(&l, 20.0, 0.0), 0.0, "the paper's wall");
+        c.set_invariant(Invariant::LeaderAware);
+        assert_eq!(c.invariant(), Invariant::LeaderAware);
+        // The harder of the two limits: the follower's 7.9.
+        let full = safety::leader_credit(&p, 10.0, 4.5);
+        assert!(full > 5.0);
+        assert_eq!(c.credit(&l, 20.0, 0.0), full);
+        assert_eq!(c.credit(&leader(None), 20.0, 0.0), 0.0, "no limit declared");
+        // Fresh up to the longer of the notification bound and STALE_AFTER_S.
+        assert_eq!(c.credit(&l, 20.0, STALE_AFTER_S), full);
+        assert_eq!(c.credit(&l, 20.0, STALE_AFTER_S + 0.01), 0.0, "stale");
+        c.set_notify_latency(0.5).expect("finite");
+        assert_eq!(c.credit(&l, 20.0, 0.5), full);
+        assert_eq!(c.credit(&l, 20.0, 0.51), 0.0);
+        // Ahead only when more than both half-lengths and d0 ahead.
+        let touching = 4.5 + p.d0();
+        assert_eq!(c.credit(&l, touching, 0.0), 0.0, "beside, not ahead");
+        assert_eq!(c.credit(&l, touching + 0.01, 0.0), full);
+        // The speed taken half a bus step lower, the length a position step longer.
+        c.set_bus_resolution(0.2, 0.5).expect("valid");
+        assert_eq!(
+            c.credit(&l, 20.0, 0.0),
+            safety::leader_credit(&p, 9.75, 4.5)
+        );
+        assert_eq!(c.credit(&l, touching + 0.1, 0.0), 0.0);
+        assert!(c.credit(&l, touching + 0.21, 0.0) > 0.0);
+    }
+
+    #[test]
+    fn a_credited_leader_moves_the_wall_and_the_follower_goes_faster() {
+        let l = spec8();
+        let route = *l.route(0).expect("route 0");
+        // Both on route 0, on its inlet, the leader 9 m ahead at 10 m/s: within the
+        // paper's stopping distance of the follower at 10 m/s, not the leader-aware one.
+        let s = route.path.entry() - 40.0;
+        let mut speeds = [0.0; 2];
+        for (k, inv) in [Invariant::Paper, Invariant::LeaderAware]
+            .into_iter()
+            .enumerate()
+        {
+            let mut c: Car = car(1, 0);
+            c.set_invariant(inv);
+            c.hear_grant(1, at(100.0));
+            let mut r = leader(Some(7.9));
+            r.s = s + 9.0;
+            c.hear_report(&r, at(0.0)).expect("room");
+            // Past the start-up blindness (one period's notification bound).
+            c.steps = 10;
+            speeds[k] = c.step(&l, s, 10.0, at(0.0)).expect("step").v;
+        }
+        let p = Params::<f64>::table_i();
+        assert!(
+            speeds[0] < 10.0 + p.a_min() * p.h() + 1e-9,
+            "the wall: the fallback's braking, {speeds:?}"
+        );
+        assert!(speeds[1] > 10.0, "credited: keeps going, {speeds:?}");
+    }
+
+    #[test]
     fn reports_keep_the_newest_per_vehicle_and_never_the_own() {
         let mut c: Car = car(1, 5);
         assert_eq!(c.route(), 5);
@@ -1209,18 +1465,18 @@ mod tests {
         c.hear_report(&report(2, 10.0), at(1.0)).expect("first");
         c.hear_report(&report(2, 8.0), at(0.5)).expect("older");
         assert_eq!(
-            c.others.as_slice(),
+            kept(&c).as_slice(),
             &[(2, 3, 10.0, at(1.0))],
             "older ignored"
         );
         c.hear_report(&report(2, 11.0), at(1.0)).expect("duplicate");
         assert_eq!(
-            c.others.as_slice(),
+            kept(&c).as_slice(),
             &[(2, 3, 10.0, at(1.0))],
             "same stamp ignored"
         );
         c.hear_report(&report(2, 12.0), at(1.5)).expect("newer");
-        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, at(1.5))]);
+        assert_eq!(kept(&c).as_slice(), &[(2, 3, 12.0, at(1.5))]);
         assert_eq!(
             c.hear_report(&report(3, f64::NAN), at(2.0)),
             Err(ManagerError::BadValue)
@@ -1233,7 +1489,7 @@ mod tests {
         );
         assert!(c.overflowed, "an unknown vehicle may be anywhere");
         c.hear_left(3);
-        assert_eq!(c.others.as_slice(), &[(2, 3, 12.0, at(1.5))], "only 3 left");
+        assert_eq!(kept(&c).as_slice(), &[(2, 3, 12.0, at(1.5))], "only 3 left");
         c.clear_reports();
         assert!(c.others.is_empty() && !c.overflowed);
     }
@@ -1295,6 +1551,7 @@ mod tests {
                     s: x,
                     v: 5.0,
                     length: 4.5,
+                    brake: None,
                 },
                 at(stamp),
             )
@@ -1328,6 +1585,7 @@ mod tests {
             s: x,
             v: 5.0,
             length: 4.5,
+            brake: None,
         };
         c.hear_report(&r, at(0.0)).expect("kept");
         let s = l.route(0).expect("route 0").path.entry() - 60.0;
@@ -1376,7 +1634,7 @@ mod tests {
             if sensing {
                 c.set_sensing(Some(Sensing::radar())).expect("radar");
             }
-            c.set_bus_resolution(0.1).expect("step");
+            c.set_bus_resolution(0.1, 0.0).expect("step");
             c
         };
         let has = |c: &Car8, x: f64, len: f64| {

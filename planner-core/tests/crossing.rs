@@ -57,6 +57,7 @@ fn report(l: &Layout<f64>, id: u16, route: u8, at: At) -> CrossingReport<f64> {
         s,
         v: if matches!(at, At::Waiting) { 0.0 } else { 10.0 },
         length: 4.5,
+        brake: None,
     }
 }
 
@@ -109,7 +110,7 @@ fn starve(algorithm: Algorithm) -> Option<u32> {
         let held: Vec<_> = m.entries().iter().filter(|e| e.permitted).collect();
         for (i, p) in held.iter().enumerate() {
             for q in held.iter().skip(i + 1) {
-                let pipelined_follow = algorithm == Algorithm::Pipelined && p.route == q.route;
+                let pipelined_follow = algorithm.pipelined() && p.route == q.route;
                 assert!(
                     !l.conflict(usize::from(p.route), usize::from(q.route)) || pipelined_follow,
                     "{algorithm:?}: conflicting routes {} and {} both permitted",
@@ -242,7 +243,7 @@ fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
     let gap = |res: f64| {
         let planner = Planner::<f64, 20>::new(p, CostWeights::default()).unwrap();
         let mut c = CrossingPlanner::<f64, 20, 8>::new(planner, 1, 0, 4.5);
-        c.set_bus_resolution(res).unwrap();
+        c.set_bus_resolution(res, 0.0).unwrap();
         c.hear_grant(1, secs(10.0));
         let ahead = CrossingReport {
             id: 2,
@@ -250,6 +251,7 @@ fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
             s: entry - 10.0,
             v: 5.0,
             length: 4.5,
+            brake: None,
         };
         c.hear_report(&ahead, secs(0.0)).unwrap();
         c.step(&l, entry - 40.0, 5.0, secs(0.0)).unwrap().gap
@@ -261,8 +263,8 @@ fn crossing_planner_bus_resolution_lengthens_the_vehicles_it_hears_of() {
     );
     let planner = Planner::<f64, 20>::new(p, CostWeights::default()).unwrap();
     let mut c = CrossingPlanner::<f64, 20, 8>::new(planner, 1, 0, 4.5);
-    assert!(c.set_bus_resolution(f64::INFINITY).is_err());
-    assert!(c.set_bus_resolution(-1e-3).is_err());
+    assert!(c.set_bus_resolution(f64::INFINITY, 0.0).is_err());
+    assert!(c.set_bus_resolution(-1e-3, 0.0).is_err());
 }
 
 /// A queue on one inlet lane: the leader 0.5 m before its line, the follower 10 m
@@ -359,6 +361,7 @@ fn a_restarted_manager_grants_nothing_an_old_lease_could_conflict_with() {
             s: entry - 2.25 - 7.0 + 10.0 * (t - 10) as f64 * 1e-3,
             v: 10.0,
             length: 4.5,
+            brake: None,
         };
         let mut t = 10;
         let mut granted_b_at = None;
@@ -375,7 +378,7 @@ fn a_restarted_manager_grants_nothing_an_old_lease_could_conflict_with() {
             t += 10;
         }
         // Out of A_S — or, for the pipelined algorithm, past its conflict zone with b.
-        let clear = if alg == Algorithm::Pipelined {
+        let clear = if alg.pipelined() {
             entry + l.zone_end[usize::from(ra)][usize::from(rb)] + CONFLICT_SAMPLE_M
         } else {
             exit + 2.25
@@ -442,6 +445,7 @@ fn a_vehicle_that_cannot_stop_before_its_line_holds_its_zones() {
         s: entry - 2.25 - gap,
         v,
         length: 4.5,
+        brake: None,
     };
     let p = Params::<f64>::table_i();
     let ds = |v: f64| planner_core::safety::d_s(&p, v);

@@ -7,7 +7,8 @@
 //! `s = entry − 2.25 − to_line` (negative `to_line`: past the line, inside A_S).
 
 use planner_core::crossing::{
-    Algorithm, CrossingReport, Manager, ManagerError, REQUEST_DISTANCE_M,
+    Algorithm, CrossingReport, Manager, ManagerError, PLATOON_MAX_WAIT, PLATOON_SPACING_M,
+    REQUEST_DISTANCE_M,
 };
 use planner_core::intersection::{Layout, LayoutSpec, Movement, CONFLICT_SAMPLE_M, ROUTES};
 use planner_core::{Instant, Params};
@@ -41,6 +42,7 @@ fn at(l: &Layout<f64>, id: u16, route: usize, to_line: f64, v: f64) -> CrossingR
         s: entry - HALF - to_line,
         v,
         length: LENGTH,
+        brake: None,
     }
 }
 
@@ -69,7 +71,10 @@ fn with_holder(l: &Layout<f64>, alg: Algorithm, id: u16, route: usize) -> Manage
 #[test]
 fn algorithm_names_are_the_ones_outputs_and_the_cli_use() {
     let names: Vec<&str> = Algorithm::ALL.iter().map(|a| a.name()).collect();
-    assert_eq!(names, ["STOP", "FIFO", "CON", "CON-fair", "PIPE"]);
+    assert_eq!(
+        names,
+        ["STOP", "FIFO", "CON", "CON-fair", "PIPE", "PLATOON"]
+    );
 }
 
 #[test]
@@ -747,4 +752,115 @@ fn a_rounded_report_commits_where_the_rounding_allows() {
         m.observe(&at(&l, 1, a, ds + 0.1, v), secs(0.0)).unwrap();
         assert_eq!(entry(&m, 1).committed, committed, "step {step}");
     }
+}
+
+// ---- platoons ----
+
+/// A platoon's scene: leader 1 on east-straight at its line, a vehicle 2 on a crossing
+/// route at its line, arrived later, and leader 1's follower 3, `gap` metres (centre to
+/// centre) behind 1 once 1 is 3 m past its line. Returns the manager after the scan at
+/// `t` with 1 inside A_S, 2 waiting since 0.5 s, and 3 first heard at `t`.
+fn platoon_scene(alg: Algorithm, gap: f64, t: f64) -> (Manager<f64, 8>, Layout<f64>) {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let w = route(&l, 1, Movement::Straight);
+    assert!(l.conflict(a, w));
+    let mut m = manager(&l, alg);
+    m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+    m.update(secs(0.0));
+    assert!(m.permitted(1));
+    m.observe(&at(&l, 1, a, -3.0, 5.0), secs(0.5)).unwrap();
+    m.observe(&at(&l, 2, w, 0.5, 0.0), secs(0.5)).unwrap();
+    m.update(secs(0.5));
+    assert!(!m.permitted(2), "crossing a holder's zone");
+    assert_eq!(entry(&m, 2).waiting_since, Some(secs(0.5)));
+    // 1's front is 3 m past the line, its centre 0.75 m past it.
+    m.observe(&at(&l, 1, a, -3.0, 5.0), secs(t)).unwrap();
+    m.observe(&at(&l, 2, w, 0.5, 0.0), secs(t)).unwrap();
+    m.observe(&at(&l, 3, a, gap - 3.0, 8.0), secs(t)).unwrap();
+    m.update(secs(t));
+    (m, l)
+}
+
+/// A follower close behind a holder on its lane goes with it under PLATOON — ahead of an
+/// earlier vehicle waiting on a conflicting route — and under no other algorithm.
+#[test]
+fn a_close_follower_joins_its_leaders_platoon_only_under_platoon() {
+    for (alg, joins) in [
+        (Algorithm::Platoon, true),
+        (Algorithm::Pipelined, false),
+        (Algorithm::ConcurrentFair, false),
+    ] {
+        let (m, _) = platoon_scene(alg, 20.0, 1.0);
+        assert!(m.permitted(1) && !m.permitted(2), "{alg:?}");
+        assert_eq!(m.permitted(3), joins, "{alg:?}");
+        assert_eq!(entry(&m, 2).waiting_since, Some(secs(0.5)), "kept");
+    }
+}
+
+// The follower below asks (it is within the request distance), and is refused.
+const _: () = assert!(PLATOON_SPACING_M + 1.0 < REQUEST_DISTANCE_M);
+
+/// Beyond the platoon spacing a follower is a new arrival like any other.
+#[test]
+fn a_follower_beyond_the_spacing_waits_its_turn() {
+    let (m, _) = platoon_scene(Algorithm::Platoon, PLATOON_SPACING_M + 1.0, 1.0);
+    assert!(!m.permitted(3));
+    let (m, _) = platoon_scene(Algorithm::Platoon, PLATOON_SPACING_M - 0.5, 1.0);
+    assert!(m.permitted(3));
+}
+
+/// Once the conflicting vehicle has waited PLATOON_MAX_WAIT, the platoon stops growing:
+/// the follower waits behind it (Theorem 5's bound); a moment before, it still joins.
+#[test]
+fn no_platoon_grows_past_a_vehicle_that_waited_the_longest_wait() {
+    let wait = PLATOON_MAX_WAIT.as_secs::<f64>();
+    let (m, _) = platoon_scene(Algorithm::Platoon, 20.0, 0.5 + wait);
+    assert!(!m.permitted(3), "waited exactly the bound");
+    let (m, _) = platoon_scene(Algorithm::Platoon, 20.0, 0.5 + wait - 0.01);
+    assert!(m.permitted(3), "just under the bound");
+}
+
+/// A platoon may start in one scan: a leader granted now takes its follower along, past a
+/// vehicle that waits on a crossing route, while a follower of a vehicle that is not
+/// granted gets nothing.
+#[test]
+fn a_leader_granted_in_the_same_scan_takes_its_follower_along() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let w = route(&l, 1, Movement::Straight);
+    let mut m = manager(&l, Algorithm::Platoon);
+    m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+    m.observe(&at(&l, 2, w, 0.5, 0.0), secs(0.1)).unwrap();
+    m.observe(&at(&l, 3, a, 10.0, 5.0), secs(0.2)).unwrap();
+    m.update(secs(0.2));
+    assert!(m.permitted(1) && !m.permitted(2) && m.permitted(3));
+    // The crossing vehicle first: nobody of lane a is granted, so no platoon.
+    let mut m = manager(&l, Algorithm::Platoon);
+    m.observe(&at(&l, 2, w, 0.5, 0.0), secs(0.0)).unwrap();
+    m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.1)).unwrap();
+    m.observe(&at(&l, 3, a, 10.0, 5.0), secs(0.2)).unwrap();
+    m.update(secs(0.2));
+    assert!(m.permitted(2) && !m.permitted(1) && !m.permitted(3));
+}
+
+/// A suspect leader heads no platoon.
+#[test]
+fn a_suspect_heads_no_platoon() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let w = route(&l, 1, Movement::Straight);
+    let mut m = manager(&l, Algorithm::Platoon);
+    m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+    m.update(secs(0.0));
+    m.observe(&at(&l, 2, w, 0.5, 0.0), secs(0.5)).unwrap();
+    m.update(secs(0.5));
+    // 1 claims to have jumped 40 m: a suspect, holding its zones for good.
+    assert_eq!(
+        m.observe(&at(&l, 1, a, -40.0, 5.0), secs(0.6)),
+        Err(ManagerError::Implausible)
+    );
+    m.observe(&at(&l, 3, a, 15.0, 5.0), secs(0.6)).unwrap();
+    m.update(secs(0.6));
+    assert!(entry(&m, 1).suspect && !m.permitted(3));
 }

@@ -198,6 +198,7 @@ fn crossing<F: Real>(start: Instant) -> Vec<u64> {
                     s: q.s,
                     v: q.v,
                     length: F::from_f64(4.5),
+                    brake: None,
                 };
                 manager.observe(&report, now).expect("valid report");
                 for (i, c) in cars.iter_mut().enumerate() {

@@ -3,6 +3,7 @@
 use super::output::{bad_input, check_duration, draw_plot, finish, plot_output, print_json};
 use super::SolverArg;
 use host_sim::bus::Faults;
+use host_sim::experiments::demand::Plan;
 use host_sim::experiments::faults::{compare, FaultSettings};
 use host_sim::experiments::multilane::MultilaneCase;
 use host_sim::experiments::shard::{
@@ -128,9 +129,16 @@ pub enum Experiment {
         /// Draw mean delay against demand, one curve per algorithm, to a .png or .svg.
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
-        /// Algorithms to run (comma-separated, of STOP, FIFO, CON, CON-fair, PIPE).
-        #[arg(long, value_delimiter = ',', default_value = "STOP,FIFO,CON-fair,PIPE")]
+        /// Algorithms to run (comma-separated, of STOP, FIFO, CON, CON-fair, PIPE, PLATOON).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "STOP,FIFO,CON-fair,PIPE,PLATOON"
+        )]
         algorithms: Vec<String>,
+        /// The invariant every vehicle keeps toward the vehicle ahead.
+        #[arg(long, value_enum, default_value = "paper")]
+        invariant: super::InvariantArg,
         /// Run only shard I of N (0-based) of the runs and print them as JSON for
         /// `host-sim merge`.
         #[arg(long, value_name = "I/N", conflicts_with = "plot")]
@@ -176,7 +184,7 @@ pub enum Experiment {
         /// Every message as one CAN FD frame.
         #[arg(long)]
         can_fd: bool,
-        /// The intersection's algorithm (STOP, FIFO, CON-fair, PIPE).
+        /// The intersection's algorithm (STOP, FIFO, CON-fair, PIPE, PLATOON).
         #[arg(long, default_value = "FIFO")]
         algorithm: String,
         /// Only these rows (comma-separated): forged-grant, replayed-grant,
@@ -348,8 +356,12 @@ pub fn run(e: Experiment) -> ExitCode {
             json,
             plot,
             algorithms,
+            invariant,
             shard,
-        } => demand(&rates, duration, seeds, (json, plot), &algorithms, shard),
+        } => match demand_plan(&rates, duration, seeds, &algorithms, invariant) {
+            Ok(plan) => demand(&plan, (json, plot), shard),
+            Err(code) => code,
+        },
     }
 }
 
@@ -458,40 +470,41 @@ fn fault_grid_shard(
 }
 
 /// A shard of the demand experiment: its runs, for `host-sim merge`.
-fn demand_shard(
-    algorithms: &[Algorithm],
-    rates: &[f64],
-    duration: f64,
-    seeds: u64,
-    sh: Shard,
-) -> ExitCode {
-    use host_sim::experiments::demand::{demand_runs, rates_in_order, run_count, RunOutcome};
+fn demand_shard(plan: &Plan, sh: Shard) -> ExitCode {
+    use host_sim::experiments::demand::{demand_runs, RunOutcome};
     let settings = DemandSettings {
-        algorithms: algorithms.iter().map(|a| a.name().to_string()).collect(),
-        rates: rates_in_order(rates),
-        duration,
-        seeds,
+        algorithms: plan
+            .algorithms
+            .iter()
+            .map(|a| a.name().to_string())
+            .collect(),
+        rates: plan.rates.clone(),
+        duration: plan.duration,
+        seeds: plan.seeds,
+        invariant: host_sim::world::invariant_name(plan.invariant).to_string(),
     };
     shard_of(
         "demand",
         settings,
-        run_count(algorithms, rates, seeds),
+        plan.run_count(),
         sh,
-        |r| demand_runs(algorithms, rates, duration, seeds, r, 0),
+        |r| demand_runs(plan, r, 0),
         RunOutcome::unsafe_events,
     )
 }
 
-fn demand(
+/// The demand experiment's plan from its flags, or the exit code of a refusal.
+fn demand_plan(
     rates: &[f64],
     duration: f64,
     seeds: u64,
-    (json, plot): (bool, Option<PathBuf>),
     algorithms: &[String],
-    shard: Option<Shard>,
-) -> ExitCode {
+    invariant: super::InvariantArg,
+) -> Result<Plan, ExitCode> {
     if rates.is_empty() || !rates.iter().all(|r| *r > 0.0 && *r <= 3600.0) {
-        return bad_input("--rates: vehicles per hour per lane, each in (0, 3600]");
+        return Err(bad_input(
+            "--rates: vehicles per hour per lane, each in (0, 3600]",
+        ));
     }
     let mut chosen = Vec::new();
     for name in algorithms {
@@ -500,28 +513,32 @@ fn demand(
             .find(|a| a.name().eq_ignore_ascii_case(name))
         {
             Some(a) if !chosen.contains(a) => chosen.push(*a),
-            Some(_) => return bad_input(format!("--algorithms: {name} given twice")),
+            Some(_) => return Err(bad_input(format!("--algorithms: {name} given twice"))),
             None => {
-                return bad_input(format!(
-                    "--algorithms: unknown {name:?} (STOP, FIFO, CON, CON-fair, PIPE)"
-                ))
+                return Err(bad_input(format!(
+                    "--algorithms: unknown {name:?} (STOP, FIFO, CON, CON-fair, PIPE, PLATOON)"
+                )))
             }
         }
     }
     if chosen.is_empty() {
-        return bad_input("--algorithms: at least one");
+        return Err(bad_input("--algorithms: at least one"));
     }
-    if let Err(code) = check_duration(duration, 7200.0) {
-        return code;
-    }
+    check_duration(duration, 7200.0)?;
+    let mut plan = Plan::new(&chosen, rates, duration, seeds);
+    plan.invariant = invariant.invariant();
+    Ok(plan)
+}
+
+fn demand(plan: &Plan, (json, plot): (bool, Option<PathBuf>), shard: Option<Shard>) -> ExitCode {
     let plot = match plot_output(plot.as_deref()) {
         Ok(p) => p,
         Err(code) => return code,
     };
     if let Some(sh) = shard {
-        return demand_shard(&chosen, rates, duration, seeds, sh);
+        return demand_shard(plan, sh);
     }
-    let r = host_sim::experiments::demand::run(&chosen, rates, duration, seeds, 0);
+    let r = host_sim::experiments::demand::run(plan, 0);
     if let Some(out) = plot {
         if let Err(code) = draw_plot(out, |p| host_sim::output::plot::demand(&r, p)) {
             return code;
@@ -763,7 +780,7 @@ fn attacks(
         .filter(|a| **a != Algorithm::Concurrent)
     else {
         return bad_input(format!(
-            "--algorithm: {algorithm:?} is not a live algorithm (STOP, FIFO, CON-fair, PIPE)"
+            "--algorithm: {algorithm:?} is not a live algorithm (STOP, FIFO, CON-fair, PIPE, PLATOON)"
         ));
     };
     let names = row_names();

@@ -16,15 +16,17 @@ use crate::scenario::junction::{JunctionScenario, LayoutToml, Placement};
 use crate::world::{LENGTH_M, START_MARGIN_M};
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{lane_movements, Layout};
+use planner_core::Invariant;
 use rand::Rng;
 use serde::Serialize;
 
 /// The live algorithms (the targets), then the paper's as written.
-pub const ALGORITHMS: [Algorithm; 5] = [
+pub const ALGORITHMS: [Algorithm; 6] = [
     Algorithm::AllWayStop,
     Algorithm::Fifo,
     Algorithm::ConcurrentFair,
     Algorithm::Pipelined,
+    Algorithm::Platoon,
     Algorithm::Concurrent,
 ];
 
@@ -128,13 +130,23 @@ pub fn queue_placements(
     out
 }
 
-/// Case `index` under `algorithm`.
+/// Case `index` under `algorithm`, the vehicles keeping the paper's invariant.
 pub fn case(seed: u64, index: u64, algorithm: Algorithm) -> JunctionScenario {
+    case_with(seed, index, algorithm, Invariant::Paper)
+}
+
+/// Case `index` under `algorithm`, the vehicles keeping `invariant`.
+pub fn case_with(
+    seed: u64,
+    index: u64,
+    algorithm: Algorithm,
+    invariant: Invariant,
+) -> JunctionScenario {
     let lt = LayoutToml::default();
     let layout = crate::scenario::junction::build_layout(&lt)
         .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
     let p = placements(seed, index, &layout);
-    JunctionScenario::new(
+    let mut sc = JunctionScenario::new(
         format!("crossings-{seed}-{index}-{}", algorithm.name()),
         300.0,
         case_seed(seed, index),
@@ -142,19 +154,32 @@ pub fn case(seed: u64, index: u64, algorithm: Algorithm) -> JunctionScenario {
         lt,
         p,
     )
-    .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"))
+    .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
+    sc.header.invariant = invariant;
+    sc
 }
 
 /// Runs `cases` cases from index `first` of the sweep seeded `seed`, each under every
-/// algorithm, on `threads` threads.
+/// algorithm, on `threads` threads, under the paper's invariant.
 pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> CrossingsReport {
+    sweep_with(cases, first, seed, threads, Invariant::Paper)
+}
+
+/// [`sweep`] with every vehicle keeping `invariant`.
+pub fn sweep_with(
+    cases: u64,
+    first: u64,
+    seed: u64,
+    threads: usize,
+    invariant: Invariant,
+) -> CrossingsReport {
     let t0 = std::time::Instant::now();
     let jobs: Vec<(u64, Algorithm)> = (0..cases)
         .flat_map(|i| ALGORITHMS.iter().map(move |&a| (first + i, a)))
         .collect();
     let results: Vec<Case> = super::par::map_indexed(jobs.len(), threads, |j| {
         let (index, algorithm) = jobs[j];
-        let sc = case(seed, index, algorithm);
+        let sc = case_with(seed, index, algorithm, invariant);
         Case {
             index,
             seed: case_seed(seed, index),

@@ -21,6 +21,7 @@ use crate::world::network::{Junction, Network};
 use crate::world::spawn::Entry;
 use crate::world::{Arrivals, Finish, SolverChoice, World, WorldSpec, LENGTH_M};
 use planner_core::crossing::Algorithm;
+use planner_core::Invariant;
 use serde::{Deserialize, Serialize};
 
 /// Vehicles waiting outside one lane at the end beyond which its queue is unbounded.
@@ -86,8 +87,58 @@ pub struct DemandReport {
     pub duration_s: f64,
     /// Runs per algorithm and rate.
     pub seeds: u64,
+    /// The invariant the vehicles keep toward the vehicle ahead.
+    pub invariant: &'static str,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
+}
+
+/// What `experiment demand` runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The algorithms, in report order.
+    pub algorithms: Vec<Algorithm>,
+    /// Arrivals per inlet lane (vehicles per hour): ascending, each once (a capacity is
+    /// the last rate before the first saturated one).
+    pub rates: Vec<f64>,
+    /// Simulated seconds per run.
+    pub duration: f64,
+    /// Runs per algorithm and rate.
+    pub seeds: u64,
+    /// The invariant every vehicle keeps toward the vehicle ahead.
+    pub invariant: Invariant,
+}
+
+impl Plan {
+    /// A plan of `seeds` runs of `duration` s per algorithm and rate, the rates put in
+    /// order, under the paper's invariant.
+    pub fn new(algorithms: &[Algorithm], rates: &[f64], duration: f64, seeds: u64) -> Self {
+        Self {
+            algorithms: algorithms.to_vec(),
+            rates: rates_in_order(rates),
+            duration,
+            seeds,
+            invariant: Invariant::Paper,
+        }
+    }
+
+    /// The runs in report order: (algorithm, rate, run).
+    fn jobs(&self) -> Vec<(Algorithm, f64, u64)> {
+        let seeds = self.seeds;
+        self.algorithms
+            .iter()
+            .flat_map(|&a| {
+                self.rates
+                    .iter()
+                    .flat_map(move |&r| (0..seeds).map(move |k| (a, r, k)))
+            })
+            .collect()
+    }
+
+    /// How many runs: algorithms × rates × seeds.
+    pub fn run_count(&self) -> u64 {
+        self.algorithms.len() as u64 * self.rates.len() as u64 * self.seeds
+    }
 }
 
 /// The world of one run: the SPEC §8 junction under `algorithm`, arrivals at `rate` per
@@ -230,8 +281,9 @@ fn growing(arrivals: &[Arrival], end: f64) -> bool {
     sxx > 0.0 && sxy / sxx > GROWTH_SLOPE
 }
 
-fn one(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> RunOutcome {
-    let spec = world(algorithm, rate, duration, seed);
+fn one(algorithm: Algorithm, rate: f64, plan: &Plan, seed: u64) -> RunOutcome {
+    let mut spec = world(algorithm, rate, plan.duration, seed);
+    spec.invariant = plan.invariant;
     let net = spec.network.clone();
     let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
     while !w.finished() {
@@ -271,58 +323,26 @@ pub fn rates_in_order(rates: &[f64]) -> Vec<f64> {
     rates
 }
 
-/// The experiment's runs in report order: (algorithm, rate, run).
-fn jobs(algorithms: &[Algorithm], rates: &[f64], seeds: u64) -> Vec<(Algorithm, f64, u64)> {
-    algorithms
-        .iter()
-        .flat_map(|&a| {
-            rates
-                .iter()
-                .flat_map(move |&r| (0..seeds).map(move |k| (a, r, k)))
-        })
-        .collect()
-}
-
-/// How many runs: algorithms × rates × seeds.
-pub fn run_count(algorithms: &[Algorithm], rates: &[f64], seeds: u64) -> u64 {
-    algorithms.len() as u64 * rates_in_order(rates).len() as u64 * seeds
-}
-
-/// The runs [first, end) (of [`run_count`], in (algorithm, rate, run) order), on
-/// `threads` threads. A run's seed depends on its rate and index alone, so an
+/// The runs [first, end) of `plan` (of [`Plan::run_count`], in (algorithm, rate, run)
+/// order), on `threads` threads. A run's seed depends on its rate and index alone, so an
 /// algorithm's rows do not depend on which others run, nor a run on its shard.
-pub fn demand_runs(
-    algorithms: &[Algorithm],
-    rates: &[f64],
-    duration: f64,
-    seeds: u64,
-    (first, end): (u64, u64),
-    threads: usize,
-) -> Vec<RunOutcome> {
-    let rates = rates_in_order(rates);
-    let jobs = jobs(algorithms, &rates, seeds);
+pub fn demand_runs(plan: &Plan, (first, end): (u64, u64), threads: usize) -> Vec<RunOutcome> {
+    let jobs = plan.jobs();
     let base = (first.min(end) as usize).min(jobs.len());
     let mine = &jobs[base..(end as usize).min(jobs.len())];
     super::par::map_indexed(mine.len(), threads, |i| {
         let (a, r, k) = mine[i];
-        one(a, r, duration, case_seed(r.to_bits(), k))
+        one(a, r, plan, case_seed(r.to_bits(), k))
     })
 }
 
-/// The report over every run of the experiment, `outs` in run order.
-pub fn demand_report(
-    algorithms: &[Algorithm],
-    rates: &[f64],
-    duration: f64,
-    seeds: u64,
-    outs: &[RunOutcome],
-    wall_seconds: f64,
-) -> DemandReport {
-    let rates = rates_in_order(rates);
-    let jobs = jobs(algorithms, &rates, seeds);
+/// The report over every run of `plan`, `outs` in run order.
+pub fn demand_report(plan: &Plan, outs: &[RunOutcome], wall_seconds: f64) -> DemandReport {
+    let (duration, seeds) = (plan.duration, plan.seeds);
+    let jobs = plan.jobs();
     let mut results = Vec::new();
-    for &a in algorithms {
-        for &r in &rates {
+    for &a in &plan.algorithms {
+        for &r in &plan.rates {
             let mine: Vec<&RunOutcome> = jobs
                 .iter()
                 .zip(outs)
@@ -332,7 +352,8 @@ pub fn demand_report(
             results.push(row(a, r, duration, &mine));
         }
     }
-    let capacity = algorithms
+    let capacity = plan
+        .algorithms
         .iter()
         .map(|&a| Capacity {
             algorithm: a.name(),
@@ -353,30 +374,17 @@ pub fn demand_report(
         lane_limit_vph: 3600.0 * v / (LENGTH_M + lim.d0 + lim.safe_distance(v)),
         duration_s: duration,
         seeds,
+        invariant: crate::world::invariant_name(plan.invariant),
         wall_seconds,
     }
 }
 
-/// The experiment: each of `algorithms` at every rate in `rates` (vehicles per hour per
-/// lane), `seeds` runs of `duration` s each, on `threads` threads.
-pub fn run(
-    algorithms: &[Algorithm],
-    rates: &[f64],
-    duration: f64,
-    seeds: u64,
-    threads: usize,
-) -> DemandReport {
+/// The experiment: each of the plan's algorithms at every rate (vehicles per hour per
+/// lane), its seeds' runs each, on `threads` threads.
+pub fn run(plan: &Plan, threads: usize) -> DemandReport {
     let t0 = std::time::Instant::now();
-    let all = (0, run_count(algorithms, rates, seeds));
-    let outs = demand_runs(algorithms, rates, duration, seeds, all, threads);
-    demand_report(
-        algorithms,
-        rates,
-        duration,
-        seeds,
-        &outs,
-        t0.elapsed().as_secs_f64(),
-    )
+    let outs = demand_runs(plan, (0, plan.run_count()), threads);
+    demand_report(plan, &outs, t0.elapsed().as_secs_f64())
 }
 
 fn row(a: Algorithm, rate: f64, duration: f64, runs: &[&RunOutcome]) -> DemandRow {
@@ -415,8 +423,8 @@ impl core::fmt::Display for DemandReport {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         writeln!(
             f,
-            "open-system demand at the SPEC §8 intersection: {} run(s) of {} s per algorithm and rate",
-            self.seeds, self.duration_s
+            "open-system demand at the four-way intersection: {} run(s) of {} s per algorithm and rate, {} invariant",
+            self.seeds, self.duration_s, self.invariant
         )?;
         writeln!(
             f,

@@ -238,9 +238,26 @@ pub struct DemandSettings {
     pub duration: f64,
     /// Runs per algorithm and rate.
     pub seeds: u64,
+    /// The invariant ("paper" or "leader-aware"; "paper" in shards of older versions).
+    #[serde(default = "paper")]
+    pub invariant: String,
+}
+
+/// The paper's invariant's name.
+fn paper() -> String {
+    crate::world::invariant_name(planner_core::Invariant::Paper).to_string()
 }
 
 impl DemandSettings {
+    /// The plan these settings describe, or the first name that is no algorithm or
+    /// invariant.
+    pub fn plan(&self) -> Result<super::demand::Plan, String> {
+        let mut plan =
+            super::demand::Plan::new(&self.algorithms()?, &self.rates, self.duration, self.seeds);
+        plan.invariant = crate::scenario::common::parse_invariant(&self.invariant)?;
+        Ok(plan)
+    }
+
     /// The algorithms named, or the first name that is none.
     pub fn algorithms(&self) -> Result<Vec<planner_core::crossing::Algorithm>, String> {
         use planner_core::crossing::Algorithm;
@@ -295,17 +312,8 @@ fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
         "demand" => {
             let s: DemandSettings = parse("settings", &h.settings)?;
             let r: Runs<super::demand::RunOutcome> = parse("runs", merged)?;
-            let algorithms = s
-                .algorithms()
-                .map_err(|n| MergeError::Shape(format!("no algorithm {n}")))?;
-            serde_json::to_value(super::demand::demand_report(
-                &algorithms,
-                &s.rates,
-                s.duration,
-                s.seeds,
-                &r.runs,
-                r.wall_seconds,
-            ))
+            let plan = s.plan().map_err(MergeError::Shape)?;
+            serde_json::to_value(super::demand::demand_report(&plan, &r.runs, r.wall_seconds))
         }
         _ => {
             let s: faults::FaultSettings = parse("settings", &h.settings)?;

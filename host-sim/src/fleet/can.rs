@@ -991,6 +991,7 @@ impl<'a> WireMap<'a> {
                 s: q.s,
                 v: q.v,
                 length: LENGTH_M,
+                brake: None,
             },
             stamp: q.arrival,
             junction: j,

@@ -4,6 +4,7 @@
 //! outlet once both are on it), and IC Protocol (ii): nobody inside A_S who was never
 //! permitted.
 
+use super::road::least_travel;
 use super::{Findings, Limits};
 use planner_core::intersection::Layout;
 use std::collections::HashSet;
@@ -21,6 +22,27 @@ pub struct OnRoute {
     pub v: f64,
     /// Its length (m).
     pub length: f64,
+    /// It keeps the leader-aware invariant toward the vehicle ahead (every vehicle at a
+    /// junction is planner-driven and reports itself, so every leader cooperates).
+    pub leader_aware: bool,
+    /// Its braking limit |amin| (m/s²).
+    pub brake: f64,
+}
+
+/// Whether follower `a`, `ahead` (m, centre to centre along their shared piece of path)
+/// behind `b`, keeps its invariant toward it: Lemma 3's, x̄ − dS(v_{t−h}) beyond it; the
+/// leader-aware one, when `a` keeps it, with x̄ moved along the path by the exact least
+/// distance `b` still travels braking at the larger of the two limits ([`least_travel`];
+/// positions here are along the path, so no cos θmax), and `a` behind `b` by more than
+/// d0.
+pub fn keeps_invariant(lim: &Limits, a: &OnRoute, b: &OnRoute, ahead: f64) -> bool {
+    let room = ahead - 0.5 * (a.length + b.length) - lim.d0;
+    let credit = if a.leader_aware && room > 0.0 {
+        least_travel(b.v, b.brake.max(a.brake), lim.h)
+    } else {
+        0.0
+    };
+    room + credit > lim.safe_distance(a.v)
 }
 
 /// What a junction's monitor remembers: who was ever granted a permission.
@@ -58,11 +80,8 @@ impl JunctionWatch {
                 } else {
                     continue;
                 };
-                if fa < fb {
-                    let gap = fb - fa - 0.5 * (a.length + b.length);
-                    if gap - lim.d0 <= lim.safe_distance(a.v) {
-                        f.invariant_violations += 1;
-                    }
+                if fa < fb && !keeps_invariant(lim, a, b, fb - fa) {
+                    f.invariant_violations += 1;
                 }
             }
         }

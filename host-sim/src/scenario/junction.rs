@@ -158,6 +158,8 @@ pub enum AlgorithmToml {
     ConcurrentFair,
     /// Pipelined (ours).
     Pipelined,
+    /// Pipelined with platoons (ours).
+    Platoon,
 }
 
 impl AlgorithmToml {
@@ -169,6 +171,7 @@ impl AlgorithmToml {
             AlgorithmToml::Concurrent => Algorithm::Concurrent,
             AlgorithmToml::ConcurrentFair => Algorithm::ConcurrentFair,
             AlgorithmToml::Pipelined => Algorithm::Pipelined,
+            AlgorithmToml::Platoon => Algorithm::Platoon,
         }
     }
 
@@ -180,6 +183,7 @@ impl AlgorithmToml {
             Algorithm::Concurrent => AlgorithmToml::Concurrent,
             Algorithm::ConcurrentFair => AlgorithmToml::ConcurrentFair,
             Algorithm::Pipelined => AlgorithmToml::Pipelined,
+            Algorithm::Platoon => AlgorithmToml::Platoon,
         }
     }
 }
@@ -478,6 +482,8 @@ impl JunctionScenario {
             duration_s: f64,
             seed: u64,
             algorithm: AlgorithmToml,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            invariant: Option<&'static str>,
             intersection: LayoutToml,
             #[serde(skip_serializing_if = "Faults::is_none")]
             faults: Faults,
@@ -506,6 +512,8 @@ impl JunctionScenario {
             duration_s: self.header.duration_s,
             seed: self.seed,
             algorithm: AlgorithmToml::of(self.algorithm),
+            invariant: (self.header.invariant != planner_core::Invariant::Paper)
+                .then(|| crate::world::invariant_name(self.header.invariant)),
             intersection: self.layout_toml,
             faults: self.header.faults,
             sensing: Some(SensingToml::of(self.header.sensing)),

@@ -221,6 +221,7 @@ mod tests {
             s,
             v,
             length: 4.5,
+            brake: None,
         };
         let last = r(2, 10.0, 10.0);
         assert_eq!(

@@ -329,6 +329,7 @@ pub fn report32(rep: &CrossingReport<f64>) -> CrossingReport<f32> {
         s: r(rep.s),
         v: r(rep.v),
         length: r(rep.length),
+        brake: rep.brake,
     }
 }
 

@@ -143,6 +143,8 @@ impl WorldMonitor {
                         s,
                         v: v.v,
                         length: LENGTH_M,
+                        leader_aware: v.leader_aware,
+                        brake: lim.brake,
                     }),
                     _ => None,
                 })

@@ -380,6 +380,7 @@ pub fn announce(
                 s,
                 v,
                 length: LENGTH_M,
+                brake,
             },
             stamp: now,
             junction,
@@ -556,16 +557,20 @@ impl<const N: usize> Brain<N> {
                 .unwrap_or_else(|_| unreachable!("the weights are valid"));
             let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M as f32);
             let _ = c.set_notify_latency(self.setup.notify as f32);
-            let _ = c.set_bus_resolution(self.setup.resolution.0 as f32);
+            let (pos, speed) = self.setup.resolution;
+            let _ = c.set_bus_resolution(pos as f32, speed as f32);
             let _ = c.set_sensing(self.setup.sensing.map(sensing32));
+            c.set_invariant(self.setup.invariant);
             return CrossingBrain::F32(Box::new(CrossingF32::new(c, layout)));
         }
         let planner = Planner::new(params(v_limit), crossing_weights())
             .unwrap_or_else(|_| unreachable!("the weights are valid"));
         let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M);
         let _ = c.set_notify_latency(self.setup.notify);
-        let _ = c.set_bus_resolution(self.setup.resolution.0);
+        let (pos, speed) = self.setup.resolution;
+        let _ = c.set_bus_resolution(pos, speed);
         let _ = c.set_sensing(self.setup.sensing);
+        c.set_invariant(self.setup.invariant);
         CrossingBrain::F64(Box::new(c))
     }
 }
