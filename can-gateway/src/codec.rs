@@ -56,6 +56,23 @@ pub enum EncodeError {
     Frame,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::OutOfRange(..) => write!(
+                f,
+                "a value is NaN, infinite or outside what its field can carry ({self:?})"
+            ),
+            Self::Frame => f.write_str(
+                "the frame type refused the identifier or data (never for a conforming type)",
+            ),
+        }
+    }
+}
+
+impl core::error::Error for EncodeError {}
+
 /// Why a frame was rejected (the reassembler is unchanged).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -90,6 +107,37 @@ pub enum DecodeError {
     Full,
     /// A secured message's authenticator was refused ([`crate::secoc`]).
     Auth(AuthError),
+}
+
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for DecodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NotOurs => f.write_str("a standard (11-bit) identifier or a remote frame: not ours"),
+            Self::ForeignId => f.write_str("extended identifier outside this protocol (priority, data page, PDU format)"),
+            Self::UnknownKind(..) => write!(f, "unknown message kind code ({self:?})"),
+            Self::BadFrameIndex => f.write_str("the frame index is not below the kind's frame count"),
+            Self::BadLength => f.write_str("not 8 data bytes (a classic frame), not the length of its kind's CAN FD frame, or padding that is not zero"),
+            Self::HeaderMismatch => f.write_str("the header's frame index differs from the identifier's"),
+            Self::OutOfSequence => f.write_str("a continuation frame without its message's first frame, or with another alive counter, or out of order"),
+            Self::Crc => f.write_str("the message CRC does not match"),
+            Self::OutOfRange(..) => write!(f, "a field is outside its plausible range ({self:?})"),
+            Self::SenderMismatch => f.write_str("the sender's address differs from the id in the message"),
+            Self::Duplicate => f.write_str("same alive counter as the last accepted message of this sender and kind"),
+            Self::Stale => f.write_str("time stamp not newer than the last accepted state of this sender"),
+            Self::Full => f.write_str("the reassembler tracks as many senders as it can hold"),
+            Self::Auth(e) => write!(f, "a secured message's authenticator was refused: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for DecodeError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Auth(e) => Some(e),
+            _ => None,
+        }
+    }
 }
 
 fn q<F: Real>(x: F, res: f64, lo: f64, hi: f64, field: Field) -> Result<i64, EncodeError> {

@@ -92,6 +92,27 @@ pub enum AuthError {
     Full,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for AuthError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::UnknownKey => f.write_str("no key for the sender's address"),
+            Self::BadMac => f.write_str("the MAC does not match"),
+            Self::Replayed => f.write_str(
+                "the freshness value is not above the last accepted one of this sender and kind",
+            ),
+            Self::Stale => f.write_str(
+                "the freshness value is outside the acceptance window around the receiver's clock",
+            ),
+            Self::Full => {
+                f.write_str("the receiver tracks as many (sender, kind) pairs as it can hold")
+            }
+        }
+    }
+}
+
+impl core::error::Error for AuthError {}
+
 /// The Data ID of a message: its kind code and its sender's address.
 pub fn data_id(kind_code: u8, sa: u8) -> u16 {
     u16::from(kind_code) << 8 | u16::from(sa)

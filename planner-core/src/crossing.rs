@@ -162,6 +162,22 @@ pub enum ManagerError {
     Distrusted,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for ManagerError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::UnknownRoute => f.write_str("no such route"),
+            Self::BadValue => f.write_str("a field is NaN, infinite or out of range"),
+            Self::Full => f.write_str("the manager already tracks CAP vehicles"),
+            Self::RouteChanged => f.write_str("the vehicle changed its route after registering (the IC Protocol forbids it)"),
+            Self::Implausible => f.write_str("the report is physically impossible after the last one accepted from the same vehicle (see Manager::observe): the vehicle is a suspect from now on"),
+            Self::Distrusted => f.write_str("from a suspect: nothing it reports is taken any more"),
+        }
+    }
+}
+
+impl core::error::Error for ManagerError {}
+
 /// Slack (m) on a report's move since the last one accepted from the same vehicle,
 /// forward and back: far above a bus's rounding (0.01 m), far below a lie that matters.
 pub const PLAUSIBLE_POSITION_M: f64 = 0.5;

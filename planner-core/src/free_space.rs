@@ -33,6 +33,20 @@ pub enum FreeSpaceError {
     NotFinite,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for FreeSpaceError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::OutsideBand => {
+                f.write_str("the reference point is outside the band (or the band is empty)")
+            }
+            Self::NotFinite => f.write_str("an input is NaN or infinite"),
+        }
+    }
+}
+
+impl core::error::Error for FreeSpaceError {}
+
 /// One arc A_r (r ∈ {L, H}) and what (28)–(30) derive from it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

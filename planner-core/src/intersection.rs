@@ -245,6 +245,22 @@ pub enum LayoutError<F> {
     },
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl<F: core::fmt::Debug> core::fmt::Display for LayoutError<F> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NotPositive => f.write_str("a value is NaN, infinite or not positive"),
+            Self::LanesDoNotFit => f.write_str("the n inlet lanes (n Wl) do not fit in the half-size a, or n is not 1 to MAX_LANES"),
+            Self::TurnTooTight { .. } => write!(f, "a turn's radius would be below ρmin (the right turn has radius a − (n − ½) Wl) ({self:?})"),
+            Self::NotSpacious { .. } => write!(f, "the Spaciousness Assumption (27) fails: ∂A_C is margin from A_S but must be at least dS(vImax) + vImax h = needed ({self:?})"),
+            Self::InletShorterThanCommRegion => f.write_str("the inlet track does not reach back to ∂A_C (vehicles must arrive through A_C)"),
+            Self::OutletShorterThanCommRegion { .. } => write!(f, "the outlet track does not reach a vehicle length beyond ∂A_C: a vehicle leaves the intersection (C^I_t (25)) once it is on its outlet outside A_C, so every outlet must take it there; a shorter one ends inside A_C, where vehicles could only pile up ({self:?})"),
+        }
+    }
+}
+
+impl<F: core::fmt::Debug> core::error::Error for LayoutError<F> {}
+
 /// The intersection: geometry, routes and their conflicts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Layout<F> {

@@ -220,6 +220,28 @@ pub enum LaneInputError {
     OutsideBand,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for LaneInputError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Speed(e) => write!(f, "the speed part is invalid: {e}"),
+            Self::NotFinite => f.write_str("a pose, rate, other vehicle or road field is NaN or infinite"),
+            Self::NoSuchLane => f.write_str("the road has no lanes, or a lane index (own, target, another vehicle's) is not on it"),
+            Self::LaneTooNarrow => f.write_str("the lane width is not wider than the vehicle"),
+            Self::OutsideBand => f.write_str("the vehicle's reference point is outside its band"),
+        }
+    }
+}
+
+impl core::error::Error for LaneInputError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Speed(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
 /// Length (m) of the S-curve back to the centre line at speed `v`: two seconds of travel,
 /// at least 8 m (a 0.6 m offset then needs a radius of ≥ 18 m, above ρmin).
 pub fn recentre_length<F: Real>(v: F) -> F {

@@ -48,6 +48,19 @@ pub enum LateralError {
     Singular,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for LateralError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NotConverged => f.write_str("no convergence within MAX_ITER iterations"),
+            Self::NotFinite => f.write_str("a non-finite number appeared"),
+            Self::Singular => f.write_str("the reduced Newton matrix lost positive definiteness"),
+        }
+    }
+}
+
+impl core::error::Error for LateralError {}
+
 /// Weights of the lateral cost, per step of the horizon.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -71,6 +71,20 @@ pub enum ProblemError {
     InvariantViolated,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for ProblemError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::InvalidWeights => f.write_str("a weight is negative or not finite, or both w_v and w_Δ are 0 (J must be strictly convex for the optimum to be unique and the Newton systems nonsingular)"),
+            Self::NotFinite => f.write_str("an input (position, speed, target) is NaN or infinite"),
+            Self::SpeedOutOfRange => f.write_str("v_{{t−h}} is outside [0, vmax]"),
+            Self::InvariantViolated => f.write_str("the safety invariant x_t < x̄ − dS(v_{{t−h}}) does not hold for the tightened gap: (10) may be infeasible and Lemma 2 does not apply"),
+        }
+    }
+}
+
+impl core::error::Error for ProblemError {}
+
 /// One instance of problem (10) in gap coordinates (x_t = 0).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SingleLaneProblem<F, const N: usize> {

@@ -68,6 +68,8 @@ pub enum ParamsError {
     NegativeStandstillMargin,
 }
 
+impl core::error::Error for ParamsError {}
+
 /// Names of [`ParamsSpec`] fields, for error reporting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -117,6 +117,20 @@ pub enum InputError {
     OutOfRange,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for InputError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NotFinite => f.write_str("a position, speed, length or target is NaN or infinite"),
+            Self::SpeedOutOfRange => f.write_str("v_{{t−h}} is negative or above vmax"),
+            Self::BadLength => f.write_str("a vehicle length is not positive"),
+            Self::OutOfRange => f.write_str("a coordinate's magnitude exceeds Real::MAX_COORD_M, where the precision's spacing of representable positions approaches the safety margins"),
+        }
+    }
+}
+
+impl core::error::Error for InputError {}
+
 /// `true` if every value is within ±[`Real::MAX_COORD_M`] (NaN is not).
 pub fn in_range<F: Real>(values: &[F]) -> bool {
     values.iter().all(|x| x.abs() <= F::MAX_COORD_M)
@@ -138,6 +152,21 @@ pub enum ConfigError {
     /// A [`ReusePolicy`] tolerance that is negative or not finite.
     InvalidReuse,
 }
+
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::InvalidWeights => f.write_str("invalid cost weights (see ProblemError::InvalidWeights)"),
+            Self::InvalidLatency => f.write_str("a notification latency that is not a finite number"),
+            Self::InvalidResolution => f.write_str("a bus resolution that is negative, not finite, or 1 or more"),
+            Self::InvalidSensing => f.write_str("sensing values that are not finite, ranges below Sensing::min_range, or error bounds outside [0, 1)"),
+            Self::InvalidReuse => f.write_str("a ReusePolicy tolerance that is negative or not finite"),
+        }
+    }
+}
+
+impl core::error::Error for ConfigError {}
 
 /// The position x̄_t of the nearest obstacle ahead, extent-adjusted (SPEC §1):
 /// min over vehicles c with x(c) > x_t of x(c) − (L(c) + L)/2 − d0, eq. (2), and the stop

@@ -59,6 +59,23 @@ pub enum WorldError {
     OwnMessage,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for WorldError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NotFinite => f.write_str("a field is NaN or infinite"),
+            Self::NegativeSpeed => f.write_str("speed negative"),
+            Self::Stale => f.write_str(
+                "not newer than the state already held for that vehicle (duplicate or reordered)",
+            ),
+            Self::Full => f.write_str("the view already tracks CAP vehicles"),
+            Self::OwnMessage => f.write_str("the message is the receiver's own"),
+        }
+    }
+}
+
+impl core::error::Error for WorldError {}
+
 /// A tracked vehicle: its latest state and when it was received.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

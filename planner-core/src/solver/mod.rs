@@ -158,6 +158,25 @@ pub enum SolveError {
     NonFinite,
 }
 
+/// The first sentence of each variant's documentation (and its data).
+impl core::fmt::Display for SolveError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::IterationLimit { .. } => write!(
+                f,
+                "the iteration cap was reached before the tolerances were met ({self:?})"
+            ),
+            Self::Numerical { .. } => write!(
+                f,
+                "a Newton matrix was not positive definite to working precision ({self:?})"
+            ),
+            Self::NonFinite => f.write_str("the warm start or an iterate held NaN or ∞"),
+        }
+    }
+}
+
+impl core::error::Error for SolveError {}
+
 /// Which method produced an answer or an iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
