@@ -46,3 +46,8 @@ pub use frame::{FdFrame, PlainFrame};
 /// fleet's clock.
 pub use planner_core::{Duration, Instant};
 pub use wire::{Message, MessageKind};
+
+/// The README's examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -622,7 +622,7 @@ fn intersection_run_and_throughput_experiment() {
     );
     let v = json_with(&out.stdout, &["results"]);
     let rows = v["results"].as_array().expect("rows");
-    assert_eq!(rows.len(), 5);
+    assert_eq!(rows.len(), planner_core::crossing::Algorithm::ALL.len());
     for row in rows {
         for k in [
             "algorithm",

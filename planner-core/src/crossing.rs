@@ -1470,6 +1470,27 @@ mod tests {
             "the wall: the fallback's braking, {speeds:?}"
         );
         assert!(speeds[1] > 10.0, "credited: keeps going, {speeds:?}");
+        // The obstacle: the leader's reported centre moved by its credit, one position
+        // step longer; a vehicle level with this one is not credited at all.
+        for (ahead, credited) in [(9.0, true), (4.9, false)] {
+            let mut c: Car = car(1, 0);
+            c.set_invariant(Invariant::LeaderAware);
+            c.set_bus_resolution(0.2, 0.0).expect("valid");
+            c.steps = 10;
+            let mut r = leader(Some(7.9));
+            r.s = s + ahead;
+            c.hear_report(&r, at(0.0)).expect("room");
+            c.step(&l, s, 10.0, at(0.0)).expect("step");
+            let credit = safety::leader_credit(&p, 10.0, 7.9);
+            let x = if credited { r.s + credit } else { r.s };
+            assert!(
+                c.obstacles
+                    .iter()
+                    .any(|o| (o.x - x).abs() < 1e-9 && (o.length - 4.7).abs() < 1e-9),
+                "{ahead}: {:?}",
+                c.obstacles
+            );
+        }
     }
 
     #[test]

@@ -1,21 +1,33 @@
 //! # planner-core
 //!
 //! A `#![no_std]`, allocation-free implementation of Kim & Kumar's MPC-based approach to
-//! provable system-wide safety of autonomous ground traffic (IEEE TAC 59(12), 2014).
-//! Equation numbers in the docs are the paper's; the choices where the paper is silent
-//! follow the project's SPEC.
+//! provable system-wide safety and liveness of autonomous ground traffic (IEEE TAC
+//! 59(12), 2014). Equation, lemma and theorem numbers in the docs are the paper's; the
+//! choices where the paper is silent, and the rules that go beyond it, are argued in the
+//! project's specification (`docs/spec.md` in the repository) and in each item's docs.
 //!
-//! This release covers the single-lane part (paper Sec. III, SPEC §1–4):
+//! One module per concept:
 //! - [`params`]: Table I parameters, validated;
 //! - [`safety`]: dMB, tL, dh, dS, the speed bounds (3)(4), tH (5)(6), V^k_t (7), the
-//!   invariant of Lemma 3 and the max-braking sequence of Lemma 2;
+//!   invariant of Lemma 3 (and the leader-aware one) and the max-braking sequence of
+//!   Lemma 2;
 //! - [`mpc`]: problem (10) as data with a configurable quadratic cost;
 //! - [`solver`]: our solver with O(N) pentadiagonal Newton systems: an active-set
 //!   step on warm starts, an interior-point method behind it;
-//! - [`planner`]: the planner step: obstacle (2)/(22), solve, verify, certified fallback;
+//! - [`planner`]: the single-lane planner step: obstacle (2)/(22), solve, verify,
+//!   certified fallback;
 //! - [`reuse`]: certified plan reuse (the previous plan, shifted, when duality proves it
 //!   near-optimal);
-//! - [`world`]: V2V vehicle-state messages and the bounded world view built from them.
+//! - [`unicycle`], [`lanes`], [`lateral`], [`free_space`], [`lane_change`]: the
+//!   multi-lane planner — the unicycle (1), lanes and bands, the Lane Change Protocol
+//!   (16)–(18), Yield, dead ends (22)(23);
+//! - [`intersection`], [`crossing`]: the intersection layout, route conflicts,
+//!   Spaciousness (27), the managers of the Intersection-Crossing Protocol and the
+//!   vehicle side of it;
+//! - [`world`], [`sensing`], [`time`]: V2V vehicle-state messages and the bounded world
+//!   view built from them, onboard range sensors, and the integer time base (µs since an
+//!   epoch the vehicles share);
+//! - [`slot`]: placing a planner in a `static` without `alloc` or `static mut`.
 //!
 //! Memory is bounded by the const-generic horizon `N`; no function panics on any input
 //! (clippy denies `unwrap`, `expect`, `panic!` and indexing that can panic), and every
@@ -83,3 +95,8 @@ pub use world::{VehicleState, WorldError, WorldView};
 /// `planner_core::heapless::Vec` and the versions always agree (a different `heapless` in
 /// the user's crate is a different type).
 pub use heapless;
+
+/// The README's examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
