@@ -63,6 +63,7 @@ fn a_constructed_deadlock_is_reported_with_its_cycle() {
 fn the_same_queue_is_live_under_every_other_algorithm() {
     for a in [
         Algorithm::AllWayStop,
+        Algorithm::AllWayStopSingle,
         Algorithm::Fifo,
         Algorithm::ConcurrentFair,
         Algorithm::Pipelined,
@@ -89,9 +90,9 @@ fn longest_standstill(rows: &[TraceRow]) -> f64 {
 
 #[test]
 fn a_long_red_wait_is_not_a_deadlock() {
-    // All-Way STOP on 32 queued vehicles: vehicles stand at the stop line and behind it
-    // far longer than the detector's window, while others cross.
-    let spec = with_algorithm(load("queues-32.toml"), Algorithm::AllWayStop);
+    // All-Way STOP, one at a time, on 32 queued vehicles: vehicles stand at the stop line
+    // and behind it far longer than the detector's window, while others cross.
+    let spec = with_algorithm(load("queues-32.toml"), Algorithm::AllWayStopSingle);
     let mut w = World::<20>::new(spec, SolverChoice::Ours, None);
     let mut rows = Vec::new();
     while !w.finished() {

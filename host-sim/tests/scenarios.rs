@@ -304,7 +304,15 @@ fn multilane_experiment_completes_with_either_solver() {
 /// cross, none collide, nobody enters A_S without a permission.
 #[test]
 fn intersection_scenario_all_cross_under_every_algorithm() {
-    for alg in ["concurrent", "fifo", "stop", "concurrent_fair", "pipelined"] {
+    for alg in [
+        "concurrent",
+        "fifo",
+        "stop",
+        "stop_single",
+        "concurrent_fair",
+        "pipelined",
+        "platoon",
+    ] {
         common::intersection_all_cross(alg, "");
     }
 }

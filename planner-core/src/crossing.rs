@@ -20,9 +20,16 @@ use heapless::Vec;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Algorithm {
-    /// All-Way STOP (SPEC's choice): every vehicle stops at its stop line; vehicles are
-    /// served in the order they stopped, one vehicle inside A_S at a time.
+    /// All-Way STOP as drivers keep it: every vehicle comes to a full stop at its stop
+    /// line; the stopped vehicles then go in the order they stopped, each as soon as no
+    /// vehicle whose route conflicts with its own holds A_S — and never ahead of an
+    /// earlier-stopped vehicle it conflicts with. Vehicles on routes that do not
+    /// conflict (opposite straights, say) go together.
     AllWayStop,
+    /// All-Way STOP one vehicle at a time, the baseline this project first took for the
+    /// paper's Fig. 9 (SPEC §7): every vehicle stops at its stop line; vehicles are
+    /// served in the order they stopped, one vehicle inside A_S at a time.
+    AllWayStopSingle,
     /// FIFO Crossing: order by arrival τ, ties by route index Ψ; only the first vehicle,
     /// and only when no other holds a permission.
     Fifo,
@@ -75,8 +82,9 @@ pub enum Algorithm {
 
 impl Algorithm {
     /// Every algorithm, in the order of the paper's Fig. 9 plus ours.
-    pub const ALL: [Algorithm; 6] = [
+    pub const ALL: [Algorithm; 7] = [
         Algorithm::AllWayStop,
+        Algorithm::AllWayStopSingle,
         Algorithm::Fifo,
         Algorithm::Concurrent,
         Algorithm::ConcurrentFair,
@@ -87,6 +95,7 @@ impl Algorithm {
     pub fn name(self) -> &'static str {
         match self {
             Algorithm::AllWayStop => "STOP",
+            Algorithm::AllWayStopSingle => "STOP-1",
             Algorithm::Fifo => "FIFO",
             Algorithm::Concurrent => "CON",
             Algorithm::ConcurrentFair => "CON-fair",
@@ -624,14 +633,14 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             self.revoke_blocked();
         }
         match self.algorithm {
-            Algorithm::Fifo | Algorithm::AllWayStop => {
+            Algorithm::Fifo | Algorithm::AllWayStopSingle => {
                 if self.entries.iter().any(Entry::holds) {
                     return;
                 }
                 let order = self.priority(false);
                 // A suspect is never granted, and holds back no one by waiting.
                 let suspect = |i: &&usize| self.entries.get(**i).is_none_or(|e| e.suspect);
-                let first = if self.algorithm == Algorithm::AllWayStop {
+                let first = if self.algorithm == Algorithm::AllWayStopSingle {
                     // Served in the order they stopped (only a lane's first vehicle can
                     // stop at its line); ties in priority order.
                     let stopped = |i: &usize| self.entries.get(*i).and_then(|e| e.stopped_at);
@@ -646,7 +655,8 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                     e.permitted = true;
                 }
             }
-            Algorithm::Concurrent
+            Algorithm::AllWayStop
+            | Algorithm::Concurrent
             | Algorithm::ConcurrentFair
             | Algorithm::Pipelined
             | Algorithm::Platoon => self.scan(now, as_written),
@@ -658,7 +668,11 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
     /// priority order — FIFO, lane-consistent but for CON), with the pipelined and
     /// platoon relaxations where chosen.
     fn scan(&mut self, now: Instant, as_written: bool) {
-        let order = self.priority(as_written);
+        let order = if self.algorithm == Algorithm::AllWayStop {
+            self.stop_order()
+        } else {
+            self.priority(as_written)
+        };
         // Routes of the vehicles refused so far, and since when each has waited at most.
         let mut waiting: u32 = 0;
         let mut since = [now; MAX_ROUTES];
@@ -706,6 +720,19 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 e.waiting_since.get_or_insert(now);
             }
         }
+    }
+
+    /// [`Algorithm::AllWayStop`]'s order: only the vehicles that have stopped at their line
+    /// (only a lane's first vehicle can), in the order they stopped, ties in priority
+    /// order.
+    fn stop_order(&self) -> Vec<usize, CAP> {
+        let priority = self.priority(false);
+        let mut order = priority.clone();
+        order.retain(|i| self.entries.get(*i).is_some_and(|e| e.stopped_at.is_some()));
+        let stopped = |i: &usize| self.entries.get(*i).and_then(|e| e.stopped_at);
+        let rank = |i: &usize| priority.iter().position(|j| j == i);
+        order.sort_unstable_by(|a, b| stopped(a).cmp(&stopped(b)).then(rank(a).cmp(&rank(b))));
+        order
     }
 
     /// [`Algorithm::Platoon`]'s exception to fairness: `c` follows, within

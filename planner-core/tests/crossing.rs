@@ -151,9 +151,9 @@ fn the_fair_variant_bounds_the_wait() {
 }
 
 #[test]
-fn fifo_and_stop_permit_one_at_a_time_and_bad_reports_change_nothing() {
+fn fifo_and_stop_1_permit_one_at_a_time_and_bad_reports_change_nothing() {
     let l = layout();
-    for alg in [Algorithm::Fifo, Algorithm::AllWayStop] {
+    for alg in [Algorithm::Fifo, Algorithm::AllWayStopSingle] {
         let mut m = manager::<8>(&l, alg);
         for (id, r) in [(1u16, 0u8), (2, 8), (3, 5)] {
             m.observe(&report(&l, id, r, At::Waiting), secs(f64::from(id)))
@@ -185,19 +185,93 @@ fn fifo_and_stop_permit_one_at_a_time_and_bad_reports_change_nothing() {
         assert!(m.observe(&bad, secs(10.0)).is_err(), "route change");
         assert_eq!(m.entries(), &before[..]);
     }
-    // All-Way STOP serves only vehicles that have stopped at their line (a vehicle still
-    // rolling toward it, 1.5 m out at 2 m/s, can stop: dS(2) = 0.27 m).
+    // Both All-Way STOPs serve only vehicles that have stopped at their line (a vehicle
+    // still rolling toward it, 1.5 m out at 2 m/s, can stop: dS(2) = 0.27 m).
+    for alg in [Algorithm::AllWayStop, Algorithm::AllWayStopSingle] {
+        let mut m = manager::<8>(&l, alg);
+        let mut moving = report(&l, 1, 0, At::Waiting);
+        moving.v = 2.0;
+        moving.s -= 1.0;
+        m.observe(&moving, secs(0.0)).unwrap();
+        m.update(secs(100.0));
+        assert!(!m.permitted(1), "{alg:?}");
+        m.observe(&report(&l, 1, 0, At::Waiting), secs(1.0))
+            .unwrap();
+        m.update(secs(100.0));
+        assert!(m.permitted(1), "{alg:?}");
+    }
+}
+
+/// All-Way STOP as drivers keep it: stopped vehicles on routes that do not conflict go
+/// together; a vehicle never goes ahead of an earlier-stopped one it conflicts with, nor
+/// while a conflicting one holds A_S; STOP-1 lets one go at a time.
+#[test]
+fn all_way_stop_lets_stopped_vehicles_that_do_not_conflict_go_together() {
+    let l = layout();
+    let route = |heading: u8| {
+        l.route_index(heading, 0, planner_core::intersection::Movement::Straight)
+            .unwrap() as u8
+    };
+    let (east, north, west) = (route(0), route(1), route(2));
+    assert!(!l.conflict(usize::from(east), usize::from(west)));
+    assert!(l.conflict(usize::from(east), usize::from(north)));
+    assert!(l.conflict(usize::from(north), usize::from(west)));
+    // East and west stopped first: both go under STOP, one under STOP-1.
+    for (alg, together) in [
+        (Algorithm::AllWayStop, true),
+        (Algorithm::AllWayStopSingle, false),
+    ] {
+        let mut m = manager::<8>(&l, alg);
+        m.observe(&report(&l, 1, east, At::Waiting), secs(1.0))
+            .unwrap();
+        m.observe(&report(&l, 2, west, At::Waiting), secs(2.0))
+            .unwrap();
+        m.observe(&report(&l, 3, north, At::Waiting), secs(3.0))
+            .unwrap();
+        m.update(secs(3.0));
+        assert!(m.permitted(1) && !m.permitted(3), "{alg:?}");
+        assert_eq!(m.permitted(2), together, "{alg:?}");
+    }
+    // North stopped between them: west waits for north, which waits for east.
     let mut m = manager::<8>(&l, Algorithm::AllWayStop);
-    let mut moving = report(&l, 1, 0, At::Waiting);
-    moving.v = 2.0;
-    moving.s -= 1.0;
-    m.observe(&moving, secs(0.0)).unwrap();
-    m.update(secs(100.0));
-    assert!(!m.permitted(1));
-    m.observe(&report(&l, 1, 0, At::Waiting), secs(1.0))
+    m.observe(&report(&l, 1, east, At::Waiting), secs(1.0))
         .unwrap();
-    m.update(secs(100.0));
-    assert!(m.permitted(1));
+    m.observe(&report(&l, 3, north, At::Waiting), secs(2.0))
+        .unwrap();
+    m.observe(&report(&l, 2, west, At::Waiting), secs(3.0))
+        .unwrap();
+    m.update(secs(3.0));
+    assert!(m.permitted(1) && !m.permitted(3) && !m.permitted(2));
+    // East gone: north goes; west still waits (north holds A_S).
+    m.observe(&report(&l, 1, east, At::Gone), secs(4.0))
+        .unwrap();
+    m.update(secs(4.0));
+    assert!(m.permitted(3) && !m.permitted(2));
+    // Stopped at the same instant on conflicting routes: the priority order (by lane, in
+    // Ψ's order) decides.
+    let lane = |r: u8| l.inlet_index(l.route(usize::from(r)).unwrap().inlet);
+    let (first, second) = if lane(east) < lane(north) {
+        (1, 3)
+    } else {
+        (3, 1)
+    };
+    let mut m = manager::<8>(&l, Algorithm::AllWayStop);
+    m.observe(&report(&l, 3, north, At::Waiting), secs(1.0))
+        .unwrap();
+    m.observe(&report(&l, 1, east, At::Waiting), secs(1.0))
+        .unwrap();
+    m.update(secs(1.0));
+    assert!(m.permitted(first) && !m.permitted(second));
+    // A vehicle that has not stopped yet is not served, and holds back no one.
+    let mut m = manager::<8>(&l, Algorithm::AllWayStop);
+    let mut rolling = report(&l, 3, north, At::Waiting);
+    rolling.v = 2.0;
+    rolling.s -= 1.0;
+    m.observe(&rolling, secs(1.0)).unwrap();
+    m.observe(&report(&l, 2, west, At::Waiting), secs(2.0))
+        .unwrap();
+    m.update(secs(2.0));
+    assert!(!m.permitted(3) && m.permitted(2));
 }
 
 /// Reports rounded by a bus (0.01 m) may put a vehicle up to 5 mm ahead of itself: with

@@ -73,7 +73,7 @@ fn algorithm_names_are_the_ones_outputs_and_the_cli_use() {
     let names: Vec<&str> = Algorithm::ALL.iter().map(|a| a.name()).collect();
     assert_eq!(
         names,
-        ["STOP", "FIFO", "CON", "CON-fair", "PIPE", "PLATOON"]
+        ["STOP", "STOP-1", "FIFO", "CON", "CON-fair", "PIPE", "PLATOON"]
     );
 }
 
@@ -417,7 +417,7 @@ fn a_vehicle_first_heard_inside_a_s_holds_its_route_after_a_restart() {
         m.observe(&gone, secs(11.0)).unwrap();
         m.update(secs(100.0));
         assert!(m.entries().iter().all(|e| e.id != 1), "{alg:?}");
-        if alg == Algorithm::AllWayStop {
+        if matches!(alg, Algorithm::AllWayStop | Algorithm::AllWayStopSingle) {
             m.observe(&at(&l, 2, x, 0.5, 0.0), secs(11.5)).unwrap();
             m.update(secs(100.0));
         }

@@ -23,8 +23,8 @@ pub enum Experiment {
     /// the paper's invariant and the leader-aware one (bench/sumo/lane_capacity.py runs
     /// the same road in SUMO, side by side).
     LaneCapacity(LaneCapacityArgs),
-    /// Fig. 9: closed system of 8 vehicles at the SPEC §8 intersection; STOP, FIFO, CON,
-    /// the starvation-free CON and the pipelined algorithm on identical seeds.
+    /// Fig. 9: closed system of 8 vehicles at the SPEC §8 intersection; every algorithm
+    /// (STOP, STOP-1, FIFO, CON, CON-fair, PIPE, PLATOON) on identical seeds.
     Throughput {
         /// Simulated seconds per run.
         #[arg(long, default_value_t = 300.0)]
@@ -129,7 +129,7 @@ pub enum Experiment {
         /// Draw mean delay against demand, one curve per algorithm, to a .png or .svg.
         #[arg(long, value_name = "out.png|out.svg")]
         plot: Option<PathBuf>,
-        /// Algorithms to run (comma-separated, of STOP, FIFO, CON, CON-fair, PIPE, PLATOON).
+        /// Algorithms to run (comma-separated, of STOP, STOP-1, FIFO, CON, CON-fair, PIPE, PLATOON).
         #[arg(
             long,
             value_delimiter = ',',
@@ -184,7 +184,7 @@ pub enum Experiment {
         /// Every message as one CAN FD frame.
         #[arg(long)]
         can_fd: bool,
-        /// The intersection's algorithm (STOP, FIFO, CON-fair, PIPE, PLATOON).
+        /// The intersection's algorithm (STOP, STOP-1, FIFO, CON-fair, PIPE, PLATOON).
         #[arg(long, default_value = "FIFO")]
         algorithm: String,
         /// Only these rows (comma-separated): forged-grant, replayed-grant,
@@ -516,8 +516,8 @@ fn demand_plan(
             Some(_) => return Err(bad_input(format!("--algorithms: {name} given twice"))),
             None => {
                 return Err(bad_input(format!(
-                    "--algorithms: unknown {name:?} (STOP, FIFO, CON, CON-fair, PIPE, PLATOON)"
-                )))
+                "--algorithms: unknown {name:?} (STOP, STOP-1, FIFO, CON, CON-fair, PIPE, PLATOON)"
+            )))
             }
         }
     }
@@ -780,7 +780,7 @@ fn attacks(
         .filter(|a| **a != Algorithm::Concurrent)
     else {
         return bad_input(format!(
-            "--algorithm: {algorithm:?} is not a live algorithm (STOP, FIFO, CON-fair, PIPE, PLATOON)"
+            "--algorithm: {algorithm:?} is not a live algorithm (STOP, STOP-1, FIFO, CON-fair, PIPE, PLATOON)"
         ));
     };
     let names = row_names();

@@ -148,8 +148,11 @@ impl MovementToml {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AlgorithmToml {
-    /// All-Way STOP.
+    /// All-Way STOP: stopped vehicles go in the order they stopped, together when their
+    /// routes do not conflict.
     Stop,
+    /// All-Way STOP one vehicle at a time.
+    StopSingle,
     /// FIFO Crossing.
     Fifo,
     /// Concurrent Crossing as written in the paper (not live; see SPEC §7).
@@ -167,6 +170,7 @@ impl AlgorithmToml {
     pub fn algorithm(self) -> Algorithm {
         match self {
             AlgorithmToml::Stop => Algorithm::AllWayStop,
+            AlgorithmToml::StopSingle => Algorithm::AllWayStopSingle,
             AlgorithmToml::Fifo => Algorithm::Fifo,
             AlgorithmToml::Concurrent => Algorithm::Concurrent,
             AlgorithmToml::ConcurrentFair => Algorithm::ConcurrentFair,
@@ -179,6 +183,7 @@ impl AlgorithmToml {
     pub fn of(a: Algorithm) -> Self {
         match a {
             Algorithm::AllWayStop => AlgorithmToml::Stop,
+            Algorithm::AllWayStopSingle => AlgorithmToml::StopSingle,
             Algorithm::Fifo => AlgorithmToml::Fifo,
             Algorithm::Concurrent => AlgorithmToml::Concurrent,
             Algorithm::ConcurrentFair => AlgorithmToml::ConcurrentFair,
