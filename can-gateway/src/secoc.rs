@@ -1,4 +1,4 @@
-//! Message authentication in the manner of AUTOSAR SecOC (issue 17).
+//! Message authentication in the manner of AUTOSAR SecOC.
 //!
 //! CAN has no sender authentication: the source address in an identifier is whatever the
 //! writer puts there, and the E2E counter and CRC of [`crate::codec`] protect against

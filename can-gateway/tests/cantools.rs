@@ -1,7 +1,10 @@
 //! The DBC describes the frames: a candump log written by the gateway is decoded by the
-//! Python `cantools` package (from PyPI; `.ci/run` installs it) and every signal must
-//! equal what was encoded, within half a resolution step; the script also recomputes
-//! every message CRC on its own.
+//! Python `cantools` package (from PyPI) and every signal must equal what was encoded,
+//! within half a resolution step; the script also recomputes every message CRC on its own.
+//! README's test command (`scripts/test.sh`) installs cantools in a virtual environment;
+//! run bare, the test needs `python3` with `cantools` and fails saying so. It is skipped
+//! only when the test script could not set cantools up (`TESTS_SKIP=cantools`), with a
+//! line in the normal output and in the script's list of skips.
 
 use can_gateway::log::candump_line;
 use can_gateway::wire::{Request, TrackWire, CLOCK_ADDRESS, MANAGER_ADDRESS};
@@ -41,8 +44,52 @@ fn message_of(frames: &Frames<F8>) -> (Message<f64>, u8, u8) {
     (msg.expect("a whole message"), id.as_raw() as u8, counter)
 }
 
+/// The Python that runs the checks: the test script's environment, else `python3`.
+fn python() -> String {
+    std::env::var("TESTS_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+/// Skips the test when the test script could not set up `what` (it lists it in
+/// `TESTS_SKIP`): says so on the terminal, past cargo's capture, and in the script's skip
+/// log. Anywhere else a missing prerequisite fails the test with `why`.
+fn skip_or_fail(what: &str, test: &str, why: &str) {
+    use std::io::Write;
+    let listed = std::env::var("TESTS_SKIP").is_ok_and(|s| s.split(',').any(|w| w == what));
+    assert!(
+        listed,
+        "{why} (README's test command, scripts/test.sh, sets it up)"
+    );
+    let line = format!("SKIPPED {test}: {why}");
+    let _ = writeln!(std::io::stderr(), "{line}");
+    if let Ok(log) = std::env::var("TESTS_SKIP_LOG") {
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(&log)
+            .expect("the test script's skip log opens");
+        writeln!(f, "{line}").expect("the skip log takes a line");
+    }
+}
+
 #[test]
 fn cantools_decodes_the_gateways_candump_log() {
+    // Say what is missing instead of a Python traceback, before any work.
+    let probe = Command::new(python())
+        .args(["-c", "import cantools"])
+        .output();
+    if !probe.as_ref().is_ok_and(|o| o.status.success()) {
+        let cause = match probe {
+            // The traceback's last line says what is missing; one line per skip.
+            Ok(o) => String::from_utf8_lossy(&o.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+                .to_string(),
+            Err(e) => e.to_string(),
+        };
+        let why = format!("{} has no cantools ({cause})", python());
+        return skip_or_fail("cantools", "can-gateway DBC test (cantools)", &why);
+    }
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
     let tmp = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("can-gateway-{}", std::process::id()));
@@ -327,22 +374,13 @@ fn cantools_decodes_the_gateways_candump_log() {
     let exp_path = tmp.join("expected.jsonl");
     std::fs::write(&log_path, log).expect("write log");
     std::fs::write(&exp_path, expected).expect("write expected");
-    // Say what is missing instead of a Python traceback (README lists the prerequisite).
-    let probe = Command::new("python3")
-        .args(["-c", "import cantools"])
-        .output();
-    assert!(
-        probe.as_ref().is_ok_and(|o| o.status.success()),
-        "this test needs python3 with cantools: python3 -m pip install cantools ({:?})",
-        probe.map(|o| String::from_utf8_lossy(&o.stderr).into_owned())
-    );
-    let out = Command::new("python3")
+    let out = Command::new(python())
         .arg(dir.join("tools/check_candump.py"))
         .arg(dir.join("can-gateway.dbc"))
         .arg(&log_path)
         .arg(&exp_path)
         .output()
-        .expect("python3 runs (CI installs cantools from PyPI)");
+        .expect("python runs");
     assert!(
         out.status.success(),
         "cantools check failed:\n{}{}",
@@ -351,12 +389,12 @@ fn cantools_decodes_the_gateways_candump_log() {
     );
     println!("{}", String::from_utf8_lossy(&out.stdout));
     // The DBC's CAN FD messages are its classic frames laid end to end (tools/dbc_fd.py).
-    let fd = Command::new("python3")
+    let fd = Command::new(python())
         .arg(dir.join("tools/dbc_fd.py"))
         .arg(dir.join("can-gateway.dbc"))
         .arg("--check")
         .output()
-        .expect("python3 runs");
+        .expect("python runs");
     assert!(
         fd.status.success(),
         "{}",

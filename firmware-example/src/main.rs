@@ -44,9 +44,9 @@ const CALIBRATION_ITERATIONS: u32 = 1_000_000;
 /// Word painted over the free stack before the run.
 const PAINT: u32 = 0xDEAD_BEEF;
 const STEPS: usize = 1000;
-/// Most stack the whole program may use, painted (issue 19 §4): 8 KiB, at N = 20 and 50.
+/// Most stack the whole program may use, painted: 8 KiB, at N = 20 and 50.
 const STACK_BUDGET: usize = 8 * 1024;
-/// Most instructions one N = 20 lane-change step may take (issue 19 §4): 2.4 ms at the
+/// Most instructions one N = 20 lane-change step may take: 2.4 ms at the
 /// emulated 125 MHz, 1.8 ms at 168 MHz.
 const LANE_CHANGE_BUDGET: u32 = 300_000;
 
@@ -157,7 +157,7 @@ fn main() -> ! {
         per_tick
     );
 
-    // The planners live in static slots (.bss), built in place (issue 19 §4): the stack
+    // The planners live in static slots (.bss), built in place: the stack
     // holds only what one control step needs.
     // SAFETY: `main` runs once and never returns; this is the only reference to SLOTS.
     let slots = unsafe { &mut *core::ptr::addr_of_mut!(SLOTS) };
@@ -225,7 +225,7 @@ fn main() -> ! {
         timing.set(t);
         deadline.set(end + PERIOD_TICKS);
     };
-    // What one planner takes (issue 19 §4; each lives in a static slot, not on the
+    // What one planner takes (each lives in a static slot, not on the
     // stack); with a view of 32 neighbours, the most a multi-lane planner is configured
     // for.
     defmt::info!(
@@ -301,7 +301,7 @@ fn main() -> ! {
     );
     let lt = timing.get();
     defmt::info!("control loop (lane change, h = 10 ms): {}", lt);
-    // Every period on time at N = 20 and 50 (issue 19 §4: the active-set step brought
+    // Every period on time at N = 20 and 50 (the active-set step brought
     // N = 50's worst step from 1.9 M to under 0.5 M instructions), and at N = 20 the step
     // within its instruction budget.
     let lane_ok = l.completed_at.is_some()

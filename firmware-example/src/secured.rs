@@ -1,4 +1,4 @@
-//! SecOC on the MCU (issue 17 §1): what verifying an authenticated message costs here.
+//! SecOC on the MCU: what verifying an authenticated message costs here.
 //!
 //! The node's key is fixed at build time (`FW_SECOC_KEY`, 32 hex digits, read by
 //! `build.rs`; a documented development key when unset — never for a vehicle). The

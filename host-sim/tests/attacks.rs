@@ -1,4 +1,4 @@
-//! Issue 17 §4: the attack experiment over the CAN hub — every attack on the Fig. 8
+//! The attack experiment over the CAN hub — every attack on the Fig. 8
 //! intersection and on the multi-lane road, every node authenticating.
 
 use host_sim::experiments::attacks::{experiment, AttackRow, Settings};

@@ -1,4 +1,4 @@
-//! The fleet on CAN frames (issue 6, items 3–4) without a kernel: every vehicle in its
+//! The fleet on CAN frames without a kernel: every vehicle in its
 //! own task on the in-process frame hub, with the same code that runs on SocketCAN
 //! (the real vcan test is `host-sim/vcan/run-in-qemu.sh`, run by CI).
 

@@ -323,7 +323,7 @@ fn scale_traffic_changes_lanes_densely_and_safely_and_the_sweep_plots() {
     }
 }
 
-/// `scale --compare`: the same roads with the solver as before issue 19 (the
+/// `scale --compare`: the same roads with the solver as before its active-set step (the
 /// interior-point method alone) and with the default solver, both safe, the active-set
 /// step answering most solves in fewer Newton steps at the same closed-loop cost (both
 /// find the optima); with `--reuse` the current arm also skips solves. Bad settings are
@@ -509,7 +509,7 @@ fn clarabel_can_drive_the_planners() {
 }
 
 #[test]
-fn experiment_multilane_prints_the_issue_json_and_a_plot() {
+fn experiment_multilane_prints_its_json_and_a_plot() {
     let png = tmp("fig7.png");
     let out = bin()
         .args([
@@ -649,7 +649,7 @@ fn intersection_run_and_throughput_experiment() {
     }
 }
 
-/// `--auth` and `--keys` (issue 17): a key file authenticates the fleet; a bad one, or
+/// `--auth` and `--keys`: a key file authenticates the fleet; a bad one, or
 /// authentication without a CAN bus, is refused before anything runs, naming the file
 /// and the key.
 #[test]
@@ -721,4 +721,35 @@ fn key_files_are_checked_and_authenticate_the_fleet() {
         .expect("runs");
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--bus can-hub"));
+}
+
+/// The summary agrees with itself, in text and in JSON: in the open grid (vehicles still
+/// arriving at the end) goals met, unfinished and under way add up to the vehicles with
+/// goals, and the text claims every goal met only when none is under way; in the closed
+/// corridor every vehicle's goals are met and counted as such.
+#[test]
+fn summaries_agree_with_themselves_in_text_and_json() {
+    for (name, open) in [("grid-3x3.toml", true), ("corridor.toml", false)] {
+        let v = json_of(
+            bin().arg("run").arg(scenario(name)).arg("--json"),
+            &["goals", "goals_met", "unfinished", "under_way", "completed"],
+        );
+        let n = |k: &str| v[k].as_u64().expect("a count");
+        assert!(n("goals") > 0, "{name}: {v}");
+        assert_eq!(
+            n("goals"),
+            n("goals_met") + n("unfinished") + n("under_way"),
+            "{name}: {v}"
+        );
+        assert_eq!(v["completed"], true, "{name}: {v}");
+        assert_eq!(n("under_way") > 0, open, "{name}: {v}");
+        let out = bin().arg("run").arg(scenario(name)).output().expect("runs");
+        let text = String::from_utf8_lossy(&out.stdout);
+        let claims_all = text.contains("every goal met");
+        assert_eq!(claims_all, !open, "{name}: {text}");
+        if open {
+            let done = format!("{} of {} vehicles done", n("goals_met"), n("goals"));
+            assert!(text.contains(&done), "{name}: {text}");
+        }
+    }
 }

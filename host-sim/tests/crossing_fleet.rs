@@ -1,4 +1,4 @@
-//! Intersection scenarios as fleets on CAN frames (issue 6, item 4): a task per vehicle
+//! Intersection scenarios as fleets on CAN frames: a task per vehicle
 //! and one for the intersection manager, on the in-process frame hub with the code that
 //! runs on SocketCAN (the real vcan run is `host-sim/vcan/run-in-qemu.sh`, run by CI).
 
@@ -432,7 +432,7 @@ fn with_impostors(
     .unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// Issue 17: without authentication the grants a vehicle forges under the manager's
+/// Without authentication the grants a vehicle forges under the manager's
 /// address are accepted by every receiver (the CRC, the counter and the sender rule all
 /// pass); with it, every one fails its MAC at every receiver, nothing else is refused,
 /// and the run is the clean authenticated run to the bit.

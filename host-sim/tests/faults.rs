@@ -1,4 +1,4 @@
-//! Issue 6, item 6: faults injected on the bus (loss, delay, jitter, duplication,
+//! Faults injected on the bus (loss, delay, jitter, duplication,
 //! reordering, a silent vehicle) — what the bus does, and that the planners stay safe.
 
 use host_sim::bus::{Bus, Faults, InProcessBus, Message, Received, Silent};

@@ -1,4 +1,4 @@
-//! host-sim's source reads from its tree (issue 15): modules depend on each other one way
+//! host-sim's source reads from its tree: modules depend on each other one way
 //! (no import cycle between the folders of `src/`), and no function is longer than
 //! [`MAX_FN_LINES`].
 

@@ -1,5 +1,5 @@
 //! Liveness (Theorems 3–5) where the paper's experiments did not go: the deadlock
-//! detector's positive and negative cases, and the failures of issue 14 as regressions.
+//! detector's positive and negative cases, and the failures the liveness sweeps found as regressions.
 
 mod common;
 
@@ -110,7 +110,7 @@ fn a_long_red_wait_is_not_a_deadlock() {
 
 #[test]
 fn thirty_two_queued_vehicles_cross_under_every_live_algorithm() {
-    // Issue 14: FIFO and Concurrent Crossing (fair) crossed 0 of these, pipelined 7.
+    // Found by the liveness sweeps: FIFO and Concurrent Crossing (fair) crossed 0 of these, pipelined 7.
     for a in [
         Algorithm::Fifo,
         Algorithm::ConcurrentFair,
@@ -136,7 +136,7 @@ fn concurrent_crossing_as_written_still_deadlocks_on_them() {
 
 #[test]
 fn nine_vehicles_at_a_dead_end_all_reach_their_lanes() {
-    // Issue 14: vehicle 9 (lane 2 → 0) stood at the road end in lane 1.
+    // Found by the liveness sweeps: vehicle 9 (lane 2 → 0) stood at the road end in lane 1.
     let s = run_world(load("deadend-9.toml"));
     assert_eq!(s.unsafe_events(), 0);
     assert!(s.deadlock.is_none(), "{:?}", s.deadlock);
@@ -146,7 +146,7 @@ fn nine_vehicles_at_a_dead_end_all_reach_their_lanes() {
 
 #[test]
 fn a_change_bent_off_its_curve_still_centres_before_the_road_end() {
-    // Issue 14, deadends case 536 of 2,000: vehicle 2 ended at the road end 0.75 m off
+    // Found by the dead-end sweep, case 536 of 2,000: vehicle 2 ended at the road end 0.75 m off
     // lane 2's centre, its change never completed (a deadlock).
     let s = run_world(load("deadend-536.toml"));
     assert_eq!(s.unsafe_events(), 0);

@@ -1,4 +1,4 @@
-//! The independent monitors must see what they are there to see (issue 20): hand-placed
+//! The independent monitors must see what they are there to see: hand-placed
 //! ground truth just inside and just outside each rule, for the road, the intersection
 //! and the network monitor. A blind monitor would certify every run; these fail if a
 //! check is switched off, loosened or pointed at the wrong lane.

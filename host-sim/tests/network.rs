@@ -1,4 +1,4 @@
-//! Road networks (issue 15): the shipped corridor and grid, in-process and as a fleet of
+//! Road networks: the shipped corridor and grid, in-process and as a fleet of
 //! CAN nodes, the loader's refusals, and the grid experiment's figures.
 
 mod common;

@@ -1,4 +1,4 @@
-//! Safety off the paper's ideal world (issue 21): the six files that broke it, through the
+//! Safety off the paper's ideal world: the six files that broke it, through the
 //! CLI as a user runs them, and their harder variants in-process. Safety may not rest on
 //! the bus, on other vehicles' goodwill, or on inputs the loader let through.
 

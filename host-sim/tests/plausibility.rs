@@ -1,4 +1,4 @@
-//! Senders that lie (issue 17 §3): a state physically impossible after the sender's last
+//! Senders that lie: a state physically impossible after the sender's last
 //! accepted one is refused with its reason and changes nothing; the sender becomes a
 //! suspect whose later messages (states, `Left`, `Gone`) are refused too, and the planner
 //! is handed its last trusted record, ageing, as a vehicle that does not cooperate.

@@ -1,4 +1,4 @@
-//! The red team's findings (issues 35 and 42), each replayed exactly as reported, and the
+//! The red team's findings, each replayed exactly as reported, and the
 //! sweeps built to find their kind: small runs of each that must come out clean, and that
 //! a sharded run of each merges into the unsharded one.
 

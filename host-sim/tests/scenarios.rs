@@ -50,8 +50,12 @@ fn builtin_single_lane_scenarios_are_safe_and_live() {
             (0, 0, 0, 0),
             "{name}: {s:?}"
         );
-        assert!(s.completed, "{name}: goals {}/{}", s.goals_reached, s.goals);
-        assert!(s.goals > 0, "{name} must have liveness goals");
+        assert!(s.completed, "{name}: goals met {}/{}", s.goals_met, s.goals);
+        assert!(s.goal_x > 0, "{name} must have liveness goals");
+        assert_eq!(
+            s.goals_met, s.goals,
+            "{name}: a closed world ends with every goal met"
+        );
         assert_eq!(s.fallback_steps, 0, "{name}: {s:?}");
         assert_eq!(s.messages_rejected, 0);
         assert_eq!(

@@ -1,4 +1,4 @@
-//! Sharded sweeps (issue 18): four shards run as separate processes and merged give the
+//! Sharded sweeps: four shards run as separate processes and merged give the
 //! unsharded result field for field (wall-clock times aside; floats to 1e-9 relative), and
 //! shards that do not belong together are refused.
 

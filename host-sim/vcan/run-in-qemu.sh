@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The real-vcan test (issue 6): boots Debian's own kernel under qemu-system-x86_64 (TCG;
+# The real-vcan test: boots Debian's own kernel under qemu-system-x86_64 (TCG;
 # this machine's kernel has no CAN), loads its can, can-raw, can-dev and vcan modules,
 # and runs `host-sim run SCENARIO --bus vcan0` there for each scenario — a task and a
 # SocketCAN socket per vehicle (and one for an intersection's manager) — with candump

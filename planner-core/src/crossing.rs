@@ -807,7 +807,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             .any(|(i, l)| !l.holds() && !granted_now.contains(&i) && self.ahead_on_inlet(l, c))
     }
 
-    /// Liveness fix 2 (root cause of the queue deadlocks of issue 14): a permitted vehicle
+    /// Liveness fix 2 (root cause of the queue deadlocks the liveness sweeps found): a permitted vehicle
     /// that has not entered A_S while an *unpermitted* vehicle is ahead of it on its inlet
     /// lane cannot use its permission — it cannot pass that vehicle — yet under FIFO it
     /// keeps every other vehicle out, and under the Concurrent algorithms it keeps
@@ -1044,7 +1044,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
     /// Sets a bound on how long other vehicles' reports take to arrive (delay, jitter,
     /// repeated losses; ≥ h, the default). Until that long has passed since the first
     /// step, a vehicle without sensors may not yet have heard of one just ahead of it, and
-    /// takes its path as blocked (issue 21: on a bus with 0.1 s of delay, a vehicle
+    /// takes its path as blocked (on a bus with 0.1 s of delay, a vehicle
     /// accelerated into one standing 0.5 m ahead that it had not heard of yet). Reports
     /// older than the bound may miss that their vehicle has reached this one's outlet;
     /// such a vehicle is placed where it may be. A non-finite value changes nothing.
@@ -1307,7 +1307,7 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
 #[cfg(test)]
 mod tests {
     //! The vehicle side's bookkeeping, read from its private state: what it keeps of the
-    //! reports, grants and sensor returns it hears (issue 20's second mutation pass).
+    //! reports, grants and sensor returns it hears (the second mutation pass).
     use super::*;
     use crate::intersection::LayoutSpec;
     use crate::mpc::CostWeights;

@@ -236,7 +236,7 @@ pub enum LayoutError<F> {
     /// The outlet track does not reach a vehicle length beyond ∂A_C: a vehicle leaves the
     /// intersection (C^I_t (25)) once it is on its outlet outside A_C, so every outlet must
     /// take it there; a shorter one ends inside A_C, where vehicles could only pile up
-    /// (issue 21: 40 m outlets, 4,864 collisions).
+    /// (40 m outlets, 4,864 collisions).
     OutletShorterThanCommRegion {
         /// The outlet length (m).
         length: F,

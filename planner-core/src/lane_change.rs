@@ -39,7 +39,7 @@ pub const STRAIGHT_HEADING_RAD: f64 = 0.02;
 /// inside the new lane (as this planner first did) can leave a vehicle a few cm from the
 /// lane's edge; once its heading is straightened there, no turn within the horizon
 /// keeps its rear corner inside the lane (the rear swings out by (L/2)θ before y gains),
-/// so it never steers again and a second change never starts (issue 14's dead-end
+/// so it never steers again and a second change never starts (the dead-end sweep's
 /// failures). 0.6 m from the centre leaves 0.35 m to the edge. Until the change
 /// completes its band spans both lanes, so the S-curve can finish.
 pub const CENTRED_M: f64 = 0.6;
@@ -289,7 +289,7 @@ pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     steps: u32,
     omega_plan: [F; N],
     reference: Option<Reference<F>>,
-    /// The lateral QP's storage, here rather than on the stack (issue 19 §4).
+    /// The lateral QP's storage, here rather than on the stack.
     lateral: LateralWork<F>,
     /// The invariant kept toward the vehicle ahead.
     invariant: Invariant,
@@ -567,7 +567,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// Where space ahead stops being known (as x̄_t − x_t), if it does. With sensors:
     /// the end of the forward range, as if a stopped vehicle stood just beyond it. Without
     /// (the paper's world): nowhere, except until the notification bound has passed since
-    /// the first step — a vehicle may then not yet have heard of one just ahead (issue 21:
+    /// the first step — a vehicle may then not yet have heard of one just ahead (off the ideal world:
     /// a follower at the smallest safe gap accelerated for a period of bus delay before
     /// it first heard its braking leader), so it takes the road ahead as blocked at once
     /// and brakes, which is safe whatever is there.
@@ -829,7 +829,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         safety::invariant_holds(p, v, room)
     }
 
-    /// The entry check (issue 21; RSS-style): the ego, changing into `m`, may put its
+    /// The entry check (RSS-style: the ego, changing into `m`, may put its
     /// rectangle into lane `m` at `lead` from now only if every vehicle that may be in `m`
     /// behind it could stop behind it then even had it never heard of the change — moving
     /// unaware, at up to amax, for the age of the ego's data of it plus `lead`. The
@@ -897,7 +897,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// a new S-curve from where the vehicle is to the centre, over [`recentre_length`].
     /// Without it the lateral QP alone closes the rest only over hundreds of metres, and
     /// a vehicle near a road end stops there short of the centre, unable to steer at
-    /// standstill (issue 14's dead-end sweep, case 536 of 2,000).
+    /// standstill (the dead-end sweep's sweep, case 536 of 2,000).
     fn rejoin(&mut self, obs: &LaneObservation<'_, F>, m: u8) {
         let centre = obs.road.lane_centre(m);
         let driven = self.reference.is_none_or(|r| obs.pose.x >= r.x0 + r.len);
@@ -1108,7 +1108,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// clamped into Ω^k_t (31), or the straightening plan if the QP has no answer; and the
     /// QP's iterations. Not inlined into [`LanePlanner::step`]: its references and the
     /// QP then take stack only while the lateral part runs, not beside the speed solve
-    /// (issue 19 §4).
+    ///.
     #[inline(never)]
     fn plan_lateral(
         &mut self,
@@ -1247,7 +1247,7 @@ fn straightening_plan<F: Real, const N: usize>(p: &Params<F>, theta: F, v: &[F; 
 /// [`LATERAL_MARGIN_M`] on each side, but never by more than the clearance the rectangle
 /// has there now. A vehicle closer to an edge than the margin would otherwise make the
 /// QP's own start state infeasible; the QP then fails every step and the straightening
-/// plan pins θ at 0 (issue 14's dead-end failures). The exact check
+/// plan pins θ at 0 (the dead-end sweep's failures). The exact check
 /// ([`verify_lateral`]) is on the untightened lanes.
 fn qp_band<F: Real>(p: &Params<F>, pose: Pose<F>, lanes: Band<F>) -> (F, F) {
     let margin = F::from_f64(LATERAL_MARGIN_M);

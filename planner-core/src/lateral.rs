@@ -416,7 +416,7 @@ pub struct LateralInput<'a, F, const N: usize> {
 
 /// The lateral QP and its solver's working vectors: ~3.3 KB in `f32`, which a
 /// [`crate::LanePlanner`] keeps in its own storage so that a lane-change step does not
-/// need them on the stack (on the Cortex-M4F, issue 19 §4).
+/// need them on the stack (on the Cortex-M4F).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LateralWork<F> {
     qp: DenseQp<F>,

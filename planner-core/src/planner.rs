@@ -463,7 +463,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
     /// The previous plan, shifted, if the policy allows it, it passes [`verify`] for
     /// `problem` and the solver's duals certify it within the policy's tolerance.
     // Not inlined: its dual bound's work vectors would otherwise sit in every step's frame,
-    // reuse or not (issue 19 §4).
+    // reuse or not.
     #[inline(never)]
     fn try_reuse(&mut self, problem: &SingleLaneProblem<F, N>, gap: F) -> Option<Command<F>> {
         let policy = self.reuse?;

@@ -70,7 +70,7 @@ pub trait Real:
     /// only while one ulp of a coordinate is far below them: f32 10 km (ulp 1 mm, half
     /// of `SAFETY_MARGIN_M`'s 2 cm is 10 ulp); f64 1,000 km (ulp 1.2e-10 m, a thousandth
     /// of `VERIFY_SLACK_M`). Beyond, the spacing of representable positions alone can
-    /// exceed the margins (issue 21: at x ≈ 5.6e14 m f64 positions are 6 cm apart).
+    /// exceed the margins (at x ≈ 5.6e14 m f64 positions are 6 cm apart).
     const MAX_COORD_M: Self;
     /// Converts from `f64` (rounding to nearest).
     fn from_f64(x: f64) -> Self;

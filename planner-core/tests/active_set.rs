@@ -1,4 +1,4 @@
-//! The solver's active-set step (issue 19 §1, `planner_core::solver::active_set`): what
+//! The solver's active-set step (`planner_core::solver::active_set`): what
 //! it answers is a KKT point of (10) by an independent check written in the speeds (not
 //! the solver's prefix-sum stencils), it finds the same optima as the interior-point
 //! method alone, redundant speed bounds carry no multiplier, and its give-up paths (the

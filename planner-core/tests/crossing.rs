@@ -356,7 +356,7 @@ fn queue(l: &Layout<f64>) -> (CrossingReport<f64>, CrossingReport<f64>) {
     (leader, follower)
 }
 
-/// Issue 14's queue deadlock, first cause: vehicles that arrive together (all that start
+/// The queue deadlock the liveness sweeps found, first cause: vehicles that arrive together (all that start
 /// inside A_C) were ordered by Ψ, which can rank a follower before its leader on the
 /// same lane. Every live algorithm now serves the leader first.
 #[test]

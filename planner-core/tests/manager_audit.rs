@@ -1,4 +1,4 @@
-//! The intersection manager's rules one at a time, on hand-placed reports (issue 20's
+//! The intersection manager's rules one at a time, on hand-placed reports (the mutation audit's
 //! second mutation pass: each test here pins a rule that only the slow host-sim sweeps
 //! exercised before, so that a bug in it fails `cargo test -p planner-core`).
 //!
@@ -387,7 +387,7 @@ fn pipelined_grants_a_head_and_its_follower_in_one_scan() {
     assert!(m.permitted(1) && m.permitted(2));
 }
 
-/// A manager restarted mid-crossing (issue 17) rebuilds its state from the next reports:
+/// A manager restarted mid-crossing rebuilds its state from the next reports:
 /// a vehicle first heard inside A_S holds its zones as a permission would, under every
 /// algorithm, so a conflicting route waits for it — even one whose vehicle was heard
 /// first and waits at its line — and is granted once it has left.

@@ -1,5 +1,5 @@
 //! The MPC problem (10)'s objective and constraint values against hand computation
-//! (issue 20's second mutation pass: these were checked only through the Clarabel
+//! (the second mutation pass: these were checked only through the Clarabel
 //! cross-check in host-sim).
 
 use planner_core::mpc::{ConstraintKind, CostWeights, SingleLaneProblem};

@@ -569,7 +569,7 @@ fn drive_changes(
     done
 }
 
-/// Issue 14's dead-end failures: a change used to complete as soon as the rectangle was
+/// The dead-end sweep's failures: a change used to complete as soon as the rectangle was
 /// inside the new lane — millimetres from its edge, still heading toward the centre. From there
 /// the lateral QP (band tightened by 5 cm) found its own start state infeasible, the
 /// straightening fallback pinned θ at 0, and at the edge with θ = 0 no turn within the
@@ -729,7 +729,7 @@ fn the_end_of_the_forward_range_is_not_free_road() {
     );
 }
 
-/// The entry check (issue 21): a change under way whose rectangle is not yet in the
+/// The entry check: a change under way whose rectangle is not yet in the
 /// target lane does not enter it in front of a vehicle there that does not cooperate and
 /// could not stop behind it; with the lane clear, the same step steers in.
 #[test]
@@ -788,7 +788,7 @@ fn a_change_under_way_waits_for_a_vehicle_behind_that_cannot_stop() {
     assert!(refused > 0, "the fast vehicle never held the change back");
 }
 
-/// Sensor fusion at the start of a change (issue 21): a vehicle behind in the target lane
+/// Sensor fusion at the start of a change: a vehicle behind in the target lane
 /// known only from the ego's sensor is taken as one that does not cooperate; with a
 /// V2V record of the same vehicle it is trusted to (cooperation is what the vehicle is,
 /// not how fresh its record: entering stays guarded by the entry check).

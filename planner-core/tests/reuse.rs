@@ -1,4 +1,4 @@
-//! Certified plan reuse (issue 19 §1, `planner_core::reuse`): the dual bound is a lower
+//! Certified plan reuse (`planner_core::reuse`): the dual bound is a lower
 //! bound on J* for any multipliers ≥ 0 and is tight at the solver's own; a reusing
 //! planner applies only verified plans, whose certified gap bounds what they really give
 //! up, decides exactly by its stated rule, and does reuse.

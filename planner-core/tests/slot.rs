@@ -1,4 +1,4 @@
-//! Planners built in place in static slots (issue 19 §4): a slot hands out a planner only
+//! Planners built in place in static slots: a slot hands out a planner only
 //! after `init`, that planner plans bit for bit what one built by `new` plans (also after a
 //! slot is re-initialised over a used planner), and a refused `init` changes nothing. The
 //! in-place resets and workspaces they rely on (`IpmSolver::reset`, the lateral QP's

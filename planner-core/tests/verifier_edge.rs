@@ -1,4 +1,4 @@
-//! The verifier at its edge (issue 20): a plan is accepted only if it keeps every
+//! The verifier at its edge: a plan is accepted only if it keeps every
 //! constraint of the exact (10) within the documented slack — safety within
 //! `Real::VERIFY_SLACK_M` of the margin-tightened gap, the linear constraints within
 //! `speed_slack` — in f32 and in f64, for each constraint kind. Each case sits at twice

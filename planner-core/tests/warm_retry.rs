@@ -1,4 +1,4 @@
-//! The interior-point method's one retry at the fixed warm barrier (issue 19): when a
+//! The interior-point method's one retry at the fixed warm barrier: when a
 //! warm start's barrier was raised to the start's violation and the method then failed,
 //! it runs once more from the warm start with the previous multipliers at the fixed
 //! barrier; otherwise it never runs twice.

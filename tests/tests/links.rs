@@ -150,3 +150,89 @@ fn the_checker_reads_links_and_headings_as_github_does() {
         ["a.md#b", "https://e.org", "docs/p.png"]
     );
 }
+
+/// Every text file of the repository under `dir` (sources, docs, scripts, scenarios),
+/// skipping build outputs, virtual environments and git's own.
+fn text_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    const SKIP: [&str; 4] = ["target", ".git", ".venv", "test-python"];
+    const TEXT: [&str; 12] = [
+        "md", "rs", "toml", "sh", "py", "html", "yaml", "yml", "sbatch", "dbc", "svg", "x",
+    ];
+    for entry in std::fs::read_dir(dir).expect("readable").flatten() {
+        let p = entry.path();
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if p.is_dir() {
+            if !SKIP.contains(&name.as_str()) {
+                text_files(&p, out);
+            }
+        } else if p.extension().is_some_and(|e| TEXT.iter().any(|t| e == *t))
+            || ["run", "init", "Containerfile"].contains(&name.as_str())
+        {
+            out.push(p);
+        }
+    }
+}
+
+/// Where `text` cites a tracker or a file the repository does not hold: "issue N" (the
+/// tracker's numbers mean nothing to a reader of a clone) or the folder beside the
+/// checkout where the project's work was specified.
+fn outside_citations(text: &str) -> Vec<String> {
+    let lower = text.to_lowercase();
+    let mut found = Vec::new();
+    for (i, _) in lower.match_indices("issue") {
+        let rest = lower[i + "issue".len()..].trim_start_matches('s');
+        let rest = rest.strip_prefix(' ').unwrap_or("x");
+        if rest
+            .trim_start_matches('#')
+            .starts_with(|c: char| c.is_ascii_digit())
+        {
+            found.push(lower[i..(i + 12).min(lower.len())].to_string());
+        }
+    }
+    for needle in [concat!("../", "shared"), concat!("shared/", "spec.md")] {
+        found.extend(lower.match_indices(needle).map(|(_, s)| s.to_string()));
+    }
+    found
+}
+
+/// The repository stands alone: no source, page, script or scenario cites "issue N" of
+/// a tracker a clone does not have, or the folder beside the checkout; the spec it cites
+/// is docs/spec.md.
+#[test]
+fn the_repository_cites_nothing_it_does_not_hold() {
+    let mut files = Vec::new();
+    text_files(&root(), &mut files);
+    assert!(files.len() > 150, "only {} files found", files.len());
+    let mut bad = Vec::new();
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap_or_default();
+        for hit in outside_citations(&text) {
+            bad.push(format!("{}: {hit}", f.display()));
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "citations of what a clone lacks:\n{}",
+        bad.join("\n")
+    );
+}
+
+/// The citation finder finds what it must and nothing else.
+#[test]
+fn the_citation_finder_sees_issue_numbers_and_the_shared_folder() {
+    // Written in pieces, so that this file does not cite them itself.
+    let issue = "Issue";
+    assert_eq!(
+        outside_citations(&format!("fixed ({issue} 14, item 2)")).len(),
+        1
+    );
+    assert_eq!(
+        outside_citations(&format!("{issue}s 35 and 42; {issue} #7")).len(),
+        2
+    );
+    assert_eq!(
+        outside_citations(&format!("see ../{}/SPEC.md", "shared")).len(),
+        2
+    );
+    assert!(outside_citations("a known issue in 2 cases; issues: none").is_empty());
+}

@@ -3,7 +3,7 @@
 //! stop-and-go), 20–30 s at h = 0.01, followers running planner-core (every fourth case
 //! in f32): the independent monitor must see zero invariant violations, zero collisions
 //! and zero limit violations — with the planners solving every step, and with certified
-//! plan reuse (issue 19 §1), which must not change that.
+//! plan reuse, which must not change that.
 //!
 //! `THEOREM1_CASES` sets the number of cases (default 200; README gives the 10,000 run),
 //! `THEOREM1_REUSE_CASES` those of the reuse sweep (default 60).
@@ -63,7 +63,7 @@ fn theorem_1_random_platoons_with_plan_reuse() {
 
 /// The cases of the 10,000-platoon sweep (seed 1) where an f32 follower cruising near
 /// vmax once fell back to braking because the warm-started interior-point method,
-/// its barrier raised to the start's violation, failed (issue 19's solver, before its
+/// its barrier raised to the start's violation, failed (the solver, before its
 /// retry at the fixed barrier): each must now be solved every step.
 #[test]
 fn f32_followers_near_vmax_are_solved_every_step() {

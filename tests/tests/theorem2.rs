@@ -6,7 +6,7 @@
 //!
 //! `THEOREM2_CASES` sets the number of cases (default 100; README gives the 5,000 run,
 //! `host-sim traffic --cases 5000 --json`); `THEOREM2_REUSE_CASES` those of the sweep
-//! with certified plan reuse (issue 19 §1; default 30), which must see nothing either;
+//! with certified plan reuse (default 30), which must see nothing either;
 //! `THEOREM2_COMPARE_CASES` those compared against solving every step (default 8; the
 //! 5,000-case comparison is `host-sim traffic --cases 5000 --compare --json`).
 
@@ -45,9 +45,9 @@ fn theorem_2_random_multilane_traffic_with_plan_reuse() {
     assert!(sweep(cases, true) > cases * 5000);
 }
 
-/// Issue 19 §1: what the planner as shipped, and with certified plan reuse, gives up
+/// What the planner as shipped, and with certified plan reuse, gives up
 /// against solving every step with the interior-point method alone (the planner before
-/// issue 19), on the same cases: the closed-loop cost, and the iterations it saves.
+/// its active-set step), on the same cases: the closed-loop cost, and the iterations it saves.
 #[test]
 fn cost_given_up_against_solving_every_step() {
     use host_sim::experiments::traffic::{traffic_compare, Planning};

@@ -1,4 +1,4 @@
-//! Fuzzes the secured decoder (SecOC-style authenticators, issue 17): the input is read as
+//! Fuzzes the secured decoder (SecOC-style authenticators): the input is read as
 //! a sequence of frames ([`frames::next`]), each followed by one byte that moves the
 //! receiver's clock on, pushed into one reassembler with a key
 //! store and a freshness record. Any input must give messages, `None`s or typed errors —

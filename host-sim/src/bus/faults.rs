@@ -22,7 +22,7 @@ pub struct Faults {
     pub reorder_s: f64,
     /// A vehicle whose transmitter goes silent from a time on (it still receives).
     pub silent: Option<Silent>,
-    /// A vehicle that lies about its position from a time on (issue 17 §3).
+    /// A vehicle that lies about its position from a time on.
     pub liar: Option<Liar>,
     /// A junction's manager that stops, then restarts with nothing remembered.
     pub manager_down: Option<ManagerDown>,
@@ -30,7 +30,7 @@ pub struct Faults {
 
 /// Junction `junction`'s manager stops at `from_s` (it hears and sends nothing; the
 /// leases it gave run out) and restarts at `until_s` as a new manager, its state rebuilt
-/// from the reports it hears from then on (issue 17 §3).
+/// from the reports it hears from then on.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ManagerDown {

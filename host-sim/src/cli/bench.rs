@@ -54,7 +54,7 @@ pub struct ScaleArgs {
     /// The planners' speed solver.
     #[arg(long, value_enum, default_value = "ours")]
     solver: super::SolverArg,
-    /// The same world twice in one run: with the planner as before issue 19 (the
+    /// The same world twice in one run: with the planner as before its active-set step (the
     /// interior-point solver alone, every step solved) and as set here (--solver,
     /// --reuse), side by side with their ratios.
     #[arg(long, conflicts_with = "sweep")]
@@ -283,7 +283,7 @@ fn print_against_clarabel(report: &BenchReport) {
 /// The second table: ours against our interior-point method alone, same problems.
 fn print_against_interior_point(report: &BenchReport) {
     out!(
-        "\nours against the interior-point method alone (the solver before issue 19), same problems:"
+        "\nours against the interior-point method alone (the solver before its active-set step), same problems:"
     );
     out!(
         "{:>3} {:>5} {:>11} {:>10} {:>8} {:>10} {:>10} {:>8} {:>8} {:>10} {:>6} {:>9}",

@@ -170,7 +170,7 @@ pub enum Experiment {
         #[arg(long)]
         json: bool,
     },
-    /// Issue 17's attacks on the Fig. 8 intersection and the multi-lane road, each a fleet
+    /// The threat model's attacks on the Fig. 8 intersection and the multi-lane road, each a fleet
     /// on CAN with every node authenticating: forged grant, replayed grant, replayed
     /// state, spoofed id, flood, a lying vehicle, the manager's crash and restart (exit 1
     /// on a forgery or replay accepted, or an unsafe event).

@@ -38,7 +38,7 @@ pub enum SolverArg {
     /// planner-core's solver: the active-set step on warm starts, the interior-point
     /// method behind it.
     Ours,
-    /// planner-core's solver as before issue 19: the interior-point method alone.
+    /// planner-core's solver as before its active-set step: the interior-point method alone.
     OursInteriorPoint,
     /// Clarabel, the reference solver.
     Clarabel,

@@ -32,7 +32,7 @@ pub struct RunArgs {
     pub solver: SolverChoice,
     /// `in-process`, `can-hub`, or an interface.
     pub bus: String,
-    /// Authenticate every message (issue 17).
+    /// Authenticate every message.
     pub auth: bool,
     /// The key file (else keys derived from the simulation master key).
     pub keys: Option<PathBuf>,
@@ -306,10 +306,23 @@ pub fn human(s: &Summary, written: &[String]) -> String {
             s.unpermitted_entries()
         )
     };
+    // An open world ends with vehicles still under way: neither met nor failed, so the
+    // line counts them rather than claiming their goals.
+    let under_way = match s.under_way {
+        0 => String::new(),
+        n => format!(", {n} still under way within their time"),
+    };
     let live = match (&s.deadlock, s.completed) {
         (Some(d), _) => format!("DEADLOCK at t = {:.2} s (see above)", d.at_s),
-        (None, true) => "every goal met".to_string(),
-        (None, false) => format!("NOT every goal met: {} vehicles unfinished", s.unfinished),
+        (None, true) if s.under_way == 0 => "every goal met".to_string(),
+        (None, true) => format!(
+            "every goal due met: {} of {} vehicles done{under_way}",
+            s.goals_met, s.goals
+        ),
+        (None, false) => format!(
+            "NOT every goal met: {} of {} vehicles done, {} unfinished{under_way}",
+            s.goals_met, s.goals, s.unfinished
+        ),
     };
     let mut out = format!(
         "{}: {} vehicles, {:.2} s simulated in {:.2} s\n  {safe}\n  {live}",
@@ -317,8 +330,15 @@ pub fn human(s: &Summary, written: &[String]) -> String {
     );
     if s.lane_changes.changes > 0 {
         out += &format!(
-            "\n  lane changes: {} ({} of {} vehicles in their target lane)",
-            s.lane_changes.changes, s.lane_changes.in_target_lane, s.lane_changes.vehicles
+            "\n  lane changes: {} ({} of {} vehicles in their target lane{})",
+            s.lane_changes.changes,
+            s.lane_changes.in_target_lane,
+            s.lane_changes.vehicles,
+            if s.lane_changes.in_target_lane < s.lane_changes.vehicles && s.completed {
+                ", the others still under way"
+            } else {
+                ""
+            }
         );
     }
     if let Some(c) = &s.crossing {

@@ -45,7 +45,7 @@ pub struct TrafficArgs {
     #[arg(long)]
     reuse: bool,
     /// Also run every case with the interior-point method alone, solving every step (the
-    /// planner before issue 19), and report the closed-loop cost given up against it.
+    /// planner before the active-set step), and report the closed-loop cost given up against it.
     #[arg(long)]
     compare: bool,
     /// The invariant every planner keeps toward the vehicle ahead.

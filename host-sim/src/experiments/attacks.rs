@@ -1,4 +1,4 @@
-//! `host-sim experiment attacks` (issue 17 §4): every attack of the threat model on the
+//! `host-sim experiment attacks`: every attack of the threat model on the
 //! paper's intersection (Fig. 8, under a live algorithm) and on its multi-lane road, each
 //! run as a fleet on a CAN medium — the in-process hub by default — with every node
 //! authenticating (SecOC-style, keys derived from the simulation master key) unless

@@ -1,4 +1,4 @@
-//! `host-sim experiment faults --grid`: safety off the ideal world, cell by cell (issue 21).
+//! `host-sim experiment faults --grid`: safety off the ideal world, cell by cell.
 //!
 //! Every cell is a bus: loss × delay over [`LOSSES`] × [`DELAYS`], then the other faults
 //! one at a time ([`VARIANTS`]: jitter, duplicates, reordering, a vehicle silent from

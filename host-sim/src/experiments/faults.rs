@@ -1,4 +1,4 @@
-//! Issue 6's question: how much slower do the multi-lane and intersection experiments
+//! How much slower do the multi-lane and intersection experiments
 //! complete on a faulty bus? Both are run on the same seeds over a perfect bus and over
 //! one injecting the given faults, in one command, and compared.
 

@@ -7,7 +7,7 @@
 //! arrival (waiting outside included) to leaving the network, less the free-flow time of
 //! the same route ([`crate::world::network::Network::free_flow_s`]).
 //!
-//! Targets (issue 15): 0 collisions, 0 invariant violations, 0 unpermitted entries, no
+//! Targets: 0 collisions, 0 invariant violations, 0 unpermitted entries, no
 //! deadlock, and at least 95 % of the trips that arrived at least free flow + [`GRACE_S`]
 //! before the end completed.
 

@@ -3,7 +3,7 @@
 //! each other). Two kinds of road:
 //!
 //! - platoons (the default): one lane, a randomly driven leader and planner followers;
-//! - traffic (`--traffic`, issue 19 §2): three lanes, every vehicle a planner with a
+//! - traffic (`--traffic`): three lanes, every vehicle a planner with a
 //!   random target lane and reference speed, packed at the smallest safe spacing plus
 //!   0.5–5 m — lane changes among dense neighbours, the planners' expensive case.
 //!
@@ -320,7 +320,7 @@ impl core::fmt::Display for ScaleReport {
 }
 
 /// `scale --compare`: one world run twice in one process — with the planner as it was
-/// before issue 19 (the interior-point method alone, solving every step) and as set up
+/// before the active-set step (the interior-point method alone, solving every step) and as set up
 /// here (its solver, its reuse policy) — and the ratios of the second to the first.
 #[derive(Debug, Clone, Serialize)]
 pub struct ScaleComparison {

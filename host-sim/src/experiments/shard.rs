@@ -1,4 +1,4 @@
-//! Sweeps split into shards, and shards merged back (issue 18).
+//! Sweeps split into shards, and shards merged back.
 //!
 //! A sweep's case i is built from the sweep's seed and i alone ([`super::sweep::case_seed`],
 //! or `seed + i` for `traffic`), so shard I of N runs the cases

@@ -52,7 +52,7 @@ impl Case {
     /// Vehicles with a goal unmet at the end (a deadlock leaves them so).
     pub fn unfinished(&self) -> u64 {
         let s = &self.summary;
-        s.unfinished as u64 + s.goals.saturating_sub(s.goals_reached) as u64
+        s.unfinished as u64 + s.goal_x.saturating_sub(s.goal_x_reached) as u64
     }
 
     /// `true` if it failed: unsafe, or not every vehicle done.

@@ -1,13 +1,12 @@
 //! The Theorem 2 sweep: random multi-lane traffic ([`super::multilane::random_traffic`]),
 //! every vehicle its own planner on the bus, judged by the independent monitor — and,
-//! with `--compare`, what the planner as configured gives up against solving every step
-//! (issue 19 §1).
+//! with `--compare`, what the planner as configured gives up against solving every step.
 //!
 //! The comparison runs every case twice on the same seeds: once with the planner as
 //! configured (the default solver, whose warm starts go through the active-set step, and
 //! certified plan reuse if asked), once as the *every-step* baseline — the interior-point
 //! method alone ([`planner_core::Settings::interior_point_only`]), a solve at every step,
-//! no reuse: the planner as it was before issue 19. Both are closed loops, so the two
+//! no reuse: the planner as it was before its active-set step. Both are closed loops, so the two
 //! runs' trajectories may part; what is compared is the closed-loop cost the planners
 //! minimise, Σ over planner steps of w_v (v − v_ref)² + w_Δ (v − v_prev)² with the
 //! default weights (Eq. 10's stage cost), per planner step. Without reuse both solvers

@@ -483,7 +483,7 @@ pub fn simulation_keys(master: &Key) -> Keys {
     keys
 }
 
-/// A node's authentication state (issue 17): the fleet's keys, its own freshness values
+/// A node's authentication state: the fleet's keys, its own freshness values
 /// and what it accepted from each sender.
 struct Security {
     keys: Arc<Keys>,

@@ -1,4 +1,4 @@
-//! An intruder on the fleet's bus (issue 17 §4): a node that is not the fleet's — or a
+//! An intruder on the fleet's bus: a node that is not the fleet's — or a
 //! vehicle's node that has been taken over — writing what a genuine node would not.
 //!
 //! It holds a port on the same medium and, if the fleet authenticates, one key: its own

@@ -1,4 +1,4 @@
-//! The attack experiment's oracle (issue 17 §4): every frame a genuine node of the fleet
+//! The attack experiment's oracle: every frame a genuine node of the fleet
 //! transmitted, so that a message a receiver accepted can be told from one an intruder
 //! forged or replayed.
 //!

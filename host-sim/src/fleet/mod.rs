@@ -154,7 +154,7 @@ pub struct FleetSummary {
     /// Every node's CAN traffic, summed.
     pub can: CanStats,
     /// Every message carried a SecOC-style authenticator, and every node accepted only
-    /// those that verified (issue 17).
+    /// those that verified.
     pub authenticated: bool,
     /// Every message went as one CAN FD frame (its authenticator inside).
     pub can_fd: bool,
@@ -368,7 +368,7 @@ pub fn run(
 }
 
 /// [`run`], every node authenticating what it sends and verifying what it accepts with
-/// `keys` (issue 17; `None` runs without), and sending each message as one CAN FD frame
+/// `keys` (`None` runs without), and sending each message as one CAN FD frame
 /// when `fd` (an interface must then carry CAN FD: MTU 72).
 pub fn run_keyed(
     spec: WorldSpec,
@@ -454,11 +454,11 @@ pub struct Fleet<'a> {
     pub seed: Option<u64>,
     /// Names the medium in the summary.
     pub medium: &'a str,
-    /// With keys, every message is authenticated (issue 17).
+    /// With keys, every message is authenticated.
     pub keys: Option<Arc<Keys>>,
     /// Every message goes as one CAN FD frame.
     pub fd: bool,
-    /// An intruder carries out this attack from [`ATTACK_FROM_S`] on (issue 17 §4).
+    /// An intruder carries out this attack from [`ATTACK_FROM_S`] on.
     pub attack: Option<Attack>,
 }
 
@@ -733,6 +733,8 @@ impl<const N: usize> Harness<N> {
                 spec: &self.spec,
                 in_world,
                 unfinished,
+                // The fleet runs closed worlds: every vehicle is due from the start.
+                under_way: 0,
                 findings: &findings,
                 counters: &counters,
                 deadlock: deadlock.as_ref(),

@@ -1,4 +1,4 @@
-//! The gateway's cost per message as a fleet pays it (issue 17: "the fleet's frames/s with
+//! The gateway's cost per message as a fleet pays it ("the fleet's frames/s with
 //! and without" authentication): one node encodes — and signs — a stream of vehicle
 //! states, the in-process hub carries the frames, another node reassembles — and
 //! verifies — them. Four configurations, one after the other in the same process:

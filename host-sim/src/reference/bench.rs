@@ -51,7 +51,7 @@ pub struct BenchResult {
     /// Of our solves, the share the active-set step answered.
     pub active_set_share: f64,
     /// Median wall time of our solver with the interior-point method alone, as it was
-    /// before issue 19 ([`planner_core::Settings::interior_point_only`]), on the same
+    /// before the active-set step ([`planner_core::Settings::interior_point_only`]), on the same
     /// problems, warm-started from its own previous plans (µs).
     pub interior_point_median_us: f64,
     /// Its 99th percentile (µs).

@@ -1,4 +1,4 @@
-//! `bench-planner`'s plan-reuse rows (issue 19 §1): the benchmark drive — one follower
+//! `bench-planner`'s plan-reuse rows: the benchmark drive — one follower
 //! behind a leader that draws a new admissible acceleration every 1.5 s — driven twice
 //! with the same leader, by a planner solving every step and by one with a
 //! [`ReusePolicy`], side by side: what reuse saves and what it gives up.

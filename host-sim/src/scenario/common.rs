@@ -16,7 +16,7 @@ pub const MAX_DURATION_S: f64 = 86_400.0;
 /// Largest coordinate, length or goal (m): planner-core's f64 range (`Real::MAX_COORD_M`,
 /// 1,000 km), within which one ulp of a position is below 1.2e-10 m — far below every
 /// safety margin. Beyond it the spacing of positions alone can break the invariant
-/// (issue 21: x ≈ 5.6e14 m, where f64 positions are 6 cm apart).
+/// (x ≈ 5.6e14 m, where f64 positions are 6 cm apart).
 pub const MAX_COORD_M: f64 = <f64 as Real>::MAX_COORD_M;
 
 /// The `[sensing]` table: every planner-driven vehicle's onboard range sensors.

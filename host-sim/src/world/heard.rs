@@ -509,7 +509,7 @@ impl View {
                     // the change assuming the followers there keep the invariant toward
                     // it from then on, and a follower still on this junction's outlet
                     // drives this crossing planner, not a multi-lane one that would see
-                    // the change itself (issue 15's grid at 500 veh/h: a follower
+                    // the change itself (the grid at 500 veh/h: a follower
                     // leaving a junction closed in on a vehicle changing into its lane).
                     for lane in core::iter::once(state.lane).chain(state.alpha) {
                         if let Some(s) = net.on_route(segment, state.x, lane, j, route) {

@@ -130,7 +130,7 @@ pub enum SolverChoice {
     /// planner-core's solver with its defaults: the active-set step on warm starts, the
     /// interior-point method behind it.
     Ours,
-    /// planner-core's solver as it was before issue 19: the interior-point method alone
+    /// planner-core's solver as it was before its active-set step: the interior-point method alone
     /// ([`planner_core::Settings::interior_point_only`]), for side-by-side benchmarks.
     OursInteriorPoint,
     /// Clarabel (the reference), for comparing plans.

@@ -1,4 +1,4 @@
-//! Plausibility of what a vehicle says of itself (issue 17 §3): every state and crossing
+//! Plausibility of what a vehicle says of itself: every state and crossing
 //! report is checked against the last one accepted from the same sender, in the same
 //! frame, before it enters a view. Authentication (SecOC) proves who sent a message, not
 //! that it is true; a sender with a valid key can still lie about where it is. Physics

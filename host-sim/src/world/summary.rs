@@ -95,11 +95,22 @@ pub struct Summary {
     /// in its target lane, every vehicle through its junctions (when the world has any
     /// and no arrivals), and no deadlock.
     pub completed: bool,
-    /// Vehicles with a goal x.
+    /// Planner-driven vehicles: each has goals (its target lane; a goal x, or junctions to
+    /// cross and an exit to reach, where the world gives them). Always `goals_met +
+    /// unfinished + under_way`.
     pub goals: usize,
-    /// Goals reached by the deadline.
-    pub goals_reached: usize,
-    /// Latest time a goal was reached (s), if any.
+    /// Of those, vehicles whose goals are all met at the end (gone through an exit
+    /// counts as met).
+    pub goals_met: usize,
+    /// Of those, vehicles still under way in an open world that are not yet due to have
+    /// met their goals (they arrived less than their free-flow time plus
+    /// [`OPEN_GRACE_S`] before the end): neither met nor failed.
+    pub under_way: usize,
+    /// Vehicles with a goal x (the Fig. 6 worlds).
+    pub goal_x: usize,
+    /// Of those, goal x reached by the deadline.
+    pub goal_x_reached: usize,
+    /// Latest time a goal x was reached (s), if any.
     pub last_goal_time_s: Option<f64>,
     /// Messages the vehicles broadcast.
     pub messages_sent: u64,
@@ -123,7 +134,8 @@ pub struct Summary {
     /// Junction crossings, when the world has junctions.
     #[serde(flatten)]
     pub crossing: Option<CrossingStats>,
-    /// Planner-driven vehicles with a goal still unmet at the end.
+    /// Planner-driven vehicles with a goal still unmet at the end that were due to have
+    /// met it (every such vehicle in a closed world).
     pub unfinished: usize,
     /// The deadlock that ended the run, if one did.
     pub deadlock: Option<Deadlock>,
@@ -186,8 +198,11 @@ pub struct Outcome<'a> {
     pub spec: &'a WorldSpec,
     /// Vehicles in the world at the end.
     pub in_world: usize,
-    /// Of those, planner-driven vehicles with a goal still unmet.
+    /// Of those, planner-driven vehicles with a goal still unmet that were due to have
+    /// met it.
     pub unfinished: usize,
+    /// Of those, planner-driven vehicles with a goal still unmet, not yet due.
+    pub under_way: usize,
     /// The monitor's findings.
     pub findings: &'a Findings,
     /// The planners' counters.
@@ -272,8 +287,11 @@ pub fn summarize<'v, const N: usize>(
                 _ => lc.in_target_lane == lc.vehicles && through,
             }
             && o.deadlock.is_none(),
-        goals: with_goal.len(),
-        goals_reached: reached.len(),
+        goals: lc.vehicles,
+        goals_met: lc.vehicles.saturating_sub(o.unfinished + o.under_way),
+        under_way: o.under_way,
+        goal_x: with_goal.len(),
+        goal_x_reached: reached.len(),
         last_goal_time_s: reached.iter().copied().reduce(f64::max),
         messages_sent: o.messages_sent,
         messages_rejected: c.rejected,
@@ -338,6 +356,11 @@ impl<const N: usize, B: Bus> World<N, B> {
                     .vehicles
                     .iter()
                     .filter(|v| unmet(v, &self.net) && self.due(v))
+                    .count(),
+                under_way: self
+                    .vehicles
+                    .iter()
+                    .filter(|v| unmet(v, &self.net) && !self.due(v))
                     .count(),
                 findings: &self.monitor.findings,
                 counters: &self.counters,

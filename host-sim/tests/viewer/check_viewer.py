@@ -4,7 +4,9 @@ Playwright): it loads with no console error and no network request; at two times
 vehicles on the page are the trace's, each drawn where the trace puts it, as long as the
 car and along its heading, in its mode's colour (pixel checks on the canvas, with the view
 set by the test, so a wrong world-to-screen transform, heading or colour fails); play
-advances the time; hovering shows a vehicle's card.
+advances the time; hovering shows a vehicle's card. The opening view is readable: a
+vehicle drawn at least MIN_PX long, the first vehicles on the canvas, the page saying how
+to zoom and pan, and the legend naming A_S and A_C where there are junctions.
 
 Usage: check_viewer.py PAGE.html TRACE.csv [SCREENSHOT.png [SCALE,X,Y[,FRACTION]]]
 Exit 0 when every check holds; 1 with the first failure."""
@@ -18,6 +20,7 @@ from playwright.sync_api import sync_playwright
 MODES = ["cruise", "lane_change", "yield", "waiting", "crossing", "fallback", "done"]
 L, W = 4.5, 1.7
 SCALE = 12.0  # px per m while checking one vehicle
+MIN_PX = 20  # a vehicle's least length on the screen at the opening view
 
 
 def fail(msg):
@@ -27,6 +30,29 @@ def fail(msg):
 
 def close(a, b, tol=12):
     return all(abs(x - y) <= tol for x, y in zip(a, b))
+
+
+def opening(page, rows, w, h):
+    """The view the page opens at, before anything is touched."""
+    scale, length = page.evaluate("[window.viewer.scale(), window.viewer.length]")
+    if scale * length < MIN_PX:
+        fail(f"opening view: a vehicle is {scale * length:.1f} px long ({scale:.2f} px/m), "
+             f"under {MIN_PX} px")
+    first = rows[min(rows)]
+    on = 0
+    for r in first.values():
+        px, py = page.evaluate(f"window.viewer.toScreen({r['x']}, {r['y']})")
+        on += 0 <= px <= w and 0 <= py <= h
+    if on == 0:
+        fail(f"opening view: none of the {len(first)} first vehicles is on the canvas")
+    help_text = page.inner_text("#help")
+    if "zoom" not in help_text or "drag" not in help_text:
+        fail(f"the page does not say how to zoom and pan: {help_text!r}")
+    legend = page.inner_text("#legend")
+    if page.evaluate("window.viewer.junctions") and ("A_S" not in legend or "A_C" not in legend):
+        fail(f"junctions on the page but the legend has no A_S and A_C: {legend!r}")
+    print(f"opening view: {scale * length:.0f} px per vehicle, {on} of {len(first)} first "
+          f"vehicles on the canvas; ", end="")
 
 
 def main(page_path, trace_path, shot=None, view=None):
@@ -49,6 +75,7 @@ def main(page_path, trace_path, shot=None, view=None):
         end, dt = page.evaluate("[window.viewer.end, window.viewer.dt]")
         colours = page.evaluate("window.viewer.colours")
         w, h = page.evaluate("window.viewer.size()")
+        opening(page, rows, w, h)
         checked = 0
         for frac in (0.3, 0.6):
             t = round(frac * end / dt) * dt
@@ -109,7 +136,7 @@ def main(page_path, trace_path, shot=None, view=None):
                 page.evaluate(f"window.viewer.setView({parts[0]}, {parts[1]}, {parts[2]})")
                 at = parts[3] if len(parts) > 3 else at
             page.evaluate(f"window.viewer.seek({round(at * end / dt) * dt})")
-            page.screenshot(path=shot, clip={"x": 0, "y": 0, "width": w, "height": 670})
+            page.screenshot(path=shot, clip={"x": 0, "y": 0, "width": w, "height": 700})
         browser.close()
     if errors:
         fail(f"console errors: {errors}")

@@ -8,7 +8,7 @@
 //! strictly inside, so a warm start is pulled off the boundary (slacks floored at
 //! [`Settings::warm_barrier`]) and needs 3–10 predictor-corrector iterations — two
 //! pentadiagonal solves each — to return to it. That was the planner's whole cost in a
-//! platoon (issue 19: ~8 iterations per follower step).
+//! platoon (~8 iterations per follower step).
 //!
 //! Here the previous step's multipliers, shifted, name the constraints that bind, and the
 //! KKT system of (10) with those held as equalities is solved by Newton's method: a

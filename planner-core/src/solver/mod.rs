@@ -76,7 +76,7 @@ pub struct Settings<F> {
     /// duals at its square over the slack (a cold start uses 1).
     pub warm_barrier: F,
     /// Whether a warm start's barrier also grows to its largest constraint violation
-    /// (see `IpmSolver::start`); `false` is the solver before issue 19.
+    /// (see `IpmSolver::start`); `false` is the solver before its active-set step.
     pub adaptive_warm_barrier: bool,
     /// Most Newton steps of the active-set step tried before the interior-point method
     /// on a warm start ([`active_set`]); 0 turns it off.
@@ -106,7 +106,7 @@ impl<F: Real> Settings<F> {
         }
     }
 
-    /// The solver as it was before issue 19: the interior-point method alone, warm
+    /// The solver as it was before its active-set step: the interior-point method alone, warm
     /// starts at the fixed [`Settings::warm_barrier`]. For side-by-side benchmarks
     /// (`host-sim scale --compare`, `bench-planner`); it finds the same optima, slower.
     pub fn interior_point_only() -> Self {
@@ -765,7 +765,7 @@ impl<F: Real, const N: usize> MpcSolver<F, N> for IpmSolver<F, N> {
 impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// [`MpcSolver::solve`], reporting every iteration to `trace`.
     // Not inlined into the planner: its work vectors then take stack only while it runs,
-    // not for the whole of the caller's step (the firmware's peak stack, issue 19 §4).
+    // not for the whole of the caller's step (the firmware's peak stack).
     #[inline(never)]
     pub fn solve_traced(
         &mut self,
