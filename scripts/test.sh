@@ -34,7 +34,16 @@ apt_install() {
     apt-get update -qq >/dev/null && apt_updated=1
   fi
   say "installing $* (apt-get)"
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@" >/dev/null
+  # apt's chatter goes to a log, shown only if the install fails.
+  local log
+  log=$(mktemp)
+  if ! DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@" \
+    >"$log" 2>&1; then
+    cat "$log"
+    rm -f "$log"
+    return 1
+  fi
+  rm -f "$log"
 }
 
 # Rust links with the system's C compiler; a bare Debian has none.
@@ -63,7 +72,8 @@ python_ready() {
 }
 make_venv() {
   command -v python3 >/dev/null || apt_install python3 || return 1
-  python3 -m venv "$venv" 2>/dev/null || {
+  # Without python3-venv, venv fails and says so at length: install it instead.
+  python3 -m venv "$venv" >/dev/null 2>&1 || {
     rm -rf "$venv"
     apt_install python3-venv && python3 -m venv "$venv"
   } || return 1

@@ -21,6 +21,7 @@ pub type Frames<Fr> = Vec<Fr, MAX_FRAMES>;
 /// Which field could not be encoded or was implausible on decoding.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum Field {
     /// x.
     X,
@@ -49,6 +50,7 @@ const NOT_COOPERATIVE: u8 = 0x10;
 /// Why a message could not be encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum EncodeError {
     /// A value is NaN, infinite or outside what its field can carry.
     OutOfRange(Field),
@@ -76,6 +78,7 @@ impl core::error::Error for EncodeError {}
 /// Why a frame was rejected (the reassembler is unchanged).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum DecodeError {
     /// A standard (11-bit) identifier or a remote frame: not ours.
     NotOurs,
@@ -554,6 +557,34 @@ struct Slot {
 }
 
 /// Reassembles frames into verified messages, for up to `CAP` (sender, kind) pairs.
+///
+/// # Examples
+///
+/// A state sent as classic CAN frames and taken back in, as a receiving node does:
+///
+/// ```
+/// use can_gateway::{encode, Frames, Instant, Message, PlainFrame, Reassembler};
+/// use planner_core::VehicleState;
+///
+/// let now = Instant::from_millis(1_000);
+/// let state = VehicleState {
+///     id: 7, x: 120.25f32, y: 1.8, theta: 0.0, v: 13.9, omega: 0.0, lane: 0,
+///     alpha: None, beta: None, stamp: now, cooperative: true, brake: None,
+/// };
+/// // Source address 7, E2E counter 0.
+/// let frames: Frames<PlainFrame> = encode(&Message::State(state), 7, 0)?;
+/// let mut rx = Reassembler::<4>::new();
+/// let mut got = None;
+/// for f in &frames {
+///     if let Some(m) = rx.push::<f32, _>(f, now)? {
+///         got = Some(m);
+///     }
+/// }
+/// let Some(Message::State(s)) = got else { panic!("one whole message") };
+/// // Quantised on the wire: within half a step (0.01 m, 0.02 m/s).
+/// assert!((s.x - 120.25).abs() <= 0.005 && (s.v - 13.9).abs() <= 0.01);
+/// # Ok::<(), Box<dyn core::error::Error>>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct Reassembler<const CAP: usize> {
     slots: Vec<Slot, CAP>,
@@ -576,8 +607,8 @@ fn rd_u32(b: &[u8], at: usize) -> u32 {
 }
 
 impl<const CAP: usize> Reassembler<CAP> {
-    /// An empty reassembler.
-    pub fn new() -> Self {
+    /// An empty reassembler (`const`: a `static` can hold one, off the stack).
+    pub const fn new() -> Self {
         Self { slots: Vec::new() }
     }
 

@@ -18,6 +18,7 @@
 //! `defmt::Format` (and planner-core's types, through its own `defmt` feature), so
 //! firmware logs a refused frame's [`DecodeError`] as it is.
 #![no_std]
+#![forbid(unsafe_code)]
 #![deny(missing_docs)]
 #![cfg_attr(
     not(test),

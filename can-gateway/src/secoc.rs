@@ -79,6 +79,7 @@ impl core::fmt::Debug for Key {
 /// Why a secured message was rejected (nothing was recorded).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum AuthError {
     /// No key for the sender's address.
     UnknownKey,

@@ -98,6 +98,7 @@ pub const SPEED_LIMIT: f64 = 100.0;
 /// Message kinds and their codes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum MessageKind {
     /// V2V vehicle state (3 frames).
     State = 1,
@@ -174,9 +175,24 @@ pub struct Request<F> {
     pub v: F,
 }
 
+impl<F> Request<F> {
+    /// The same request with its numbers converted by `f`.
+    pub fn map<G>(self, f: impl Fn(F) -> G) -> Request<G> {
+        Request {
+            id: self.id,
+            inlet: self.inlet,
+            outlet: self.outlet,
+            arrival: self.arrival,
+            s: f(self.s),
+            v: f(self.v),
+        }
+    }
+}
+
 /// Every message the planners exchange.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum Message<F> {
     /// Vehicle state (V2V).
     State(VehicleState<F>),
@@ -237,6 +253,32 @@ pub enum Message<F> {
 }
 
 impl<F> Message<F> {
+    /// The same message with its numbers converted by `f`, e.g. `f64` → `f32` for an
+    /// MCU's codec or `f32` → `f64` for a host that mirrors one: the enum grows
+    /// (`#[non_exhaustive]`), so a conversion outside this crate could not be written
+    /// exhaustively.
+    pub fn map<G>(self, f: impl Fn(F) -> G) -> Message<G> {
+        match self {
+            Message::State(st) => Message::State(st.map(f)),
+            Message::Request(q) => Message::Request(q.map(f)),
+            Message::Grant { id, until } => Message::Grant { id, until },
+            Message::Revoke { id, at } => Message::Revoke { id, at },
+            Message::Exit { id, at } => Message::Exit { id, at },
+            Message::Located { segment, state } => Message::Located {
+                segment,
+                state: state.map(f),
+            },
+            Message::JunctionRequest { junction, request } => Message::JunctionRequest {
+                junction,
+                request: request.map(f),
+            },
+            Message::JunctionExit { junction, id, at } => {
+                Message::JunctionExit { junction, id, at }
+            }
+            Message::Sync { period, last } => Message::Sync { period, last },
+        }
+    }
+
     /// Its kind.
     pub fn kind(&self) -> MessageKind {
         match self {

@@ -25,6 +25,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
+/// The test script's Python and its skips (shared with host-sim's viewer test).
+mod support;
+use support::{python, skip_or_fail};
+
 use can_gateway::codec::encode_fd_secured;
 use can_gateway::secoc::{derive_key, Key};
 use can_gateway::{encode_fd, FdFrame, PlainFrame as F8, Reassembler};
@@ -42,33 +46,6 @@ fn message_of(frames: &Frames<F8>) -> (Message<f64>, u8, u8) {
     };
     let counter = frames[0].data()[0] & 0x0F;
     (msg.expect("a whole message"), id.as_raw() as u8, counter)
-}
-
-/// The Python that runs the checks: the test script's environment, else `python3`.
-fn python() -> String {
-    std::env::var("TESTS_PYTHON").unwrap_or_else(|_| "python3".into())
-}
-
-/// Skips the test when the test script could not set up `what` (it lists it in
-/// `TESTS_SKIP`): says so on the terminal, past cargo's capture, and in the script's skip
-/// log. Anywhere else a missing prerequisite fails the test with `why`.
-fn skip_or_fail(what: &str, test: &str, why: &str) {
-    use std::io::Write;
-    let listed = std::env::var("TESTS_SKIP").is_ok_and(|s| s.split(',').any(|w| w == what));
-    assert!(
-        listed,
-        "{why} (README's test command, scripts/test.sh, sets it up)"
-    );
-    let line = format!("SKIPPED {test}: {why}");
-    let _ = writeln!(std::io::stderr(), "{line}");
-    if let Ok(log) = std::env::var("TESTS_SKIP_LOG") {
-        let mut f = std::fs::OpenOptions::new()
-            .append(true)
-            .create(true)
-            .open(&log)
-            .expect("the test script's skip log opens");
-        writeln!(f, "{line}").expect("the skip log takes a line");
-    }
 }
 
 #[test]

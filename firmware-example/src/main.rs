@@ -28,7 +28,7 @@ use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 use embedded_hal::delay::DelayNs;
 use planner_core::{CostWeights, LanePlannerSlot, Params, PlannerSlot};
-use scenarios::StepRecord;
+use scenarios::{Node, StepRecord};
 
 #[cfg(not(feature = "n50"))]
 const N: usize = 20;
@@ -56,6 +56,10 @@ static mut SAMPLES: [u32; STEPS] = [0; STEPS];
 /// The two scenarios' planners, in place (all zeros until `init`: `.bss`, no flash).
 static mut SLOTS: (PlannerSlot<f32, N>, LanePlannerSlot<f32, N>) =
     (PlannerSlot::new(), LanePlannerSlot::new());
+
+/// The node's CAN side: controller, reassembler, world view, neighbour buffers (`const`,
+/// so in `.bss` too, off the stack).
+static mut NODE: Node = Node::new();
 
 extern "C" {
     static __sdata: u32;
@@ -89,15 +93,29 @@ fn paint_stack() {
     }
 }
 
-/// Bytes of stack ever used: from the top down to the lowest word no longer painted.
-fn peak_stack() -> usize {
+/// The lowest stack address written since the last paint.
+fn lowest_unpainted() -> usize {
     let bottom = unsafe { &__ebss as *const u32 as usize };
     let top = unsafe { &_stack_start as *const u32 as usize };
     let mut a = (bottom + 3) & !3;
     while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
         a += 4;
     }
-    top - a
+    a
+}
+
+/// Bytes of stack ever used: from the top down to the lowest word no longer painted.
+fn peak_stack() -> usize {
+    let top = unsafe { &_stack_start as *const u32 as usize };
+    top - lowest_unpainted()
+}
+
+/// Paints the free stack afresh and returns the stack pointer here: a call made next
+/// used `sp − lowest_unpainted()` bytes of stack (its frame and all it called).
+fn repaint() -> usize {
+    let sp = cortex_m::register::msp::read() as usize;
+    paint_stack();
+    sp
 }
 
 /// Instructions per SysTick tick, measured: a loop of exactly 2 instructions per iteration
@@ -161,6 +179,8 @@ fn main() -> ! {
     // holds only what one control step needs.
     // SAFETY: `main` runs once and never returns; this is the only reference to SLOTS.
     let slots = unsafe { &mut *core::ptr::addr_of_mut!(SLOTS) };
+    // SAFETY: as for SLOTS: the only reference to NODE.
+    let node = unsafe { &mut *core::ptr::addr_of_mut!(NODE) };
     let params = Params::<f32>::table_i();
     let (Ok(planner), Ok(lane_planner)) = (
         slots.0.init(params, CostWeights::default()),
@@ -190,6 +210,11 @@ fn main() -> ! {
         if r.timed {
             record(timed.get(), r.ticks);
             timed.set(timed.get() + 1);
+        }
+        // The single-lane planner's command in a lane-change period: planned beside the
+        // lane planner's, in the same period, which that one ends.
+        if r.scenario == 'S' {
+            return;
         }
         let kind = r.status.map(|s| core::mem::discriminant(&s));
         if kind != last_status {
@@ -244,11 +269,17 @@ fn main() -> ! {
         "clock: {=u64} ms of uptime at the first period",
         start.as_millis()
     );
-    let Some(a) =
-        scenarios::approach::<N>(planner, scenarios::CLOCK_START, &mut { now }, &mut emit)
-    else {
+    // The whole program's peak so far; then each scenario's own, on a fresh paint.
+    let mut peak = peak_stack();
+    let sp = repaint();
+    // Painting 4 MiB took time: the first period starts now.
+    deadline.set(clock.now() + PERIOD_TICKS);
+    let start = scenarios::CLOCK_START;
+    let Some(a) = scenarios::approach::<N>(planner, node, start, &mut { now }, &mut emit) else {
         exit(false)
     };
+    let approach_stack = sp - lowest_unpainted();
+    peak = peak.max(peak_stack());
     defmt::info!(
         "done: x={=f32} v={=f32} solved={=u32} standstill={=u32} fallback={=u32}",
         a.x,
@@ -282,9 +313,25 @@ fn main() -> ! {
         && t.overruns == 0;
 
     timed.set(0);
-    let Some(l) = scenarios::lane_change::<N>(lane_planner, &mut { now }, &mut emit) else {
+    let sp = repaint();
+    deadline.set(clock.now() + PERIOD_TICKS);
+    let Some(l) =
+        scenarios::lane_change::<N>(lane_planner, planner, node, start, &mut { now }, &mut emit)
+    else {
         exit(false)
     };
+    let lane_stack = sp - lowest_unpainted();
+    peak = peak.max(peak_stack());
+    defmt::info!(
+        "stack per call (N={=usize}): approach (single-lane planner, CAN, view) {=usize} B; lane change (both planners each period, CAN, view) {=usize} B",
+        N,
+        approach_stack,
+        lane_stack
+    );
+    defmt::info!(
+        "single-lane planner beside the lane planner: {=u32} steps not solved",
+        l.single_fallbacks
+    );
     let (lmed, lmax) = stats(timed.get(), per_tick);
     defmt::info!(
         "lane change: completed at step {}, y={=f32} fallback={=u32}",
@@ -306,6 +353,7 @@ fn main() -> ! {
     // within its instruction budget.
     let lane_ok = l.completed_at.is_some()
         && l.fallbacks == 0
+        && l.single_fallbacks == 0
         && lt.overruns == 0
         && (N > 20 || lmax <= LANE_CHANGE_BUDGET);
 
@@ -334,7 +382,7 @@ fn main() -> ! {
         (addr(&__erodata) + data, data + bss)
     };
     let samples = core::mem::size_of::<[u32; STEPS]>();
-    let peak = peak_stack();
+    let peak = peak.max(peak_stack());
     defmt::info!(
         "footprint (N={=usize}): flash={=usize} B, static RAM={=usize} B (of which {=usize} B measurement buffer), peak stack={=usize} B",
         N,

@@ -24,6 +24,7 @@ fn run<F: Real>() {
             StepStatus::Solved { .. } => "solved".to_string(),
             StepStatus::Reused { .. } => "reused".to_string(),
             StepStatus::Fallback(r) => format!("{r:?}"),
+            other => format!("{other:?}"),
         };
         let s: String = s.chars().take(60).collect();
         if s != last {

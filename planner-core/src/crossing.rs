@@ -19,6 +19,7 @@ use heapless::Vec;
 /// The crossing algorithm.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum Algorithm {
     /// All-Way STOP as drivers keep it: every vehicle comes to a full stop at its stop
     /// line; the stopped vehicles then go in the order they stopped, each as soon as no
@@ -155,6 +156,7 @@ pub struct CrossingReport<F> {
 /// Why a report was not taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum ManagerError {
     /// No such route.
     UnknownRoute,

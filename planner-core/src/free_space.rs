@@ -26,6 +26,7 @@ pub const D_TURN_M: f64 = 10.0;
 /// Why the free space could not be built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum FreeSpaceError {
     /// The reference point is outside the band (or the band is empty).
     OutsideBand,

@@ -212,6 +212,7 @@ impl<F: Real> LayoutSpec<F> {
 /// Why a layout is rejected.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum LayoutError<F> {
     /// A value is NaN, infinite or not positive.
     NotPositive,

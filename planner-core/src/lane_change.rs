@@ -132,6 +132,7 @@ pub const MAX_TAIL_STEPS: usize = 8192;
 /// Why a lane change may not start now ([`LanePlanner::start_check`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum StartBlock {
     /// The heading is not yet straight.
     Heading,
@@ -148,6 +149,7 @@ pub enum StartBlock {
 /// The lane event of a step, if any.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum LaneEvent {
     /// β set: the intention to change to this lane is declared.
     Declared(u8),
@@ -207,6 +209,7 @@ pub struct LaneCommand<F> {
 /// Bad multi-lane input: nothing changed; apply [`LanePlanner::braking_command`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum LaneInputError {
     /// The speed part is invalid.
     Speed(InputError),
@@ -270,6 +273,53 @@ impl<F: Real> Reference<F> {
 }
 
 /// One vehicle's multi-lane planner with horizon `N` and speed solver `S`.
+///
+/// Each [`step`](LanePlanner::step) runs the Lane Change Protocol (16)(17) and Yield
+/// (20)(21) toward `target_lane`, plans speed (10)(13) and steering, and verifies the
+/// command on the exact unicycle (1), else the certified fallback.
+///
+/// # Examples
+///
+/// A change from lane 0 to lane 1 beside a car in lane 1, heard over V2V:
+///
+/// ```
+/// use planner_core::heapless::Vec;
+/// use planner_core::{
+///     CostWeights, Instant, LaneEvent, LaneObservation, LanePlanner, Params, Pose, Road,
+///     VehicleState, WorldView,
+/// };
+///
+/// let p = Params::<f32>::table_i();
+/// let mut lp = LanePlanner::<f32, 20>::new(p, CostWeights::default(), 0)?;
+/// let road = Road { lanes: 2, lane_width: 3.6, end_x: None };
+/// let mut view = WorldView::<f32, 8>::new(2);
+/// let mut others = Vec::new();
+/// let (mut pose, mut v, mut omega) = (Pose { x: 0.0, y: 1.8, theta: 0.0 }, 15.0, 0.0);
+/// let mut done = false;
+/// for k in 0..600u64 {
+///     let now = Instant::from_millis(10 * k);
+///     // What the bus delivered this period: the car, 40 m ahead in lane 1.
+///     let car = VehicleState {
+///         id: 3, x: 40.0 + 0.15 * k as f32, y: 5.4, theta: 0.0, v: 15.0, omega: 0.0,
+///         lane: 1, alpha: None, beta: None, stamp: now, cooperative: true, brake: None,
+///     };
+///     view.update(&car, now)?;
+///     view.others(now, p.length(), &mut others);
+///     let obs = LaneObservation {
+///         pose, v_prev: v, omega_prev: omega, others: &others, road,
+///         target_lane: 1, target: 0.0, v_ref: 15.0,
+///     };
+///     let cmd = lp.step(&obs)?;
+///     pose = planner_core::unicycle::step(pose, cmd.v, cmd.omega, p.h());
+///     (v, omega) = (cmd.v, cmd.omega);
+///     if cmd.event == Some(LaneEvent::Completed(1)) {
+///         done = true;
+///         break;
+///     }
+/// }
+/// assert!(done && pose.y > 3.6);
+/// # Ok::<(), Box<dyn core::error::Error>>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     speed: Planner<F, N, S>,

@@ -39,6 +39,7 @@ pub const MAX_ITER: u32 = 50;
 /// Why the lateral QP has no answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum LateralError {
     /// No convergence within [`MAX_ITER`] (e.g. the linearised band is infeasible).
     NotConverged,

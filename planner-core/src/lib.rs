@@ -34,6 +34,7 @@
 //! loop has a fixed bound. Precision is a type parameter: `f32` for the Cortex-M4F FPU,
 //! `f64` on hosts; the numerical margins of each are constants of [`Real`].
 #![no_std]
+#![forbid(unsafe_code)]
 #![deny(missing_docs)]
 // No panics on any input path: enforced for the library; unit tests may unwrap and index.
 #![cfg_attr(

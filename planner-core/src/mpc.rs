@@ -58,6 +58,7 @@ impl<F: Real> Default for CostWeights<F> {
 /// Why a problem could not be built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum ProblemError {
     /// A weight is negative or not finite, or both w_v and w_Δ are 0 (J must be strictly
     /// convex for the optimum to be unique and the Newton systems nonsingular).
@@ -118,6 +119,7 @@ pub struct SingleLaneProblem<F, const N: usize> {
 /// Which constraint of (10) a check refers to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum ConstraintKind {
     /// v_k ≤ hi_k (V^k_t, upper).
     SpeedUpper,
@@ -141,6 +143,18 @@ pub struct Violation<F> {
     pub kind: ConstraintKind,
     /// At which step k.
     pub step: usize,
+}
+
+impl<F> Violation<F> {
+    /// The same violation with its amount converted by `f` (e.g. `f32` → `f64` for a log
+    /// on a host that mirrors an MCU).
+    pub fn map<G>(self, f: impl FnOnce(F) -> G) -> Violation<G> {
+        Violation {
+            amount: f(self.amount),
+            kind: self.kind,
+            step: self.step,
+        }
+    }
 }
 
 impl<F: Real, const N: usize> SingleLaneProblem<F, N> {

@@ -53,6 +53,7 @@ impl<F: Real> ParamsSpec<F> {
 /// Which parameter is wrong, and how.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum ParamsError {
     /// A value is NaN or infinite.
     NotFinite(ParamName),
@@ -74,6 +75,7 @@ impl core::error::Error for ParamsError {}
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[allow(missing_docs)]
+#[non_exhaustive]
 pub enum ParamName {
     VMax,
     AMax,

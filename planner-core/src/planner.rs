@@ -43,6 +43,7 @@ pub struct Observation<'a, F> {
 /// Why the certified fallback was applied.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum FallbackReason<F> {
     /// The invariant x_t < x̄ − dS(v_{t−h}) (with margin) did not hold: (10) may be
     /// infeasible, so the planner brakes as hard as it can.
@@ -68,6 +69,7 @@ pub enum FallbackReason<F> {
 /// What the planner did this step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum StepStatus<F> {
     /// The optimal plan was verified and its first input applied.
     Solved {
@@ -89,6 +91,36 @@ pub enum StepStatus<F> {
     Fallback(FallbackReason<F>),
 }
 
+impl<F> FallbackReason<F> {
+    /// The same reason with its number (a violation's amount) converted by `f`, e.g.
+    /// `f32` → `f64`: the enum grows (`#[non_exhaustive]`), so a conversion outside this
+    /// crate could not be written exhaustively.
+    pub fn map<G>(self, f: impl FnOnce(F) -> G) -> FallbackReason<G> {
+        match self {
+            Self::InvariantViolated => FallbackReason::InvariantViolated,
+            Self::NoRoom => FallbackReason::NoRoom,
+            Self::Solver(e) => FallbackReason::Solver(e),
+            Self::Verification(v) => FallbackReason::Verification(v.map(f)),
+            Self::Yield => FallbackReason::Yield,
+            Self::Lateral => FallbackReason::Lateral,
+        }
+    }
+}
+
+impl<F> StepStatus<F> {
+    /// The same status with its number converted by `f` (see [`FallbackReason::map`]).
+    pub fn map<G>(self, f: impl FnOnce(F) -> G) -> StepStatus<G> {
+        match self {
+            Self::Solved { iterations, method } => StepStatus::Solved { iterations, method },
+            Self::Reused { age, certified_gap } => StepStatus::Reused {
+                age,
+                certified_gap: f(certified_gap),
+            },
+            Self::Fallback(why) => StepStatus::Fallback(why.map(f)),
+        }
+    }
+}
+
 /// The command to apply over [t, t+h).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -105,6 +137,7 @@ pub struct Command<F> {
 /// apply [`safety::max_braking_command`] for the step (the safe action whatever happened).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum InputError {
     /// A position, speed, length or target is NaN or infinite.
     NotFinite,
@@ -139,6 +172,7 @@ pub fn in_range<F: Real>(values: &[F]) -> bool {
 /// Invalid planner configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum ConfigError {
     /// See [`ProblemError::InvalidWeights`].
     InvalidWeights,
@@ -177,10 +211,22 @@ pub fn obstacle_position<F: Real>(
     vehicles: &[Vehicle<F>],
     stop_line: Option<F>,
 ) -> Option<F> {
+    obstacle_nearer(p, x, vehicles, stop_line, F::ZERO)
+}
+
+/// [`obstacle_position`] with every vehicle taken `nearer` metres nearer (a position heard
+/// rounded by the bus).
+fn obstacle_nearer<F: Real>(
+    p: &Params<F>,
+    x: F,
+    vehicles: &[Vehicle<F>],
+    stop_line: Option<F>,
+    nearer: F,
+) -> Option<F> {
     let half = F::HALF;
     let mut best: Option<F> = stop_line.map(|xr| xr - half * p.length() - p.d0());
     for c in vehicles.iter().filter(|c| c.x > x) {
-        let xb = c.x - half * (c.length + p.length()) - p.d0();
+        let xb = c.x - half * (c.length + p.length()) - p.d0() - nearer;
         best = Some(match best {
             Some(b) => b.min(xb),
             None => xb,
@@ -210,6 +256,46 @@ pub fn speed_slack<F: Real>(p: &Params<F>) -> F {
 }
 
 /// One vehicle's single-lane MPC planner with horizon `N`, solver `S`.
+///
+/// Each [`step`](Planner::step) solves (10), verifies the plan's first input against the
+/// exact constraints and applies it, else the certified fallback (Lemma 2's maximum
+/// braking); an invalid observation is refused with an [`InputError`] and changes nothing.
+///
+/// # Examples
+///
+/// A vehicle at 15 m/s behind a car stopped 30 m ahead, toward a stop line at 100 m:
+///
+/// ```
+/// use planner_core::{CostWeights, Observation, Params, Planner, StepStatus, Vehicle};
+///
+/// let p = Params::<f64>::table_i();
+/// let mut planner = Planner::<f64, 20>::new(p, CostWeights::default())?;
+/// // Positions heard over CAN are rounded to 0.01 m: each car is taken that much nearer.
+/// planner.set_bus_resolution(0.01, 0.02)?;
+/// let stopped = [Vehicle { x: 30.0, length: 4.5 }];
+/// let (mut x, mut v) = (0.0, 15.0);
+/// for _ in 0..1_000 {
+///     let obs = Observation {
+///         x,
+///         v_prev: v,
+///         vehicles: &stopped,
+///         stop_line: Some(100.0),
+///         target_x: 0.0,
+///         v_ref: p.v_max(),
+///     };
+///     let cmd = planner.step(&obs)?;
+///     if let StepStatus::Fallback(why) = cmd.status {
+///         // Maximum braking, certified safe; standing behind the car it is the answer.
+///         let _ = why;
+///     }
+///     v = cmd.v;
+///     x += v * p.h();
+/// }
+/// // Stopped behind the car: its rear less d0 and half our length.
+/// assert_eq!(v, 0.0);
+/// assert!(x < 30.0 - 4.5 / 2.0 - p.d0() - 4.5 / 2.0 + 1e-9);
+/// # Ok::<(), Box<dyn core::error::Error>>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct Planner<F, const N: usize, S = IpmSolver<F, N>> {
     params: Params<F>,
@@ -221,6 +307,8 @@ pub struct Planner<F, const N: usize, S = IpmSolver<F, N>> {
     /// Steps since the last solve whose duals certify reuse; `None` when the plan is not
     /// a solved one (cold, or a fallback's braking plan).
     age: Option<u8>,
+    /// The step to which the bus rounds other vehicles' positions (0: exact).
+    resolution: F,
 }
 
 impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
@@ -244,6 +332,7 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
             have_plan: false,
             reuse: None,
             age: None,
+            resolution: F::ZERO,
         }
     }
 
@@ -266,6 +355,7 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
             have_plan,
             reuse,
             age,
+            resolution,
         } = self;
         *p = params;
         *w = weights;
@@ -274,6 +364,7 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
         *have_plan = false;
         *reuse = None;
         *age = None;
+        *resolution = F::ZERO;
         Ok(())
     }
 }
@@ -310,7 +401,30 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
             have_plan: false,
             reuse: None,
             age: None,
+            resolution: F::ZERO,
         })
+    }
+
+    /// Sets the steps to which the bus rounds the positions and speeds every vehicle
+    /// broadcasts (to nearest; e.g. can-gateway's `wire::POS_RES` and `wire::SPEED_RES`,
+    /// 0.01 m and 0.02 m/s), as [`crate::LanePlanner::set_bus_resolution`] does: a vehicle
+    /// whose position was heard rounded may be up to half a step nearer, so each is taken
+    /// half a position step longer at each end. This planner takes every leader as a
+    /// wall, so the speed step changes nothing here; it is checked all the same, so that
+    /// one call configures either planner. Zero (the default) is exact. Values that are
+    /// negative, not finite or ≥ 1 are refused and change nothing.
+    pub fn set_bus_resolution(&mut self, position: F, speed: F) -> Result<(), ConfigError> {
+        let ok = |r: F| r.is_finite() && r >= F::ZERO && r < F::ONE;
+        if !(ok(position) && ok(speed)) {
+            return Err(ConfigError::InvalidResolution);
+        }
+        self.resolution = position;
+        Ok(())
+    }
+
+    /// The position step of the bus in use (0: exact).
+    pub fn bus_resolution(&self) -> F {
+        self.resolution
     }
 
     /// Lets the planner apply its previous plan, shifted, instead of solving, when that
@@ -384,7 +498,10 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         self.check_input(obs)?;
         let p = self.params;
         let free = free_road_gap(&p, N);
-        let gap = obstacle_position(&p, obs.x, obs.vehicles, obs.stop_line)
+        // A position heard rounded may be half a step nearer: each vehicle is taken that
+        // much longer at its rear (the stop line is the planner's own, exact).
+        let nearer = F::HALF * self.resolution;
+        let gap = obstacle_nearer(&p, obs.x, obs.vehicles, obs.stop_line, nearer)
             .map_or(free, |xb| (xb - obs.x).min(free));
         Ok(self.plan_speed(obs.v_prev, gap, obs.target_x - obs.x, obs.v_ref))
     }

@@ -43,9 +43,31 @@ pub struct VehicleState<F> {
     pub brake: Option<crate::safety::BrakeLimit>,
 }
 
+impl<F> VehicleState<F> {
+    /// The same state with its numbers converted by `f`, e.g. `f64` → `f32` for an MCU's
+    /// codec, or `f32` → `f64` for a host that mirrors one.
+    pub fn map<G>(self, f: impl Fn(F) -> G) -> VehicleState<G> {
+        VehicleState {
+            id: self.id,
+            x: f(self.x),
+            y: f(self.y),
+            theta: f(self.theta),
+            v: f(self.v),
+            omega: f(self.omega),
+            lane: self.lane,
+            alpha: self.alpha,
+            beta: self.beta,
+            stamp: self.stamp,
+            cooperative: self.cooperative,
+            brake: self.brake,
+        }
+    }
+}
+
 /// Why a message was not taken into the view (the view is unchanged).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum WorldError {
     /// A field is NaN or infinite.
     NotFinite,
@@ -87,6 +109,27 @@ pub struct Known<F> {
 }
 
 /// The latest known state of up to `CAP` other vehicles.
+///
+/// # Examples
+///
+/// ```
+/// use planner_core::heapless::Vec;
+/// use planner_core::{Instant, VehicleState, WorldError, WorldView};
+///
+/// let mut view = WorldView::<f32, 4>::new(2);
+/// let now = Instant::from_secs(60 * 86_400); // 60 days of uptime: integer time
+/// let car = VehicleState {
+///     id: 1, x: 50.0, y: 1.8, theta: 0.0, v: 12.0, omega: 0.0, lane: 0,
+///     alpha: None, beta: None, stamp: now, cooperative: true, brake: None,
+/// };
+/// view.update(&car, now)?;
+/// // The same stamp again is refused and changes nothing.
+/// assert_eq!(view.update(&car, now), Err(WorldError::Stale));
+/// let mut ahead = Vec::new();
+/// view.lane_vehicles(0, 4.5, &mut ahead);
+/// assert_eq!(ahead.len(), 1);
+/// # Ok::<(), WorldError>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct WorldView<F, const CAP: usize> {
     own_id: u16,
@@ -94,8 +137,9 @@ pub struct WorldView<F, const CAP: usize> {
 }
 
 impl<F: Real, const CAP: usize> WorldView<F, CAP> {
-    /// An empty view for the vehicle `own_id`.
-    pub fn new(own_id: u16) -> Self {
+    /// An empty view for the vehicle `own_id` (`const`: a `static` can hold one, off the
+    /// stack).
+    pub const fn new(own_id: u16) -> Self {
         Self {
             own_id,
             known: Vec::new(),

@@ -199,6 +199,7 @@ fn answers_are_kkt_points<const N: usize>() {
             match sol.method {
                 Method::ActiveSet => by_active_set += 1,
                 Method::InteriorPoint => by_ipm += 1,
+                other => panic!("a method this test does not know: {other:?}"),
             }
         });
     }

@@ -47,6 +47,8 @@ fn obstacle_is_nearest_vehicle_ahead_extent_adjusted() {
     // A stop line nearer than any vehicle: 20 − 4.5/2 − 0.5.
     assert_eq!(obstacle_position(&p, 0.0, &cars, Some(20.0)), Some(17.25));
     assert_eq!(obstacle_position(&p, 100.0, &cars, None), None);
+    // A vehicle exactly at the ego's position is not ahead (eq. (2) takes x(c) > x_t).
+    assert_eq!(obstacle_position(&p, 30.0, &cars, None), Some(45.0));
 }
 
 #[test]
@@ -232,4 +234,39 @@ fn stop_line_is_respected() {
         x + 2.25
     );
     assert!(x + 2.25 > 59.0, "and close to it: {}", x + 2.25);
+}
+
+/// The bus's position step: every vehicle ahead is taken half a step nearer (its position
+/// was heard rounded), the stop line is not; bad steps are refused and change nothing.
+#[test]
+fn a_bus_resolution_takes_each_vehicle_half_a_step_nearer() {
+    let car = [Vehicle {
+        x: 60.0,
+        length: 4.5,
+    }];
+    let mut exact = planner();
+    let mut rounded = planner();
+    rounded.set_bus_resolution(0.25, 0.02).expect("valid");
+    assert_eq!(rounded.bus_resolution(), 0.25);
+    let a = exact.step(&obs(0.0, 10.0, &car)).expect("valid");
+    let b = rounded.step(&obs(0.0, 10.0, &car)).expect("valid");
+    assert!((a.gap - b.gap - 0.125).abs() < 1e-12, "{} {}", a.gap, b.gap);
+    // A stop line alone: the planner's own, so no step applies.
+    let mut line = obs(0.0, 10.0, &[]);
+    line.stop_line = Some(60.0);
+    let a = exact.step(&line).expect("valid");
+    let b = rounded.step(&line).expect("valid");
+    assert_eq!(a.gap, b.gap);
+    for (pos, speed) in [
+        (-0.1, 0.0),
+        (0.0, 1.0),
+        (f64::NAN, 0.0),
+        (0.1, f64::INFINITY),
+    ] {
+        assert_eq!(
+            rounded.set_bus_resolution(pos, speed),
+            Err(planner_core::ConfigError::InvalidResolution)
+        );
+        assert_eq!(rounded.bus_resolution(), 0.25, "a refusal changes nothing");
+    }
 }

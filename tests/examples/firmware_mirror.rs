@@ -34,8 +34,11 @@ fn run<const N: usize>() -> bool {
     ) else {
         return false;
     };
-    let a = scenarios::approach::<N>(planner, scenarios::CLOCK_START, &mut now, &mut emit);
-    let l = scenarios::lane_change::<N>(lane_planner, &mut now, &mut emit);
+    let mut node = Box::new(scenarios::Node::new());
+    let start = scenarios::CLOCK_START;
+    let a = scenarios::approach::<N>(planner, &mut node, start, &mut now, &mut emit);
+    let l =
+        scenarios::lane_change::<N>(lane_planner, planner, &mut node, start, &mut now, &mut emit);
     a.is_some() && l.is_some()
 }
 

@@ -214,6 +214,7 @@ fn warm_drives<const N: usize>(seeds: std::ops::Range<u64>, steps: usize) {
                 match o.method {
                     Method::ActiveSet => by_active_set += 1,
                     Method::InteriorPoint => by_ipm += 1,
+                    other => panic!("a method this test does not know: {other:?}"),
                 }
                 if let Ok(r) = MpcSolver::<f64, N>::solve(&mut reference, &pr, None) {
                     certified += 1;

@@ -49,7 +49,8 @@ fn the_firmware_approach_plans_the_same_from_any_uptime() {
             .init(Params::table_i(), CostWeights::default())
             .expect("valid");
         let mut out = Vec::new();
-        let a = scenarios::approach::<20>(planner, start, &mut || 0, &mut |r| {
+        let mut node = Box::new(scenarios::Node::new());
+        let a = scenarios::approach::<20>(planner, &mut node, start, &mut || 0, &mut |r| {
             out.push((r.v.to_bits(), r.omega.to_bits()))
         })
         .expect("runs");

@@ -24,7 +24,7 @@
 //! delivery, 85 % of the run in them); see docs/redteam.md for what it costs now.
 
 use super::{Bus, BusError, FaultStats, Faults, Message, Received};
-use rand::Rng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use smallvec::SmallVec;
 use std::cmp::Reverse;
@@ -255,7 +255,7 @@ impl InProcessBus {
             range: None,
             cells: None,
             faults,
-            rng: crate::reference::instances::rng(seed ^ 0xfa17),
+            rng: ChaCha8Rng::seed_from_u64(seed ^ 0xfa17),
             h,
             sent: 0,
             stats: FaultStats::default(),
@@ -516,7 +516,7 @@ mod tests {
     #[test]
     fn dropping_overtaken_deliveries_changes_nothing_taken() {
         const ME: u16 = 99;
-        let mut rng = crate::reference::instances::rng(5);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
         let (mut held, mut woken, mut kept_all) = (0, 0, 0);
         for case in 0..300 {
             let mut outgoing: HashMap<u16, Outgoing> = HashMap::new();

@@ -271,10 +271,9 @@ fn follower_command<F: Real>(
                     eprintln!("solver {e:?} at v={:?} gap={:?}", me.v, c.gap);
                 }
             }
-            // A single-lane planner has neither the lane sets nor steering.
-            FallbackReason::Verification(_) | FallbackReason::Yield | FallbackReason::Lateral => {
-                out.fallback_verification += 1
-            }
+            // Verification; a single-lane planner has neither the lane sets nor steering,
+            // so no other reason reaches here.
+            _ => out.fallback_verification += 1,
         }
     }
     c.v.to_f64()

@@ -717,77 +717,14 @@ impl<P> CanNode<P> {
     }
 }
 
-/// A state's numbers converted by `f`.
-fn state_as<A: Copy, B>(
-    s: &planner_core::VehicleState<A>,
-    f: impl Fn(A) -> B,
-) -> planner_core::VehicleState<B> {
-    planner_core::VehicleState {
-        id: s.id,
-        x: f(s.x),
-        y: f(s.y),
-        theta: f(s.theta),
-        v: f(s.v),
-        omega: f(s.omega),
-        lane: s.lane,
-        alpha: s.alpha,
-        beta: s.beta,
-        stamp: s.stamp,
-        cooperative: s.cooperative,
-        brake: s.brake,
-    }
-}
-
-/// A message's numbers converted by `f`.
-fn message_as<A: Copy, B>(m: &wire::Message<A>, f: impl Fn(A) -> B) -> wire::Message<B> {
-    let request = |q: &wire::Request<A>| wire::Request {
-        id: q.id,
-        inlet: q.inlet,
-        outlet: q.outlet,
-        arrival: q.arrival,
-        s: f(q.s),
-        v: f(q.v),
-    };
-    match m {
-        wire::Message::State(st) => wire::Message::State(state_as(st, &f)),
-        wire::Message::Located { segment, state } => wire::Message::Located {
-            segment: *segment,
-            state: state_as(state, &f),
-        },
-        wire::Message::Request(q) => wire::Message::Request(request(q)),
-        wire::Message::JunctionRequest {
-            junction,
-            request: q,
-        } => wire::Message::JunctionRequest {
-            junction: *junction,
-            request: request(q),
-        },
-        wire::Message::Grant { id, until } => wire::Message::Grant {
-            id: *id,
-            until: *until,
-        },
-        wire::Message::Revoke { id, at } => wire::Message::Revoke { id: *id, at: *at },
-        wire::Message::Exit { id, at } => wire::Message::Exit { id: *id, at: *at },
-        wire::Message::JunctionExit { junction, id, at } => wire::Message::JunctionExit {
-            junction: *junction,
-            id: *id,
-            at: *at,
-        },
-        wire::Message::Sync { period, last } => wire::Message::Sync {
-            period: *period,
-            last: *last,
-        },
-    }
-}
-
 /// A message rounded to `f32` (what an MCU's codec is handed).
 pub fn wire32(m: &wire::Message<f64>) -> wire::Message<f32> {
-    message_as(m, |x| x as f32)
+    m.map(|x| x as f32)
 }
 
 /// A message widened to `f64` (exact).
 pub fn wire64(m: &wire::Message<f32>) -> wire::Message<f64> {
-    message_as(m, f64::from)
+    m.map(f64::from)
 }
 
 fn reason(e: DecodeError) -> String {
@@ -971,7 +908,9 @@ impl<'a> WireMap<'a> {
                 id,
                 until,
             }),
-            wire::Message::Revoke { .. } | wire::Message::Sync { .. } => None,
+            // Revocations and ticks are handled apart; kinds this fleet does not use
+            // carry nothing for a world view.
+            _ => None,
         }
     }
 

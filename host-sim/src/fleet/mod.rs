@@ -53,8 +53,6 @@ use std::time::{Duration, Instant, SystemTime};
 /// How long a task waits for the next SYNC, and the master for a report, before the run
 /// fails: far above a period's work even under full-system emulation.
 pub const TIMEOUT: Duration = Duration::from_secs(60);
-/// Steps to which the codec rounds positions and speeds (m, m/s).
-pub const RESOLUTION: (f64, f64) = (wire::POS_RES, wire::SPEED_RES);
 
 /// Where the fleet's frames travel.
 #[derive(Debug, Clone)]
@@ -569,7 +567,7 @@ impl<const N: usize> Harness<N> {
             solver: self.solver,
             // Lock-step: every message of period k is heard in period k.
             notify: self.lim.h,
-            resolution: RESOLUTION,
+            resolution: can::RESOLUTION,
             sensing: self.spec.sensing,
             reuse: None,
             precision: self.spec.precision,
@@ -690,7 +688,7 @@ impl<const N: usize> Harness<N> {
             })
             .collect();
         for m in &mut managers {
-            m.set_resolution(RESOLUTION)
+            m.set_resolution(can::RESOLUTION)
                 .map_err(|e| FleetError::Harness(format!("bus resolution: {e:?}")))?;
         }
         Ok(managers)

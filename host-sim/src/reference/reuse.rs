@@ -98,7 +98,8 @@ fn drive<const N: usize>(steps: usize, seed: u64, policy: Option<ReusePolicy<f64
                 };
                 d.max_gap = d.max_gap.max(certified_gap / (1.0 + j.abs()));
             }
-            StepStatus::Fallback(_) => {}
+            // The fallback, and whatever else a planner may do: no solve to count.
+            _ => {}
         }
         d.cost += w.stage_cost(c.v, v, p.v_max());
         v = c.v;

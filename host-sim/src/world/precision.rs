@@ -13,8 +13,8 @@ use planner_core::crossing::{CrossingPlanner, CrossingReport, Manager, ManagerEr
 use planner_core::intersection::{Layout, LayoutSpec, Path, Route, Segment};
 use planner_core::lane_change::StartBlock;
 use planner_core::{
-    Command, FallbackReason, InputError, Instant, LaneCommand, LaneInputError, LaneObservation,
-    LanePlanner, Other, Pose, Road, Sensing, StepStatus, Violation,
+    Command, InputError, Instant, LaneCommand, LaneInputError, LaneObservation, LanePlanner, Other,
+    Pose, Road, Sensing, StepStatus,
 };
 use serde::{Deserialize, Serialize};
 
@@ -145,31 +145,9 @@ fn other32(o: &Other<f64>) -> Other<f32> {
     }
 }
 
-fn reason64(f: FallbackReason<f32>) -> FallbackReason<f64> {
-    match f {
-        FallbackReason::InvariantViolated => FallbackReason::InvariantViolated,
-        FallbackReason::NoRoom => FallbackReason::NoRoom,
-        FallbackReason::Solver(e) => FallbackReason::Solver(e),
-        FallbackReason::Verification(v) => FallbackReason::Verification(Violation {
-            amount: w(v.amount),
-            kind: v.kind,
-            step: v.step,
-        }),
-        FallbackReason::Yield => FallbackReason::Yield,
-        FallbackReason::Lateral => FallbackReason::Lateral,
-    }
-}
-
 /// A step's status widened to `f64`.
 pub fn status64(s: StepStatus<f32>) -> StepStatus<f64> {
-    match s {
-        StepStatus::Solved { iterations, method } => StepStatus::Solved { iterations, method },
-        StepStatus::Reused { age, certified_gap } => StepStatus::Reused {
-            age,
-            certified_gap: w(certified_gap),
-        },
-        StepStatus::Fallback(f) => StepStatus::Fallback(reason64(f)),
-    }
+    s.map(w)
 }
 
 /// The observation in `f32`, its others written into `buf`.

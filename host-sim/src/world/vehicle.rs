@@ -913,7 +913,8 @@ impl<const N: usize> Vehicle<N> {
                         let from = self.log.declared_x.take().unwrap_or(x);
                         self.log.changes.push((x - from, ctx.t));
                     }
-                    Some(LaneEvent::Started(_)) | None => {}
+                    // A start, or no event: nothing to log.
+                    _ => {}
                 }
                 if c.lane == self.trip.target_lane && c.alpha.is_none() {
                     self.log.in_target_at.get_or_insert(ctx.t);
@@ -1019,6 +1020,8 @@ impl<const N: usize> Vehicle<N> {
                         counters.fallback_steps += 1;
                         (cmd.v, Some(why))
                     }
+                    // A status planner-core adds later: its command was verified.
+                    _ => (cmd.v, None),
                 }
             }
             Err(_) => {
@@ -1206,6 +1209,8 @@ fn mode_of(
             counters.fallback_steps += 1;
             Mode::Fallback
         }
+        // A status planner-core adds later: its command was verified all the same.
+        _ => Mode::moving(changing),
     }
 }
 

@@ -143,6 +143,7 @@ impl<F: Real> Default for Settings<F> {
 /// Why the solver stopped without a solution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum SolveError {
     /// The iteration cap was reached before the tolerances were met.
     IterationLimit {
@@ -180,6 +181,7 @@ impl core::error::Error for SolveError {}
 /// Which method produced an answer or an iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
 pub enum Method {
     /// The active-set step from the previous solve's multipliers ([`active_set`]).
     ActiveSet,
@@ -310,7 +312,7 @@ impl<F: Real, const N: usize> Family<F, N> {
 }
 
 /// Our interior-point solver, with all working storage inline (no allocation):
-/// about 62 N scalars and 5 N flags.
+/// about 62 N scalars and 5 N flags (the `size_of` table: [`crate::slot`]).
 ///
 /// The five constraint families share three gradient stencils in z:
 /// D1_k = e_k − e_{k−1} (v_k; upper bound +, lower bound −), D2_k = e_k − 2e_{k−1} + e_{k−2}
@@ -398,7 +400,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
     }
 
     /// Puts the solver in the state [`IpmSolver::new`] builds, in place: field by field,
-    /// so that no temporary of the solver's size (~45 N scalars) is needed — on a
+    /// so that no temporary of the solver's size (~62 N scalars) is needed — on a
     /// microcontroller whose planner lives in a `static` ([`crate::slot`]) that
     /// temporary would be the largest thing on the stack.
     pub fn reset(&mut self, settings: Settings<F>) {
