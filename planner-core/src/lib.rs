@@ -86,7 +86,7 @@ pub use reuse::ReusePolicy;
 pub use safety::{BrakeLimit, Invariant};
 pub use sensing::Sensing;
 pub use slot::{LanePlannerSlot, PlannerSlot, Slot};
-pub use solver::{IpmSolver, Method, MpcSolver, Settings, Solution, SolveError};
+pub use solver::{IpmSolver, Method, MpcSolver, Settings, SettingsError, Solution, SolveError};
 pub use time::{Duration, Instant};
 pub use unicycle::Pose;
 pub use world::{VehicleState, WorldError, WorldView};

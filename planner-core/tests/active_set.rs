@@ -277,10 +277,7 @@ fn iterations_count_every_newton_step() {
 /// rule; an independent model of it predicts which solves try the step.
 #[test]
 fn backoff_follows_its_rule() {
-    let settings = Settings {
-        active_set_iter: 1,
-        ..Settings::default()
-    };
+    let settings = Settings::default().with_active_set_iter(1).expect("valid");
     let (mut fails, mut skip, mut have_duals) = (0u8, 0u8, false);
     let (mut tried, mut skipped, mut failures) = (0, 0, 0);
     drive::<f64, 20>(3, 1500, settings, |_, warm, _, sol, methods| {
@@ -320,10 +317,7 @@ fn backoff_follows_its_rule() {
 /// runs and the interior-point method answers.
 #[test]
 fn the_step_runs_only_on_finite_warm_starts_when_on() {
-    let off = Settings {
-        active_set_iter: 0,
-        ..Settings::default()
-    };
+    let off = Settings::default().with_active_set_iter(0).expect("valid");
     drive::<f64, 20>(1, 600, off, |_, _, _, sol, methods| {
         assert_eq!(sol.method, Method::InteriorPoint);
         assert!(!methods.contains(&Method::ActiveSet));

@@ -172,10 +172,7 @@ fn the_solver_reports_and_advances_its_duals() {
     );
     s.advance();
     assert_eq!(s.duals().unwrap(), d.shifted(1));
-    let mut capped = IpmSolver::<f64, N>::new(Settings {
-        max_iter: 1,
-        ..Settings::default()
-    });
+    let mut capped = IpmSolver::<f64, N>::new(Settings::default().with_max_iter(1).expect("valid"));
     assert!(capped.solve(&pr, None).is_err());
     assert!(capped.duals().is_none());
 }

@@ -213,11 +213,11 @@ fn problem() -> SingleLaneProblem<f64, 20> {
 /// One interior-point step allowed, so that every solve fails and the error counts the
 /// steps of both attempts.
 fn one_step(adaptive: bool) -> IpmSolver<f64, 20> {
-    IpmSolver::new(Settings {
-        max_iter: 1,
-        adaptive_warm_barrier: adaptive,
-        ..Settings::default()
-    })
+    let settings = Settings::default()
+        .with_max_iter(1)
+        .expect("a cap of 1 is valid")
+        .with_adaptive_warm_barrier(adaptive);
+    IpmSolver::new(settings)
 }
 
 #[test]

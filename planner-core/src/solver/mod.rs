@@ -48,43 +48,301 @@ pub const ACTIVE_SET_ITER: u32 = 6;
 /// Number of constraint families: v_k ≤ hi_k, v_k ≥ lo_k, accel, decel, safety.
 const FAMILIES: usize = 5;
 
-/// Solver settings.
+/// Solver settings: private and checked, as Clarabel keeps its own. Start from
+/// [`Settings::default`] (or [`Settings::interior_point_only`]) and change a value with its
+/// `with_…` method, which refuses a value outside its range with a [`SettingsError`]
+/// (naming the setting) and returns the settings unchanged otherwise; read a value with
+/// the getter of the same name.
+///
+/// ```
+/// use planner_core::{IpmSolver, Settings, SettingsError};
+///
+/// let s = Settings::<f32>::default().with_max_iter(40)?.with_active_set_iter(0)?;
+/// assert_eq!((s.max_iter(), s.active_set_iter()), (40, 0));
+/// // A cap of 0 would never iterate: refused, naming the setting.
+/// assert_eq!(s.with_max_iter(0), Err(SettingsError::MaxIter));
+/// let solver = IpmSolver::<f32, 20>::new(s);
+/// # let _ = solver;
+/// # Ok::<(), SettingsError>(())
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Settings<F> {
     /// Iteration cap (the loop never runs longer).
-    pub max_iter: u32,
+    max_iter: u32,
     /// Stopping tolerance: primal residual (absolute, plus a rounding floor) and duality
     /// gap sᵀλ (relative to 1 + |J|).
-    pub tol: F,
+    tol: F,
     /// Stopping tolerance of the dual residual, relative to its largest term.
-    pub tol_dual: F,
+    tol_dual: F,
     /// Smallest fraction τ of the step to the boundary of the positive orthant (keeps
     /// s, λ > 0); the solver uses min(max(τ, 1 − μ), [`TAU_MAX`]).
-    pub step_fraction: F,
+    step_fraction: F,
     /// Static regularisation added to the Newton matrix diagonal (guards factorisation
     /// against round-off when many constraints are active).
-    pub regularization: F,
+    regularization: F,
     /// Dynamic regularisation: smallest pivot relative to its diagonal entry
     /// (see [`Penta::factor`]).
-    pub pivot_floor: F,
+    pivot_floor: F,
     /// Iterative-refinement passes per Newton solve, against the unregularised matrix
     /// (they undo the regularisation's perturbation; each costs O(N)). f32 needs one to
     /// stay within ~1e-3 of the optimum; in f64 it does not change the answer measurably.
-    pub refinement_steps: u32,
+    refinement_steps: u32,
     /// Barrier level at which a warm start begins: slacks are floored at this value and
     /// duals at its square over the slack (a cold start uses 1).
-    pub warm_barrier: F,
+    warm_barrier: F,
     /// Whether a warm start's barrier also grows to its largest constraint violation
     /// (see `IpmSolver::start`); `false` is the solver before its active-set step.
-    pub adaptive_warm_barrier: bool,
+    adaptive_warm_barrier: bool,
     /// Most Newton steps of the active-set step tried before the interior-point method
     /// on a warm start ([`active_set`]); 0 turns it off.
-    pub active_set_iter: u32,
+    active_set_iter: u32,
     /// Penalty ρ of the active-set step's regularised Newton system: held constraints
     /// enter it as ρ·aaᵀ and their multipliers move by ρ·residual each step
     /// ([`active_set`]; default [`Real::ACTIVE_SET_PENALTY`]).
-    pub active_set_penalty: F,
+    active_set_penalty: F,
+}
+
+/// The largest iteration cap [`Settings::with_max_iter`] takes: a cap is there to bound
+/// a step's time on a microcontroller.
+pub const MAX_ITER_CAP: u32 = 1_000;
+/// The most refinement passes [`Settings::with_refinement_steps`] takes.
+pub const MAX_REFINEMENT_STEPS: u32 = 8;
+/// The most active-set steps [`Settings::with_active_set_iter`] takes.
+pub const MAX_ACTIVE_SET_ITER: u32 = 100;
+
+/// A solver setting refused by its `with_…` method: which one (its range is in the
+/// method's documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum SettingsError {
+    /// `max_iter` not in 1 ..= [`MAX_ITER_CAP`].
+    MaxIter,
+    /// `tol` not finite in (0, 1).
+    Tolerance,
+    /// `tol_dual` not finite in (0, 1).
+    DualTolerance,
+    /// `step_fraction` not in (0, 1).
+    StepFraction,
+    /// `regularization` not finite in [0, 1).
+    Regularization,
+    /// `pivot_floor` not finite in (0, 1).
+    PivotFloor,
+    /// `refinement_steps` above [`MAX_REFINEMENT_STEPS`].
+    RefinementSteps,
+    /// `warm_barrier` not in (0, 1].
+    WarmBarrier,
+    /// `active_set_iter` above [`MAX_ACTIVE_SET_ITER`].
+    ActiveSetIter,
+    /// `active_set_penalty` not finite and positive.
+    ActiveSetPenalty,
+}
+
+impl core::fmt::Display for SettingsError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::MaxIter => "max_iter must be 1 to 1,000",
+            Self::Tolerance => "tol must be finite, above 0 and below 1",
+            Self::DualTolerance => "tol_dual must be finite, above 0 and below 1",
+            Self::StepFraction => "step_fraction must be above 0 and below 1",
+            Self::Regularization => "regularization must be finite, at least 0 and below 1",
+            Self::PivotFloor => "pivot_floor must be finite, above 0 and below 1",
+            Self::RefinementSteps => "refinement_steps must be at most 8",
+            Self::WarmBarrier => "warm_barrier must be above 0 and at most 1",
+            Self::ActiveSetIter => "active_set_iter must be at most 100",
+            Self::ActiveSetPenalty => "active_set_penalty must be finite and above 0",
+        })
+    }
+}
+
+impl core::error::Error for SettingsError {}
+
+/// `x` if `ok` holds for it, else `e`.
+fn checked<T>(x: T, ok: bool, e: SettingsError) -> Result<T, SettingsError> {
+    if ok {
+        Ok(x)
+    } else {
+        Err(e)
+    }
+}
+
+impl<F: Real> Settings<F> {
+    /// The iteration cap.
+    pub fn max_iter(&self) -> u32 {
+        self.max_iter
+    }
+    /// With iteration cap `n`, 1 ..= [`MAX_ITER_CAP`].
+    pub fn with_max_iter(self, n: u32) -> Result<Self, SettingsError> {
+        let ok = (1..=MAX_ITER_CAP).contains(&n);
+        checked(
+            Self {
+                max_iter: n,
+                ..self
+            },
+            ok,
+            SettingsError::MaxIter,
+        )
+    }
+
+    /// The primal and gap tolerance.
+    pub fn tol(&self) -> F {
+        self.tol
+    }
+    /// With primal and gap tolerance `t`, finite in (0, 1).
+    pub fn with_tol(self, t: F) -> Result<Self, SettingsError> {
+        let ok = t.is_finite() && t > F::ZERO && t < F::ONE;
+        checked(Self { tol: t, ..self }, ok, SettingsError::Tolerance)
+    }
+
+    /// The dual tolerance.
+    pub fn tol_dual(&self) -> F {
+        self.tol_dual
+    }
+    /// With dual tolerance `t`, finite in (0, 1).
+    pub fn with_tol_dual(self, t: F) -> Result<Self, SettingsError> {
+        let ok = t.is_finite() && t > F::ZERO && t < F::ONE;
+        checked(
+            Self {
+                tol_dual: t,
+                ..self
+            },
+            ok,
+            SettingsError::DualTolerance,
+        )
+    }
+
+    /// The smallest fraction to the boundary.
+    pub fn step_fraction(&self) -> F {
+        self.step_fraction
+    }
+    /// With smallest fraction to the boundary `tau`, in (0, 1).
+    pub fn with_step_fraction(self, tau: F) -> Result<Self, SettingsError> {
+        let ok = tau > F::ZERO && tau < F::ONE;
+        checked(
+            Self {
+                step_fraction: tau,
+                ..self
+            },
+            ok,
+            SettingsError::StepFraction,
+        )
+    }
+
+    /// The static regularisation.
+    pub fn regularization(&self) -> F {
+        self.regularization
+    }
+    /// With static regularisation `r`, finite in [0, 1).
+    pub fn with_regularization(self, r: F) -> Result<Self, SettingsError> {
+        let ok = r >= F::ZERO && r < F::ONE;
+        checked(
+            Self {
+                regularization: r,
+                ..self
+            },
+            ok,
+            SettingsError::Regularization,
+        )
+    }
+
+    /// The smallest relative pivot.
+    pub fn pivot_floor(&self) -> F {
+        self.pivot_floor
+    }
+    /// With smallest relative pivot `p`, in (0, 1).
+    pub fn with_pivot_floor(self, p: F) -> Result<Self, SettingsError> {
+        let ok = p > F::ZERO && p < F::ONE;
+        checked(
+            Self {
+                pivot_floor: p,
+                ..self
+            },
+            ok,
+            SettingsError::PivotFloor,
+        )
+    }
+
+    /// The refinement passes per Newton solve.
+    pub fn refinement_steps(&self) -> u32 {
+        self.refinement_steps
+    }
+    /// With `n` refinement passes, at most [`MAX_REFINEMENT_STEPS`].
+    pub fn with_refinement_steps(self, n: u32) -> Result<Self, SettingsError> {
+        let ok = n <= MAX_REFINEMENT_STEPS;
+        checked(
+            Self {
+                refinement_steps: n,
+                ..self
+            },
+            ok,
+            SettingsError::RefinementSteps,
+        )
+    }
+
+    /// The warm start's barrier level.
+    pub fn warm_barrier(&self) -> F {
+        self.warm_barrier
+    }
+    /// With warm-start barrier level `mu`, in (0, 1].
+    pub fn with_warm_barrier(self, mu: F) -> Result<Self, SettingsError> {
+        let ok = mu > F::ZERO && mu <= F::ONE;
+        checked(
+            Self {
+                warm_barrier: mu,
+                ..self
+            },
+            ok,
+            SettingsError::WarmBarrier,
+        )
+    }
+
+    /// Whether a warm start's barrier grows to its largest violation.
+    pub fn adaptive_warm_barrier(&self) -> bool {
+        self.adaptive_warm_barrier
+    }
+    /// With the warm start's barrier growing to its largest violation (`true`) or fixed.
+    pub fn with_adaptive_warm_barrier(self, on: bool) -> Self {
+        Self {
+            adaptive_warm_barrier: on,
+            ..self
+        }
+    }
+
+    /// The most active-set steps before the interior-point method.
+    pub fn active_set_iter(&self) -> u32 {
+        self.active_set_iter
+    }
+    /// With at most `n` active-set steps (0 turns the step off), at most
+    /// [`MAX_ACTIVE_SET_ITER`].
+    pub fn with_active_set_iter(self, n: u32) -> Result<Self, SettingsError> {
+        let ok = n <= MAX_ACTIVE_SET_ITER;
+        checked(
+            Self {
+                active_set_iter: n,
+                ..self
+            },
+            ok,
+            SettingsError::ActiveSetIter,
+        )
+    }
+
+    /// The active-set step's penalty ρ.
+    pub fn active_set_penalty(&self) -> F {
+        self.active_set_penalty
+    }
+    /// With active-set penalty `rho`, finite and positive.
+    pub fn with_active_set_penalty(self, rho: F) -> Result<Self, SettingsError> {
+        let ok = rho.is_finite() && rho > F::ZERO;
+        checked(
+            Self {
+                active_set_penalty: rho,
+                ..self
+            },
+            ok,
+            SettingsError::ActiveSetPenalty,
+        )
+    }
 }
 
 impl<F: Real> Settings<F> {
