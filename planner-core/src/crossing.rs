@@ -8,7 +8,7 @@
 use crate::intersection::{Layout, CONFLICT_SAMPLE_M, MAX_ROUTES};
 use crate::lane_change::STALE_AFTER_S;
 use crate::params::Params;
-use crate::planner::ConfigError;
+use crate::planner::{valid_resolution, ConfigError};
 use crate::real::Real;
 use crate::safety::{self, BrakeLimit, Invariant};
 use crate::sensing::{still_unheard, Sensing};
@@ -313,11 +313,6 @@ pub struct Manager<F, const CAP: usize> {
     vehicles: Params<F>,
     /// The error bound (m) of its roadside sensor, if it has one ([`Manager::measure`]).
     roadside: Option<F>,
-}
-
-/// `true` for a usable bus resolution: finite, non-negative, below 1 (m or m/s).
-fn valid_resolution<F: Real>(r: F) -> bool {
-    r.is_finite() && r >= F::ZERO && r < F::ONE
 }
 
 impl<F: Real, const CAP: usize> Manager<F, CAP> {

@@ -494,8 +494,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// vehicle behind in (17), half a speed step faster. Zero (the default) is exact.
     /// Values that are negative, not finite or ≥ 1 are refused and change nothing.
     pub fn set_bus_resolution(&mut self, position: F, speed: F) -> Result<(), ConfigError> {
-        let ok = |r: F| r.is_finite() && r >= F::ZERO && r < F::ONE;
-        if !(ok(position) && ok(speed)) {
+        if !(crate::planner::valid_resolution(position) && crate::planner::valid_resolution(speed))
+        {
             return Err(ConfigError::InvalidResolution);
         }
         self.resolution = Resolution { position, speed };

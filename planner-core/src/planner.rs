@@ -235,6 +235,12 @@ fn obstacle_nearer<F: Real>(
     best
 }
 
+/// `true` for a usable bus resolution: finite, non-negative, below 1 (m or m/s). Every
+/// planner's and the manager's `set_bus_resolution` / `set_resolution` check with it.
+pub(crate) fn valid_resolution<F: Real>(r: F) -> bool {
+    r.is_finite() && r >= F::ZERO && r < F::ONE
+}
+
 /// A gap so large that no safety constraint of an N-step horizon can be active: the
 /// farthest the ego can travel in N steps plus dS(vmax), plus 1 m.
 pub fn free_road_gap<F: Real>(p: &Params<F>, n: usize) -> F {
@@ -414,8 +420,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
     /// one call configures either planner. Zero (the default) is exact. Values that are
     /// negative, not finite or ≥ 1 are refused and change nothing.
     pub fn set_bus_resolution(&mut self, position: F, speed: F) -> Result<(), ConfigError> {
-        let ok = |r: F| r.is_finite() && r >= F::ZERO && r < F::ONE;
-        if !(ok(position) && ok(speed)) {
+        if !(valid_resolution(position) && valid_resolution(speed)) {
             return Err(ConfigError::InvalidResolution);
         }
         self.resolution = position;
