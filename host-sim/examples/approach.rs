@@ -4,10 +4,7 @@ use planner_core::{CostWeights, Observation, Params, Planner, Real, StepStatus, 
 fn run<F: Real>() {
     let params = Params::<F>::table_i();
     let mut planner = Planner::<F, 20>::new(params, CostWeights::default()).expect("weights");
-    let leader = [Vehicle {
-        x: F::from_f64(60.0),
-        length: F::from_f64(4.5),
-    }];
+    let leader = [Vehicle::wall(F::from_f64(60.0), F::from_f64(4.5))];
     let (mut x, mut v) = (F::ZERO, F::from_f64(15.0));
     let mut last = String::new();
     for step in 0..1000u32 {

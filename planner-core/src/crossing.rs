@@ -1244,26 +1244,25 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             if let Some(x) = on_my_path {
                 // Ahead of this vehicle: credited under the leader-aware invariant.
                 let credit = self.credit(rep, x - s, age);
-                let _ = self.obstacles.push(crate::planner::Vehicle {
-                    x: x + credit,
-                    length: rep.length + self.position_step,
-                });
+                let _ = self.obstacles.push(crate::planner::Vehicle::wall(
+                    x + credit,
+                    rep.length + self.position_step,
+                ));
             }
         }
         // Sensor returns, each taken at its nearest; space beyond the forward range (or,
         // without sensors, all space until reports can have arrived) is not free.
         for &x in self.mapped.iter() {
-            let _ = self.obstacles.push(crate::planner::Vehicle {
+            let _ = self.obstacles.push(crate::planner::Vehicle::wall(
                 x,
-                length: self.length + self.position_step,
-            });
+                self.length + self.position_step,
+            ));
         }
         let e = self.sensing.map_or(F::ZERO, |x| x.position_error_m);
         for &x in self.sensed.iter() {
-            let _ = self.obstacles.push(crate::planner::Vehicle {
-                x: x - e,
-                length: self.length,
-            });
+            let _ = self
+                .obstacles
+                .push(crate::planner::Vehicle::wall(x - e, self.length));
         }
         // Not yet heard of everyone (without sensors to see for itself), or a vehicle it
         // could not keep: nothing is known free.
@@ -1275,10 +1274,9 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
             (None, false) => None,
         };
         if let Some(x) = unknown {
-            let _ = self.obstacles.push(crate::planner::Vehicle {
-                x,
-                length: self.length,
-            });
+            let _ = self
+                .obstacles
+                .push(crate::planner::Vehicle::wall(x, self.length));
         }
         self.steps = self.steps.saturating_add(1);
         let front = s + half;
@@ -1787,10 +1785,7 @@ mod tests {
                 c.hear_grant(1, at(100.0));
             }
             let got = c.step(&l, s, 6.0, at(0.0)).expect("step").v;
-            let unknown = [crate::planner::Vehicle {
-                x: s + 2.25 + 150.0 + 2.25,
-                length: 4.5,
-            }];
+            let unknown = [crate::planner::Vehicle::wall(s + 2.25 + 150.0 + 2.25, 4.5)];
             let obs = crate::planner::Observation {
                 x: s,
                 v_prev: 6.0,

@@ -9,17 +9,39 @@ use crate::mpc::{ConstraintKind, CostWeights, ProblemError, SingleLaneProblem, V
 use crate::params::Params;
 use crate::real::Real;
 use crate::reuse::{self, ReusePolicy};
-use crate::safety;
+use crate::safety::{self, BrakeLimit, Invariant};
 use crate::solver::{IpmSolver, Method, MpcSolver, SolveError};
 
 /// Another vehicle in the ego's lane, as the ego knows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Vehicle<F> {
-    /// Centre position x(c) along the lane (m).
+    /// Centre position x(c) along the lane (m); for a vehicle heard over V2V, where it
+    /// was at its stamp.
     pub x: F,
     /// Length L(c) (m).
     pub length: F,
+    /// Its speed at `x` (m/s), as it broadcast it; read only when `brake` is `Some`.
+    pub v: F,
+    /// Its braking limit, when the ego may credit it under the leader-aware invariant
+    /// ([`Planner::set_invariant`]): a vehicle heard over V2V within its staleness bound
+    /// that cooperates and declared one ([`crate::WorldView::lane_leaders`] fills it so).
+    /// `None` — a vehicle seen only by a sensor, silent, not cooperating, or one that
+    /// declared no limit — is a wall that may stop at once, as in Lemma 3.
+    pub brake: Option<BrakeLimit>,
+}
+
+impl<F: Real> Vehicle<F> {
+    /// A vehicle taken as a wall (Lemma 3's leader): at `x`, `length` long, credited
+    /// with nothing under either invariant.
+    pub const fn wall(x: F, length: F) -> Self {
+        Self {
+            x,
+            length,
+            v: F::ZERO,
+            brake: None,
+        }
+    }
 }
 
 /// What the ego knows at time t.
@@ -211,22 +233,25 @@ pub fn obstacle_position<F: Real>(
     vehicles: &[Vehicle<F>],
     stop_line: Option<F>,
 ) -> Option<F> {
-    obstacle_nearer(p, x, vehicles, stop_line, F::ZERO)
+    obstacle_nearer(p, x, vehicles, stop_line, F::ZERO, |_, _| F::ZERO)
 }
 
 /// [`obstacle_position`] with every vehicle taken `nearer` metres nearer (a position heard
-/// rounded by the bus).
+/// rounded by the bus) and moved ahead by what `credit` credits it with (the leader-aware
+/// invariant; given the vehicle and its wall distance x̄(c) − x_t).
 fn obstacle_nearer<F: Real>(
     p: &Params<F>,
     x: F,
     vehicles: &[Vehicle<F>],
     stop_line: Option<F>,
     nearer: F,
+    credit: impl Fn(&Vehicle<F>, F) -> F,
 ) -> Option<F> {
     let half = F::HALF;
     let mut best: Option<F> = stop_line.map(|xr| xr - half * p.length() - p.d0());
     for c in vehicles.iter().filter(|c| c.x > x) {
-        let xb = c.x - half * (c.length + p.length()) - p.d0() - nearer;
+        let wall = c.x - half * (c.length + p.length()) - p.d0() - nearer;
+        let xb = wall + credit(c, wall - x);
         best = Some(match best {
             Some(b) => b.min(xb),
             None => xb,
@@ -278,7 +303,7 @@ pub fn speed_slack<F: Real>(p: &Params<F>) -> F {
 /// let mut planner = Planner::<f64, 20>::new(p, CostWeights::default())?;
 /// // Positions heard over CAN are rounded to 0.01 m: each car is taken that much nearer.
 /// planner.set_bus_resolution(0.01, 0.02)?;
-/// let stopped = [Vehicle { x: 30.0, length: 4.5 }];
+/// let stopped = [Vehicle::wall(30.0, 4.5)];
 /// let (mut x, mut v) = (0.0, 15.0);
 /// for _ in 0..1_000 {
 ///     let obs = Observation {
@@ -315,6 +340,10 @@ pub struct Planner<F, const N: usize, S = IpmSolver<F, N>> {
     age: Option<u8>,
     /// The step to which the bus rounds other vehicles' positions (0: exact).
     resolution: F,
+    /// The step to which it rounds their speeds (0: exact).
+    speed_resolution: F,
+    /// The invariant kept toward the vehicle ahead.
+    invariant: Invariant,
 }
 
 impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
@@ -339,6 +368,8 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
             reuse: None,
             age: None,
             resolution: F::ZERO,
+            speed_resolution: F::ZERO,
+            invariant: Invariant::Paper,
         }
     }
 
@@ -362,6 +393,8 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
             reuse,
             age,
             resolution,
+            speed_resolution,
+            invariant,
         } = self;
         *p = params;
         *w = weights;
@@ -371,6 +404,8 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
         *reuse = None;
         *age = None;
         *resolution = F::ZERO;
+        *speed_resolution = F::ZERO;
+        *invariant = Invariant::Paper;
         Ok(())
     }
 }
@@ -408,6 +443,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
             reuse: None,
             age: None,
             resolution: F::ZERO,
+            speed_resolution: F::ZERO,
+            invariant: Invariant::Paper,
         })
     }
 
@@ -415,16 +452,48 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
     /// broadcasts (to nearest; e.g. can-gateway's `wire::POS_RES` and `wire::SPEED_RES`,
     /// 0.01 m and 0.02 m/s), as [`crate::LanePlanner::set_bus_resolution`] does: a vehicle
     /// whose position was heard rounded may be up to half a step nearer, so each is taken
-    /// half a position step longer at each end. This planner takes every leader as a
-    /// wall, so the speed step changes nothing here; it is checked all the same, so that
-    /// one call configures either planner. Zero (the default) is exact. Values that are
-    /// negative, not finite or ≥ 1 are refused and change nothing.
+    /// half a position step longer at each end; under [`Invariant::LeaderAware`] a
+    /// credited leader's speed may have been rounded up, so it is credited from half a
+    /// speed step lower. Zero (the default) is exact. Values that are negative, not
+    /// finite or ≥ 1 are refused and change nothing.
     pub fn set_bus_resolution(&mut self, position: F, speed: F) -> Result<(), ConfigError> {
         if !(valid_resolution(position) && valid_resolution(speed)) {
             return Err(ConfigError::InvalidResolution);
         }
         self.resolution = position;
+        self.speed_resolution = speed;
         Ok(())
+    }
+
+    /// Chooses the invariant kept toward the vehicle ahead (default [`Invariant::Paper`],
+    /// Lemma 3's wall). Under [`Invariant::LeaderAware`] each vehicle ahead whose
+    /// [`Vehicle::brake`] is `Some` is credited with the least distance it still travels
+    /// ([`safety::leader_credit`], from its speed half a bus step lower): x̄ of (2) moves
+    /// ahead by that much, and (10)'s safety constraint, the certified fallback and the
+    /// verifier all work on the moved x̄ (docs/spec.md §11). The stop line (22) and every
+    /// vehicle without a braking limit stay walls.
+    pub fn set_invariant(&mut self, invariant: Invariant) {
+        self.invariant = invariant;
+    }
+
+    /// The invariant kept toward the vehicle ahead.
+    pub fn invariant(&self) -> Invariant {
+        self.invariant
+    }
+
+    /// What vehicle `c`, `wall` metres (x̄(c) − x_t) ahead, is credited with under the
+    /// invariant in use: nothing under the paper's, nor for a vehicle without a braking
+    /// limit or not ahead of the ego's front (its stopping point says nothing about the
+    /// ego's way to it).
+    fn credit(&self, c: &Vehicle<F>, wall: F) -> F {
+        match (self.invariant, c.brake) {
+            (Invariant::LeaderAware, Some(b)) if wall > F::ZERO => safety::leader_credit(
+                &self.params,
+                c.v - F::HALF * self.speed_resolution,
+                b.mps2(),
+            ),
+            _ => F::ZERO,
+        }
     }
 
     /// The position step of the bus in use (0: exact).
@@ -479,7 +548,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
             || obs
                 .vehicles
                 .iter()
-                .any(|c| !(c.x.is_finite() && c.length.is_finite()))
+                .any(|c| !(c.x.is_finite() && c.length.is_finite() && c.v.is_finite()))
         {
             return Err(InputError::NotFinite);
         }
@@ -506,7 +575,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         // A position heard rounded may be half a step nearer: each vehicle is taken that
         // much longer at its rear (the stop line is the planner's own, exact).
         let nearer = F::HALF * self.resolution;
-        let gap = obstacle_nearer(&p, obs.x, obs.vehicles, obs.stop_line, nearer)
+        let credit = |c: &Vehicle<F>, wall: F| self.credit(c, wall);
+        let gap = obstacle_nearer(&p, obs.x, obs.vehicles, obs.stop_line, nearer, credit)
             .map_or(free, |xb| (xb - obs.x).min(free));
         Ok(self.plan_speed(obs.v_prev, gap, obs.target_x - obs.x, obs.v_ref))
     }

@@ -2,7 +2,7 @@
 //! off its stack.
 //!
 //! A [`Planner`] holds its solver's working storage — a few dozen arrays of N scalars:
-//! 5,268 B in `f32` at N = 20 on the Cortex-M4F (the table below) — and a
+//! 5,272 B in `f32` at N = 20 on the Cortex-M4F (the table below) — and a
 //! [`LanePlanner`] more. Built by value (`new` → `Result<Self, _>` → the caller's
 //! variable) the compiler places one or more temporaries of that size on the stack, and
 //! a planner kept in a task's frame stays there. A slot avoids both:
@@ -60,8 +60,8 @@
 //! <!-- resources: begin (firmware-example/resources.py) -->
 //! | N | `size_of` `Planner` | `size_of` `LanePlanner` | stack per call: approach | stack per call: lane change, both planners | peak stack, whole firmware | instructions per single-lane step, median / worst | per lane-change step, median / worst |
 //! |---|---|---|---|---|---|---|---|
-//! | 20 | 5,268 B | 8,776 B | 3,200 B | 3,760 B | 4,024 B | 50,695 / 330,500 | 198,130 / 203,900 |
-//! | 50 | 12,988 B | 16,616 B | 6,472 B | 7,576 B | 7,832 B | 125,435 / 1,050,385 | 253,000 / 699,310 |
+//! | 20 | 5,272 B | 8,780 B | 3,200 B | 3,752 B | 4,016 B | 50,730 / 330,535 | 198,235 / 204,005 |
+//! | 50 | 12,992 B | 16,620 B | 6,472 B | 7,600 B | 7,856 B | 125,470 / 1,050,420 | 254,475 / 700,780 |
 //! <!-- resources: end -->
 
 use crate::mpc::CostWeights;

@@ -219,14 +219,41 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
     }
 
     /// The vehicles in `lane` (all assumed `length` long), as the single-lane planner
-    /// wants them, into `out` (cleared first; at most `CAP`).
+    /// wants them, into `out` (cleared first; at most `CAP`): every one a wall (Lemma 3),
+    /// whatever invariant the planner keeps.
     pub fn lane_vehicles(&self, lane: u8, length: F, out: &mut Vec<Vehicle<F>, CAP>) {
         out.clear();
         for k in self.known.iter().filter(|k| k.state.lane == lane) {
             // Cannot fail: `out` has the same capacity as `known`.
+            let _ = out.push(Vehicle::wall(k.state.x, length));
+        }
+    }
+
+    /// [`WorldView::lane_vehicles`] for a planner keeping the leader-aware invariant
+    /// ([`crate::Invariant::LeaderAware`]): a vehicle that cooperates, declared its
+    /// braking limit and whose state is at most `stale_after` old at `now` (by its stamp)
+    /// carries its speed and limit, so the planner may credit it; every other one is a
+    /// wall. (A cooperating leader's stamped state bounds its stopping point however old
+    /// it is; the bound is for one that went silent because it is no longer there to
+    /// keep the protocol — crashed, or off the road.)
+    pub fn lane_leaders(
+        &self,
+        lane: u8,
+        length: F,
+        now: Instant,
+        stale_after: Duration,
+        out: &mut Vec<Vehicle<F>, CAP>,
+    ) {
+        out.clear();
+        for k in self.known.iter().filter(|k| k.state.lane == lane) {
+            let s = &k.state;
+            let fresh = now.since(s.stamp) <= stale_after;
+            let brake = s.brake.filter(|_| s.cooperative && fresh);
+            // Cannot fail: `out` has the same capacity as `known`.
             let _ = out.push(Vehicle {
-                x: k.state.x,
-                length,
+                v: s.v,
+                brake,
+                ..Vehicle::wall(s.x, length)
             });
         }
     }

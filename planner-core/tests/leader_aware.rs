@@ -99,3 +99,184 @@ fn the_credit_takes_the_harder_of_the_two_limits() {
     let along = least_travel(&car, v, 7.9) * car.theta_max().cos();
     assert!((leader_credit(&car, v, 7.9) - along).abs() < 1e-12);
 }
+
+/// Where the ego stands in these tests: not at 0, so that a gap measured from the wrong
+/// end shows.
+const EGO_X: f64 = 100.0;
+
+/// The single-lane planner's gap toward one vehicle ahead, as `planner` sees it from
+/// [`EGO_X`]; `ahead.x` is taken relative to the ego.
+fn gap_to(planner: &mut planner_core::Planner<f64, 20>, ahead: planner_core::Vehicle<f64>) -> f64 {
+    let ahead = planner_core::Vehicle {
+        x: ahead.x + EGO_X,
+        ..ahead
+    };
+    let obs = planner_core::Observation {
+        x: EGO_X,
+        v_prev: 10.0,
+        vehicles: &[ahead],
+        stop_line: None,
+        target_x: EGO_X,
+        v_ref: 10.0,
+    };
+    planner.step(&obs).expect("a valid observation").gap
+}
+
+#[test]
+fn the_single_lane_planner_credits_a_cooperating_leader_and_nothing_else() {
+    use planner_core::{BrakeLimit, CostWeights, Invariant, Planner, Vehicle};
+    let p = Params::<f64>::table_i();
+    let new = |invariant| {
+        let mut pl = Planner::<f64, 20>::new(p, CostWeights::default()).expect("valid");
+        pl.set_invariant(invariant);
+        assert_eq!(pl.invariant(), invariant);
+        pl
+    };
+    let (mut paper, mut aware) = (new(Invariant::Paper), new(Invariant::LeaderAware));
+    let wall = Vehicle::wall(30.0, 4.5);
+    let leader = Vehicle {
+        v: 12.0,
+        brake: BrakeLimit::from_mps2(7.9),
+        ..wall
+    };
+    let raw = 30.0 - 4.5 - p.d0();
+    // Well within free_road_gap (no cap), credited or not.
+    assert!(raw + leader_credit(&p, 12.0, 7.9) < planner_core::planner::free_road_gap(&p, 20));
+    assert!(
+        (gap_to(&mut paper, leader) - raw).abs() < 1e-12,
+        "the paper's wall"
+    );
+    assert!(
+        (gap_to(&mut aware, wall) - raw).abs() < 1e-12,
+        "no limit: a wall"
+    );
+    let credited = raw + leader_credit(&p, 12.0, 7.9);
+    assert!((gap_to(&mut aware, leader) - credited).abs() < 1e-12);
+    // A weaker brake than the follower's own is taken at the follower's (a car behind a
+    // truck); a harder one is credited less.
+    let truck = Vehicle {
+        brake: BrakeLimit::from_mps2(4.5),
+        ..leader
+    };
+    assert!((gap_to(&mut aware, truck) - credited).abs() < 1e-12);
+    let hard = Vehicle {
+        brake: BrakeLimit::from_mps2(10.0),
+        ..leader
+    };
+    let less = raw + leader_credit(&p, 12.0, 10.0);
+    assert!((gap_to(&mut aware, hard) - less).abs() < 1e-12);
+    assert!(less < credited);
+    // Over a bus, its speed may have been rounded up by half a step: credited from below.
+    aware.set_bus_resolution(0.0, 0.5).expect("valid");
+    let lower = raw + leader_credit(&p, 12.0 - 0.25, 7.9);
+    assert!((gap_to(&mut aware, leader) - lower).abs() < 1e-12);
+}
+
+#[test]
+fn a_vehicle_not_ahead_of_the_front_is_not_credited() {
+    use planner_core::{BrakeLimit, CostWeights, Invariant, Planner, Vehicle};
+    let p = Params::<f64>::table_i();
+    let mut aware = Planner::<f64, 20>::new(p, CostWeights::default()).expect("valid");
+    aware.set_invariant(Invariant::LeaderAware);
+    // Its wall at exactly the ego's position (x̄ − x = 0), and just behind it: no credit.
+    for raw in [0.0, -0.2] {
+        let x = raw + 4.5 + p.d0();
+        let beside = Vehicle {
+            v: 20.0,
+            brake: BrakeLimit::from_mps2(7.9),
+            ..Vehicle::wall(x, 4.5)
+        };
+        assert!(
+            (gap_to(&mut aware, beside) - raw).abs() < 1e-12,
+            "raw {raw}"
+        );
+    }
+    // Just ahead: credited.
+    let x = 0.01 + 4.5 + p.d0();
+    let ahead = Vehicle {
+        v: 20.0,
+        brake: BrakeLimit::from_mps2(7.9),
+        ..Vehicle::wall(x, 4.5)
+    };
+    assert!(gap_to(&mut aware, ahead) > 0.01 + 1.0);
+}
+
+#[test]
+fn a_speed_that_is_not_a_number_is_refused() {
+    use planner_core::{BrakeLimit, CostWeights, InputError, Observation, Planner, Vehicle};
+    let p = Params::<f64>::table_i();
+    let mut planner = Planner::<f64, 20>::new(p, CostWeights::default()).expect("valid");
+    for v in [f64::NAN, f64::INFINITY] {
+        // With or without a braking limit: the planner checks what it is given.
+        for brake in [None, BrakeLimit::from_mps2(7.9)] {
+            let ahead = [Vehicle {
+                v,
+                brake,
+                ..Vehicle::wall(30.0, 4.5)
+            }];
+            let obs = Observation {
+                x: 0.0,
+                v_prev: 10.0,
+                vehicles: &ahead,
+                stop_line: None,
+                target_x: 0.0,
+                v_ref: 10.0,
+            };
+            assert_eq!(planner.step(&obs), Err(InputError::NotFinite), "v {v}");
+        }
+    }
+}
+
+#[test]
+fn the_view_hands_over_a_limit_only_for_a_fresh_cooperating_vehicle() {
+    use planner_core::heapless::Vec;
+    use planner_core::{BrakeLimit, Duration, Instant, VehicleState, WorldView};
+    let t = |ms| Instant::from_millis(ms);
+    let state = |id, stamp, cooperative, brake| VehicleState {
+        id,
+        x: 50.0,
+        y: 1.8,
+        theta: 0.0,
+        v: 12.0,
+        omega: 0.0,
+        lane: 0,
+        alpha: None,
+        beta: None,
+        stamp: t(stamp),
+        cooperative,
+        brake,
+    };
+    let b = BrakeLimit::from_mps2(7.9);
+    let mut view = WorldView::<f64, 8>::new(9);
+    for s in [
+        state(1, 1_000, true, b),    // fresh, cooperating, declared: credited
+        state(2, 1_000, false, b),   // not cooperating
+        state(3, 1_000, true, None), // no limit declared
+        state(4, 500, true, b),      // exactly as old as allowed: credited
+        state(5, 499, true, b),      // older
+    ] {
+        view.update(&s, t(1_000)).expect("taken");
+    }
+    let mut out = Vec::new();
+    view.lane_leaders(0, 4.5, t(1_000), Duration::from_millis(500), &mut out);
+    let brake_of = |id: usize| out[id - 1].brake;
+    assert_eq!(
+        [
+            brake_of(1),
+            brake_of(2),
+            brake_of(3),
+            brake_of(4),
+            brake_of(5)
+        ],
+        [b, None, None, b, None]
+    );
+    assert!(out
+        .iter()
+        .all(|c| c.v == 12.0 && c.x == 50.0 && c.length == 4.5));
+    // The plain view hands over walls only.
+    view.lane_vehicles(0, 4.5, &mut out);
+    assert!(out.iter().all(|c| c.brake.is_none()));
+    // Another lane's vehicles are not handed over.
+    view.lane_leaders(1, 4.5, t(1_000), Duration::from_millis(500), &mut out);
+    assert!(out.is_empty());
+}

@@ -124,10 +124,7 @@ fn a_step_far_along_the_road_equals_the_step_in_ego_coordinates() {
     use planner_core::planner::{Observation, Planner, Vehicle};
     let p = Params::<f64>::table_i();
     let x = 537.25;
-    let ahead = [Vehicle {
-        x: x + 60.0,
-        length: 4.5,
-    }];
+    let ahead = [Vehicle::wall(x + 60.0, 4.5)];
     let obs = Observation {
         x,
         v_prev: 12.0,

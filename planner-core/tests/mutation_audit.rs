@@ -106,15 +106,9 @@ fn helpers_are_what_their_docs_say() {
     assert!(!in_range(&[f64::NAN]));
     assert_eq!(shifted(&[1.0, 2.0, 3.0]), [2.0, 3.0, 3.0]);
     // A vehicle level with the ego is not ahead of it.
-    let level = [Vehicle {
-        x: 10.0,
-        length: 4.5,
-    }];
+    let level = [Vehicle::wall(10.0, 4.5)];
     assert_eq!(obstacle_position(&p, 10.0, &level, None), None);
-    let ahead = [Vehicle {
-        x: 10.001,
-        length: 4.5,
-    }];
+    let ahead = [Vehicle::wall(10.001, 4.5)];
     assert!(obstacle_position(&p, 10.0, &ahead, None).is_some());
 }
 
@@ -172,18 +166,12 @@ fn inputs_out_of_range_are_refused() {
         err(&obs(0.0, 5.0, &[], Some(far)), &mut pl),
         Some(InputError::OutOfRange)
     );
-    let v = [Vehicle {
-        x: far,
-        length: 4.5,
-    }];
+    let v = [Vehicle::wall(far, 4.5)];
     assert_eq!(
         err(&obs(0.0, 5.0, &v, None), &mut pl),
         Some(InputError::OutOfRange)
     );
-    let long = [Vehicle {
-        x: 50.0,
-        length: far,
-    }];
+    let long = [Vehicle::wall(50.0, far)];
     assert_eq!(
         err(&obs(0.0, 5.0, &long, None), &mut pl),
         Some(InputError::OutOfRange)
@@ -204,10 +192,7 @@ fn inputs_out_of_range_are_refused() {
 fn the_gap_is_measured_from_the_ego_to_the_obstacle() {
     let p = p();
     let mut pl = planner();
-    let v = [Vehicle {
-        x: 160.0,
-        length: 4.5,
-    }];
+    let v = [Vehicle::wall(160.0, 4.5)];
     let c = pl.step(&obs(100.0, 5.0, &v, None)).expect("valid");
     let want = 160.0 - 0.5 * (4.5 + p.length()) - p.d0() - 100.0;
     assert!((c.gap - want).abs() < 1e-9, "{} against {want}", c.gap);
@@ -221,10 +206,7 @@ fn standing_at_the_invariant_boundary_is_a_no_room_fallback() {
     // 0.45 mm of room beyond d0: the invariant holds, yet less than MIN_ROOM_M (0.5 mm)
     // is left, so max braking (standing still) is the answer without a solve.
     let x_other = 0.5 * (4.5 + p.length()) + p.d0() + 4.5e-4;
-    let v = [Vehicle {
-        x: x_other,
-        length: 4.5,
-    }];
+    let v = [Vehicle::wall(x_other, 4.5)];
     let c = pl.step(&obs(0.0, 0.0, &v, None)).expect("valid");
     assert_eq!(c.status, StepStatus::Fallback(FallbackReason::NoRoom));
     assert_eq!(c.v, 0.0);

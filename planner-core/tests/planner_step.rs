@@ -29,18 +29,9 @@ fn obs<'a>(x: f64, v: f64, vehicles: &'a [Vehicle<f64>]) -> Observation<'a, f64>
 fn obstacle_is_nearest_vehicle_ahead_extent_adjusted() {
     let p = Params::<f64>::table_i();
     let cars = [
-        Vehicle {
-            x: 50.0,
-            length: 4.5,
-        },
-        Vehicle {
-            x: 30.0,
-            length: 6.0,
-        },
-        Vehicle {
-            x: -10.0,
-            length: 4.5,
-        },
+        Vehicle::wall(50.0, 4.5),
+        Vehicle::wall(30.0, 6.0),
+        Vehicle::wall(-10.0, 4.5),
     ];
     // 30 − (6 + 4.5)/2 − 0.5 = 24.25
     assert_eq!(obstacle_position(&p, 0.0, &cars, None), Some(24.25));
@@ -70,10 +61,7 @@ fn closes_on_stopped_leader_keeping_the_invariant() {
     // Gap just above dS(20) + extents, leader stopped: the planner must stop behind it,
     // keeping x_t < x̄ − dS(v_{t−h}) at every step (Theorem 1's induction).
     let leader_x = 4.5 + 0.5 + d_s(&p, 20.0) + 0.3;
-    let cars = [Vehicle {
-        x: leader_x,
-        length: 4.5,
-    }];
+    let cars = [Vehicle::wall(leader_x, 4.5)];
     let (mut x, mut v) = (0.0, 20.0);
     for _ in 0..600 {
         let c = pl.step(&obs(x, v, &cars)).expect("valid input");
@@ -97,10 +85,7 @@ fn closes_on_stopped_leader_keeping_the_invariant() {
 #[test]
 fn invariant_violation_gives_certified_fallback() {
     let mut pl = planner();
-    let cars = [Vehicle {
-        x: 8.0,
-        length: 4.5,
-    }];
+    let cars = [Vehicle::wall(8.0, 4.5)];
     let c = pl.step(&obs(0.0, 20.0, &cars)).expect("valid input");
     assert_eq!(
         c.status,
@@ -114,10 +99,7 @@ fn bad_input_is_rejected_and_changes_nothing() {
     let mut pl = planner();
     pl.step(&obs(0.0, 10.0, &[])).expect("valid input");
     let before = *pl.plan().expect("a plan");
-    let nan_car = [Vehicle {
-        x: f64::NAN,
-        length: 4.5,
-    }];
+    let nan_car = [Vehicle::wall(f64::NAN, 4.5)];
     assert_eq!(
         pl.step(&obs(0.0, 10.0, &nan_car)),
         Err(InputError::NotFinite)
@@ -134,10 +116,7 @@ fn bad_input_is_rejected_and_changes_nothing() {
         pl.step(&obs(0.0, 30.0, &[])),
         Err(InputError::SpeedOutOfRange)
     );
-    let bad_len = [Vehicle {
-        x: 10.0,
-        length: 0.0,
-    }];
+    let bad_len = [Vehicle::wall(10.0, 0.0)];
     assert_eq!(
         pl.step(&obs(0.0, 10.0, &bad_len)),
         Err(InputError::BadLength)
@@ -182,10 +161,7 @@ impl MpcSolver<f64, N> for Scripted {
 fn verifier_rejects_unsafe_plan_and_falls_back() {
     let p = Params::<f64>::table_i();
     let leader_x = 4.5 + 0.5 + d_s(&p, 20.0) + 0.5;
-    let cars = [Vehicle {
-        x: leader_x,
-        length: 4.5,
-    }];
+    let cars = [Vehicle::wall(leader_x, 4.5)];
     // Keeps accelerating into the leader: within the speed and acceleration limits only
     // for a few steps, and violating the safety constraint of (10).
     let reckless: [f64; N] = core::array::from_fn(|k| 20.0 + 0.038 * (k as f64 + 1.0));
@@ -240,10 +216,7 @@ fn stop_line_is_respected() {
 /// was heard rounded), the stop line is not; bad steps are refused and change nothing.
 #[test]
 fn a_bus_resolution_takes_each_vehicle_half_a_step_nearer() {
-    let car = [Vehicle {
-        x: 60.0,
-        length: 4.5,
-    }];
+    let car = [Vehicle::wall(60.0, 4.5)];
     let mut exact = planner();
     let mut rounded = planner();
     rounded.set_bus_resolution(0.25, 0.02).expect("valid");

@@ -23,10 +23,7 @@ static STATIC_LANE_PLANNER: LanePlannerSlot<f32, 50> = LanePlannerSlot::new();
 /// Commands of a single-lane approach to a stopped car, bit for bit.
 fn approach<F: Real>(pl: &mut Planner<F, N>, steps: usize) -> Vec<u64> {
     let p = *pl.params();
-    let car = [Vehicle {
-        x: F::from_f64(60.0),
-        length: F::from_f64(4.5),
-    }];
+    let car = [Vehicle::wall(F::from_f64(60.0), F::from_f64(4.5))];
     let (mut x, mut v) = (F::ZERO, F::from_f64(15.0));
     let mut out = Vec::new();
     for _ in 0..steps {

@@ -199,10 +199,10 @@ fn planner_edge<F: Real>() {
     // Constant v0 for N steps plus dS(v0): where the boundary is, give or take a step's
     // acceleration (the bisection finds the exact speed).
     let travel = F::from_usize(N) * p.h() * v0 + v0 * v0 / (F::TWO * p.brake());
-    let leader = Vehicle {
-        x: travel + p.length() + p.d0() + F::SAFETY_MARGIN_M,
-        length: p.length(),
-    };
+    let leader = Vehicle::wall(
+        travel + p.length() + p.d0() + F::SAFETY_MARGIN_M,
+        p.length(),
+    );
     let cars = [leader];
     let obs = Observation {
         x: F::ZERO,

@@ -5,18 +5,29 @@
 //! and zero limit violations — with the planners solving every step, and with certified
 //! plan reuse, which must not change that.
 //!
+//! The same again with every follower keeping the leader-aware invariant toward the
+//! follower ahead (docs/spec.md §11), each starting as close as that allows.
+//!
 //! `THEOREM1_CASES` sets the number of cases (default 200; README gives the 10,000 run),
-//! `THEOREM1_REUSE_CASES` those of the reuse sweep (default 60).
+//! `THEOREM1_REUSE_CASES` those of the reuse sweep (default 60), `THEOREM1_AWARE_CASES`
+//! those of the leader-aware one (default 200).
 
 mod common;
 
 use common::env;
-use host_sim::experiments::platoon::run_cases;
+use host_sim::experiments::platoon::{run_cases, Following};
+use planner_core::Invariant;
 
-/// Runs the sweep and requires nothing unsafe; returns the steps that reused a plan.
-fn sweep(cases: u64, reuse: bool) -> u64 {
+/// What one sweep saw, beyond its (required) safety.
+struct Seen {
+    reused: u64,
+    credited: u64,
+}
+
+/// Runs the sweep and requires nothing unsafe.
+fn sweep(cases: u64, following: Following) -> Seen {
     let seed = env("THEOREM1_SEED", 1);
-    let results = run_cases(cases, seed, reuse);
+    let results = run_cases(cases, seed, following);
     let mut steps = 0;
     let mut fallbacks = 0;
     let mut no_room = 0;
@@ -24,6 +35,7 @@ fn sweep(cases: u64, reuse: bool) -> u64 {
     let mut reused = 0;
     let mut vehicles = 0;
     let mut min_gap = f64::INFINITY;
+    let mut credited = 0;
     for (i, (spec, out)) in results.iter().enumerate() {
         let f = out.findings;
         assert_eq!(
@@ -36,6 +48,7 @@ fn sweep(cases: u64, reuse: bool) -> u64 {
         no_room += out.fallback_no_room;
         solver_or_verification += out.fallback_solver + out.fallback_verification;
         reused += out.reused_steps;
+        credited += out.credited_steps;
         vehicles += spec.vehicles as u64;
         min_gap = min_gap.min(f.min_gap_m);
     }
@@ -43,22 +56,49 @@ fn sweep(cases: u64, reuse: bool) -> u64 {
     eprintln!(
         "Theorem 1{}: {cases} platoons ({vehicles} vehicles), {steps} planner steps, \
          {fallbacks} fallback steps ({no_room} forced standstill, {solver_or_verification} solver or \
-         verification), {reused} reused plans, 0 collisions, 0 invariant violations, min gap {min_gap:.3} m",
-        if reuse { " with plan reuse" } else { "" }
+         verification), {reused} reused plans, {credited} steps closer than a wall allows, 0 collisions, \
+         0 invariant violations, min gap {min_gap:.3} m",
+        match following {
+            Following { reuse: true, .. } => " with plan reuse",
+            Following { invariant: Invariant::LeaderAware, .. } => " (leader-aware)",
+            _ => "",
+        }
     );
-    reused
+    Seen { reused, credited }
 }
 
 #[test]
 fn theorem_1_random_platoons() {
-    assert_eq!(sweep(env("THEOREM1_CASES", 200), false), 0);
+    let seen = sweep(env("THEOREM1_CASES", 200), Following::default());
+    assert_eq!((seen.reused, seen.credited), (0, 0));
 }
 
 #[test]
 fn theorem_1_random_platoons_with_plan_reuse() {
     let cases = env("THEOREM1_REUSE_CASES", 60);
+    let reuse = Following {
+        reuse: true,
+        ..Following::default()
+    };
     // Reuse really happens (about a fifth of the steps), so the sweep tests it.
-    assert!(sweep(cases, true) > cases * 1000);
+    assert!(sweep(cases, reuse).reused > cases * 1000);
+}
+
+#[test]
+fn theorem_1_random_platoons_under_the_leader_aware_invariant() {
+    let cases = env("THEOREM1_AWARE_CASES", 200);
+    let aware = Following {
+        invariant: Invariant::LeaderAware,
+        ..Following::default()
+    };
+    let seen = sweep(cases, aware);
+    // The followers really are closer than a wall allows (over a third of their steps),
+    // so the sweep tests the credit.
+    assert!(
+        seen.credited > cases * 500,
+        "{} steps credited",
+        seen.credited
+    );
 }
 
 /// The cases of the 10,000-platoon sweep (seed 1) where an f32 follower cruising near

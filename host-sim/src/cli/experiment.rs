@@ -102,6 +102,9 @@ pub enum Experiment {
         /// print them as JSON for `host-sim merge`; with --grid, of the grid's runs.
         #[arg(long, value_name = "I/N", conflicts_with = "plot")]
         shard: Option<Shard>,
+        /// With --grid: the invariant every planner keeps toward the vehicle ahead.
+        #[arg(long, value_enum, default_value = "paper")]
+        invariant: super::InvariantArg,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -166,6 +169,9 @@ pub enum Experiment {
         /// Lanes per direction.
         #[arg(long, default_value_t = 2)]
         lanes: u8,
+        /// The invariant every planner keeps toward the vehicle ahead.
+        #[arg(long, value_enum, default_value = "paper")]
+        invariant: super::InvariantArg,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -174,33 +180,7 @@ pub enum Experiment {
     /// on CAN with every node authenticating: forged grant, replayed grant, replayed
     /// state, spoofed id, flood, a lying vehicle, the manager's crash and restart (exit 1
     /// on a forgery or replay accepted, or an unsafe event).
-    Attacks {
-        /// The fleets' medium: `can-hub` or a SocketCAN interface such as `vcan0`.
-        #[arg(long, default_value = "can-hub")]
-        bus: String,
-        /// Run without authentication, to see what it keeps out.
-        #[arg(long)]
-        without_auth: bool,
-        /// Every message as one CAN FD frame.
-        #[arg(long)]
-        can_fd: bool,
-        /// The intersection's algorithm (STOP, STOP-1, FIFO, CON-fair, PIPE, PLATOON).
-        #[arg(long, default_value = "FIFO")]
-        algorithm: String,
-        /// Only these rows (comma-separated): forged-grant, replayed-grant,
-        /// replayed-state, spoofed-id, flood, lying-vehicle, manager-crash.
-        #[arg(long, value_delimiter = ',')]
-        only: Vec<String>,
-        /// Only these worlds (comma-separated): intersection, multilane.
-        #[arg(long, value_delimiter = ',')]
-        world: Vec<String>,
-        /// Skip each world's run without an attack (its `clean_*` figures are then null).
-        #[arg(long)]
-        no_baseline: bool,
-        /// Print one JSON object.
-        #[arg(long)]
-        json: bool,
-    },
+    Attacks(AttacksArgs),
     /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
     Multilane {
         /// Number of runs (seeds 1..=K, or from --seed).
@@ -267,22 +247,7 @@ impl FaultArgs {
 /// Runs an experiment.
 pub fn run(e: Experiment) -> ExitCode {
     match e {
-        Experiment::Attacks {
-            bus,
-            without_auth,
-            can_fd,
-            algorithm,
-            only,
-            world,
-            no_baseline,
-            json,
-        } => attacks(
-            &bus,
-            (!without_auth, can_fd, !no_baseline),
-            &algorithm,
-            (only, world),
-            json,
-        ),
+        Experiment::Attacks(a) => attacks(a),
         Experiment::Multilane {
             seeds,
             seed,
@@ -306,9 +271,19 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
             json,
             shard,
+            invariant,
         } => {
             if grid {
-                return fault_grid(&losses, &delays, runs, json, plot, shard);
+                let g = GridRequest {
+                    losses,
+                    delays,
+                    runs,
+                    invariant: invariant.invariant(),
+                };
+                return fault_grid(&g, json, plot, shard);
+            }
+            if invariant != super::InvariantArg::Paper {
+                return bad_input("--invariant: only with --grid (the fault grid)");
             }
             let args = FaultArgs {
                 loss,
@@ -336,6 +311,7 @@ pub fn run(e: Experiment) -> ExitCode {
             seed,
             block,
             lanes,
+            invariant,
             json,
         } => network(
             &host_sim::experiments::network::NetworkSettings {
@@ -346,6 +322,7 @@ pub fn run(e: Experiment) -> ExitCode {
                 rate_vph: rate,
                 duration_s: duration,
                 seed,
+                invariant: invariant.invariant(),
             },
             json,
         ),
@@ -405,16 +382,37 @@ fn network(s: &host_sim::experiments::network::NetworkSettings, json: bool) -> E
     )
 }
 
-fn fault_grid(
-    losses: &[f64],
-    delays: &[f64],
+/// `experiment faults --grid`: what it runs.
+struct GridRequest {
+    losses: Vec<f64>,
+    delays: Vec<f64>,
     runs: u64,
+    invariant: planner_core::Invariant,
+}
+
+impl GridRequest {
+    /// The grid's plan over `cells` (built from its losses and delays), seed 1.
+    fn plan<'a>(
+        &self,
+        cells: &'a [host_sim::experiments::fault_grid::Cell],
+    ) -> host_sim::experiments::fault_grid::GridPlan<'a> {
+        host_sim::experiments::fault_grid::GridPlan {
+            cells,
+            runs: self.runs,
+            seed: 1,
+            invariant: self.invariant,
+        }
+    }
+}
+
+fn fault_grid(
+    g: &GridRequest,
     json: bool,
     plot: Option<PathBuf>,
     shard: Option<Shard>,
 ) -> ExitCode {
     use host_sim::experiments::fault_grid::{grid, Cell};
-    let cells = Cell::grid(losses, delays);
+    let cells = Cell::grid(&g.losses, &g.delays);
     for c in &cells {
         if let Err(e) = c.faults(1).validate() {
             return bad_input(
@@ -428,9 +426,9 @@ fn fault_grid(
         Err(code) => return code,
     };
     if let Some(sh) = shard {
-        return fault_grid_shard(cells, losses, delays, runs, sh);
+        return fault_grid_shard(g, &g.plan(&cells), sh);
     }
-    let r = grid(&cells, runs, 1, 0);
+    let r = grid(&g.plan(&cells), 0);
     if let Some(out) = plot {
         let shown = out.target().display().to_string();
         if let Err(code) = draw_plot(out, |p| host_sim::output::plot::fault_grid(&r, p)) {
@@ -443,25 +441,24 @@ fn fault_grid(
 
 /// A shard of the fault grid: its runs, for `host-sim merge`.
 fn fault_grid_shard(
-    cells: Vec<host_sim::experiments::fault_grid::Cell>,
-    losses: &[f64],
-    delays: &[f64],
-    runs: u64,
+    g: &GridRequest,
+    plan: &host_sim::experiments::fault_grid::GridPlan,
     sh: Shard,
 ) -> ExitCode {
     use host_sim::experiments::fault_grid::{grid_runs, run_count, GridRun};
     let settings = GridSettings {
-        losses: losses.to_vec(),
-        delays: delays.to_vec(),
-        runs,
-        seed: 1,
+        losses: g.losses.clone(),
+        delays: g.delays.clone(),
+        runs: g.runs,
+        seed: plan.seed,
+        invariant: host_sim::world::invariant_name(g.invariant).to_string(),
     };
     shard_of(
         "faults-grid",
         settings,
-        run_count(&cells, runs),
+        run_count(plan.cells, g.runs),
         sh,
-        |r| grid_runs(&cells, runs, 1, r, 0),
+        |r| grid_runs(plan, r, 0),
         |g: &GridRun| {
             let t = &g.totals;
             t.collisions + t.invariant_violations + t.limit_violations + t.unpermitted_entries
@@ -761,16 +758,44 @@ fn faults(
 /// got through (authenticated runs only: without authentication they are expected to)
 /// or a row saw an unsafe event, exit 3 when a row other than the liar's left a vehicle
 /// undone.
-fn attacks(
-    bus: &str,
-    (authenticated, fd, baseline): (bool, bool, bool),
-    algorithm: &str,
-    (only, worlds): (Vec<String>, Vec<String>),
+/// `experiment attacks`.
+#[derive(clap::Args)]
+pub struct AttacksArgs {
+    /// The fleets' medium: `can-hub` or a SocketCAN interface such as `vcan0`.
+    #[arg(long, default_value = "can-hub")]
+    bus: String,
+    /// Run without authentication, to see what it keeps out.
+    #[arg(long)]
+    without_auth: bool,
+    /// Every message as one CAN FD frame.
+    #[arg(long)]
+    can_fd: bool,
+    /// The intersection's algorithm (STOP, STOP-1, FIFO, CON-fair, PIPE, PLATOON).
+    #[arg(long, default_value = "FIFO")]
+    algorithm: String,
+    /// Only these rows (comma-separated): forged-grant, replayed-grant,
+    /// replayed-state, spoofed-id, flood, lying-vehicle, manager-crash.
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// Only these worlds (comma-separated): intersection, multilane.
+    #[arg(long, value_delimiter = ',')]
+    world: Vec<String>,
+    /// Skip each world's run without an attack (its `clean_*` figures are then null).
+    #[arg(long)]
+    no_baseline: bool,
+    /// Print one JSON object.
+    #[arg(long)]
     json: bool,
-) -> ExitCode {
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, value_enum, default_value = "paper")]
+    invariant: super::InvariantArg,
+}
+
+fn attacks(a: AttacksArgs) -> ExitCode {
     use host_sim::experiments::attacks::{experiment, row_names, Settings, WORLDS};
     use host_sim::fleet::intruder::Attack;
-    let medium = match super::fleet::medium(bus) {
+    let (authenticated, algorithm, only, worlds) = (!a.without_auth, &a.algorithm, a.only, a.world);
+    let medium = match super::fleet::medium(&a.bus) {
         Ok(m) => m,
         Err(e) => return bad_input(e),
     };
@@ -796,11 +821,12 @@ fn attacks(
     let settings = Settings {
         medium,
         authenticated,
-        fd,
+        fd: a.can_fd,
         algorithm,
         only,
         worlds,
-        baseline,
+        baseline: !a.no_baseline,
+        invariant: a.invariant.invariant(),
     };
     let report = match experiment(&settings) {
         Ok(r) => r,
@@ -823,7 +849,7 @@ fn attacks(
         .results
         .iter()
         .all(|r| r.completed || r.attack == "lying-vehicle");
-    finish(&AttacksText(&report), json, safe && kept_out, done)
+    finish(&AttacksText(&report), a.json, safe && kept_out, done)
 }
 
 /// `experiment attacks`'s table for a terminal.

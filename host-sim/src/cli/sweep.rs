@@ -20,6 +20,10 @@ pub struct PlatoonsArgs {
     /// (planner-core's `ReusePolicy::default()`).
     #[arg(long)]
     reuse: bool,
+    /// The invariant every follower keeps toward the vehicle ahead (the adversarial
+    /// leader, scripted, is a wall under either).
+    #[arg(long, value_enum, default_value = "paper")]
+    invariant: super::InvariantArg,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -62,12 +66,22 @@ pub struct TrafficArgs {
 /// Theorem 1 sweep.
 pub fn platoons(a: PlatoonsArgs) -> ExitCode {
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
-    let s = host_sim::experiments::platoon::sweep_range(first, end, a.seed, a.reuse);
+    use host_sim::experiments::platoon::{sweep_range, Following};
+    let following = Following {
+        reuse: a.reuse,
+        invariant: a.invariant.invariant(),
+    };
+    let s = sweep_range(first, end, a.seed, following);
     let safe =
         s.collisions + s.invariant_violations + s.limit_violations == 0 && s.cases == end - first;
+    let mut settings = json!({"cases": a.cases, "seed": a.seed, "reuse": a.reuse});
+    if a.invariant == super::InvariantArg::LeaderAware {
+        // Only then: shards of a paper sweep keep their settings as before.
+        settings["invariant"] = json!("leader-aware");
+    }
     let out = Out {
         sweep: "platoons",
-        settings: json!({"cases": a.cases, "seed": a.seed, "reuse": a.reuse}),
+        settings,
         shard: a.shard,
         range: (first, end),
         json: a.json,
@@ -202,6 +216,9 @@ pub struct GridsArgs {
     /// Simulated seconds per grid.
     #[arg(long, default_value_t = 180.0)]
     duration: f64,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, value_enum, default_value = "paper")]
+    invariant: super::InvariantArg,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -216,7 +233,14 @@ pub fn grids(a: GridsArgs) -> ExitCode {
         return code;
     }
     let (first, end) = a.shard.unwrap_or(Shard::ALL).range(a.cases);
-    let r = host_sim::experiments::network::grids(end - first, first, a.seed, a.duration, 0);
+    let invariant = a.invariant.invariant();
+    let r = host_sim::experiments::network::grids(
+        (end - first, first),
+        a.seed,
+        a.duration,
+        invariant,
+        0,
+    );
     let safe =
         r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries == 0;
     let exit = code(safe, r.deadlocks == 0);
@@ -225,7 +249,11 @@ pub fn grids(a: GridsArgs) -> ExitCode {
         Err(e) => return bad(&e.to_string()),
     };
     if let Some(sh) = a.shard {
-        let settings = json!({"cases": a.cases, "seed": a.seed, "duration": a.duration});
+        let mut settings = json!({"cases": a.cases, "seed": a.seed, "duration": a.duration});
+        if invariant != planner_core::Invariant::Paper {
+            // Only then: shards of a paper sweep keep their settings as before.
+            settings["invariant"] = json!(host_sim::world::invariant_name(invariant));
+        }
         return emit("grids", settings, sh, (first, end), &value, exit);
     }
     let notes: String = r

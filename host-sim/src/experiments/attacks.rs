@@ -57,6 +57,8 @@ pub struct Settings {
     pub worlds: Vec<String>,
     /// Also run each world without an attack, for the rows' `clean_*` figures.
     pub baseline: bool,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    pub invariant: planner_core::Invariant,
 }
 
 impl Default for Settings {
@@ -69,6 +71,7 @@ impl Default for Settings {
             only: Vec::new(),
             worlds: Vec::new(),
             baseline: true,
+            invariant: planner_core::Invariant::Paper,
         }
     }
 }
@@ -128,6 +131,8 @@ pub struct AttackReport {
     pub can_fd: bool,
     /// The intersection's algorithm.
     pub algorithm: &'static str,
+    /// The invariant every planner kept (`paper`, `leader-aware`).
+    pub invariant: &'static str,
     /// One row per attack and world.
     pub results: Vec<AttackRow>,
 }
@@ -166,7 +171,8 @@ pub fn experiment(s: &Settings) -> Result<AttackReport, FleetError> {
     let wanted = |name: &str| s.only.is_empty() || s.only.iter().any(|o| o == name);
     let mut results = Vec::new();
     let chosen = |w: &str| s.worlds.is_empty() || s.worlds.iter().any(|o| o == w);
-    for (name, spec) in worlds.into_iter().filter(|(w, _)| chosen(w)) {
+    for (name, mut spec) in worlds.into_iter().filter(|(w, _)| chosen(w)) {
+        spec.invariant = s.invariant;
         let clean = match s.baseline {
             true => Some(run(s, &keys, spec.clone(), None)?.run),
             false => None,
@@ -205,6 +211,7 @@ pub fn experiment(s: &Settings) -> Result<AttackReport, FleetError> {
         authenticated: s.authenticated,
         can_fd: s.fd,
         algorithm: s.algorithm.name(),
+        invariant: crate::world::invariant_name(s.invariant),
         results,
     })
 }

@@ -190,8 +190,24 @@ pub struct GridReport {
     pub runs: u64,
     /// The seed.
     pub seed: u64,
+    /// The invariant every planner kept (`paper`, `leader-aware`).
+    pub invariant: &'static str,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
+}
+
+/// What the grid runs: its cells, the runs of each workload per cell, the seed and the
+/// invariant every planner keeps.
+#[derive(Debug, Clone, Copy)]
+pub struct GridPlan<'a> {
+    /// The cells, in report order ([`Cell::grid`]).
+    pub cells: &'a [Cell],
+    /// Runs per workload and cell.
+    pub runs: u64,
+    /// Seed.
+    pub seed: u64,
+    /// The invariant.
+    pub invariant: planner_core::Invariant,
 }
 
 /// The grid's runs in report order: (cell, workload, run). A run's seed depends on its
@@ -218,25 +234,17 @@ pub struct GridRun {
 }
 
 /// The grid's runs [first, end) (of [`run_count`]), on `threads` threads.
-pub fn grid_runs(
-    cells: &[Cell],
-    runs: u64,
-    seed: u64,
-    (first, end): (u64, u64),
-    threads: usize,
-) -> Vec<GridRun> {
+pub fn grid_runs(plan: &GridPlan, (first, end): (u64, u64), threads: usize) -> Vec<GridRun> {
+    let GridPlan {
+        cells, runs, seed, ..
+    } = *plan;
     let workloads = Workload::all();
     let jobs = jobs(cells.len(), workloads.len(), runs);
     let mine = first.min(end) as usize..end.min(jobs.len() as u64) as usize;
     let base = mine.start;
     super::par::map_indexed(mine.len(), threads, |i| {
         let (c, w, k) = jobs[base + i];
-        let (cell, workload) = (cells[c], workloads[w]);
-        let mut world = workload.world(seed, k);
-        world.faults = cell.faults(1);
-        world.sensing = Some(Sensing::radar());
-        world.finish = Finish::GoalsMetAndStill;
-        world.name = format!("{}-{}", world.name, cell_name(&cell));
+        let world = job_world(plan, (cells[c], workloads[w]), k);
         let case = Case {
             index: k,
             seed: case_seed(seed, k),
@@ -251,14 +259,31 @@ pub fn grid_runs(
     })
 }
 
+/// Run `k` of `workload` in `cell` of the grid: its world, faults and all.
+fn job_world(plan: &GridPlan, (cell, workload): (Cell, Workload), k: u64) -> WorldSpec {
+    let mut world = workload.world(plan.seed, k);
+    world.faults = cell.faults(1);
+    world.sensing = Some(Sensing::radar());
+    world.finish = Finish::GoalsMetAndStill;
+    world.invariant = plan.invariant;
+    world.name = format!("{}-{}", world.name, cell_name(&cell));
+    world
+}
+
+/// The world of the grid's run `job` (of [`run_count`], in report order), `None` past
+/// the last.
+pub fn grid_world(plan: &GridPlan, job: u64) -> Option<WorldSpec> {
+    let workloads = Workload::all();
+    let jobs = jobs(plan.cells.len(), workloads.len(), plan.runs);
+    let &(c, w, k) = jobs.get(usize::try_from(job).ok()?)?;
+    Some(job_world(plan, (plan.cells[c], workloads[w]), k))
+}
+
 /// The report over the grid's runs `outs` (every run once, in any order of shards).
-pub fn grid_report(
-    cells: &[Cell],
-    runs: u64,
-    seed: u64,
-    outs: &[GridRun],
-    wall_seconds: f64,
-) -> GridReport {
+pub fn grid_report(plan: &GridPlan, outs: &[GridRun], wall_seconds: f64) -> GridReport {
+    let GridPlan {
+        cells, runs, seed, ..
+    } = *plan;
     let workloads = Workload::all();
     let jobs = jobs(cells.len(), workloads.len(), runs);
     let mut results = Vec::new();
@@ -301,15 +326,16 @@ pub fn grid_report(
         cells: results,
         runs,
         seed,
+        invariant: crate::world::invariant_name(plan.invariant),
         wall_seconds,
     }
 }
 
-/// Runs every workload `runs` times in every cell of `cells`, on `threads` threads.
-pub fn grid(cells: &[Cell], runs: u64, seed: u64, threads: usize) -> GridReport {
+/// Runs every workload of `plan` in every cell, on `threads` threads.
+pub fn grid(plan: &GridPlan, threads: usize) -> GridReport {
     let t0 = std::time::Instant::now();
-    let outs = grid_runs(cells, runs, seed, (0, run_count(cells, runs)), threads);
-    grid_report(cells, runs, seed, &outs, t0.elapsed().as_secs_f64())
+    let outs = grid_runs(plan, (0, run_count(plan.cells, plan.runs)), threads);
+    grid_report(plan, &outs, t0.elapsed().as_secs_f64())
 }
 
 /// A short name of a cell (for scenario names).

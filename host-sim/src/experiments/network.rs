@@ -37,6 +37,8 @@ pub struct NetworkSettings {
     pub duration_s: f64,
     /// Seed.
     pub seed: u64,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    pub invariant: planner_core::Invariant,
 }
 
 impl Default for NetworkSettings {
@@ -49,6 +51,7 @@ impl Default for NetworkSettings {
             rate_vph: 300.0,
             duration_s: 600.0,
             seed: 1,
+            invariant: planner_core::Invariant::Paper,
         }
     }
 }
@@ -56,8 +59,13 @@ impl Default for NetworkSettings {
 impl NetworkSettings {
     /// The scenario file of this grid (what `host-sim run` would load).
     pub fn to_toml(&self) -> String {
+        // Named only when not the paper's: a paper grid's file stays as it was.
+        let invariant = match self.invariant {
+            planner_core::Invariant::Paper => String::new(),
+            i => format!("invariant = \"{}\"\n", crate::world::invariant_name(i)),
+        };
         format!(
-            "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"pipelined\"\n\n\
+            "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"pipelined\"\n{invariant}\n\
              [grid]\nrows = {r}\ncols = {c}\nblock_m = {b}\nlanes = {l}\n\n\
              [arrivals]\nrate_vph = {rate}\n",
             r = self.rows,
@@ -85,6 +93,8 @@ pub struct NetworkReport {
     pub grid: String,
     /// Arrivals per boundary inlet (vehicles per hour).
     pub rate_vph: f64,
+    /// The invariant every planner kept (`paper`, `leader-aware`).
+    pub invariant: &'static str,
     /// Vehicles that entered the network.
     pub vehicles_spawned: u64,
     /// Trips completed (left at their destination).
@@ -165,6 +175,7 @@ pub fn run_with(
     Ok(NetworkReport {
         grid: format!("{}x{}", s.rows, s.cols),
         rate_vph: s.rate_vph,
+        invariant: crate::world::invariant_name(s.invariant),
         vehicles_spawned: trips.spawned,
         trips_completed: trips.completed,
         trips_in_progress: w.vehicles().len() as u64,
@@ -241,8 +252,8 @@ impl core::fmt::Display for NetworkReport {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         writeln!(
             f,
-            "grid {} at {:.0} veh/h per boundary inlet, {:.0} s simulated in {:.1} s ({:.1}x realtime)",
-            self.grid, self.rate_vph, self.sim_seconds, self.wall_seconds, self.realtime_factor
+            "grid {} at {:.0} veh/h per boundary inlet, {} invariant, {:.0} s simulated in {:.1} s ({:.1}x realtime)",
+            self.grid, self.rate_vph, self.invariant, self.sim_seconds, self.wall_seconds, self.realtime_factor
         )?;
         writeln!(
             f,
@@ -290,6 +301,8 @@ impl core::fmt::Display for NetworkReport {
 pub struct GridsReport {
     /// Cases run.
     pub cases: u64,
+    /// The invariant every planner kept (`paper`, `leader-aware`).
+    pub invariant: &'static str,
     /// Vehicles that entered, over all cases.
     pub vehicles: u64,
     /// Trips completed.
@@ -380,7 +393,8 @@ impl Unfinished {
     }
 }
 
-/// Case `index` of the grids sweep seeded `seed`, `duration_s` long.
+/// Case `index` of the grids sweep seeded `seed`, `duration_s` long (the paper's
+/// invariant).
 pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
     use rand::Rng;
     let mut r = crate::reference::instances::rng(super::sweep::case_seed(seed, index));
@@ -394,22 +408,33 @@ pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
         rate_vph: r.random_range(100.0f64..1500.0).round(),
         duration_s,
         seed: super::sweep::case_seed(seed, index),
+        invariant: planner_core::Invariant::Paper,
     }
 }
 
 /// Runs `cases` grids from index `first` of the sweep seeded `seed`, each for
-/// `duration_s`, on `threads` threads.
-pub fn grids(cases: u64, first: u64, seed: u64, duration_s: f64, threads: usize) -> GridsReport {
+/// `duration_s` with every planner keeping `invariant`, on `threads` threads.
+pub fn grids(
+    (cases, first): (u64, u64),
+    seed: u64,
+    duration_s: f64,
+    invariant: planner_core::Invariant,
+    threads: usize,
+) -> GridsReport {
     let t0 = std::time::Instant::now();
     let runs = super::par::map_indexed(cases as usize, threads, |i| {
         let index = first + i as u64;
-        let s = grid_case(seed, index, duration_s);
+        let s = NetworkSettings {
+            invariant,
+            ..grid_case(seed, index, duration_s)
+        };
         let deadlock = std::cell::RefCell::new(None);
         let r = run_with(&s, &mut |d| *deadlock.borrow_mut() = Some(d.to_string()));
         (index, s, r, deadlock.into_inner())
     });
     let mut g = GridsReport {
         cases,
+        invariant: crate::world::invariant_name(invariant),
         vehicles: 0,
         trips_completed: 0,
         trips_due: 0,

@@ -4,7 +4,8 @@
 use crate::monitor::{Findings, Limits, Truth};
 use planner_core::planner::Vehicle;
 use planner_core::{
-    CostWeights, FallbackReason, Observation, Params, Planner, Real, ReusePolicy, StepStatus,
+    BrakeLimit, CostWeights, FallbackReason, Invariant, Observation, Params, Planner, Real,
+    ReusePolicy, StepStatus,
 };
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -36,6 +37,12 @@ pub struct PlatoonSpec {
     /// Followers reuse their certified previous plan ([`ReusePolicy::default`]) instead
     /// of solving every step.
     pub reuse: bool,
+    /// The invariant the followers keep toward the vehicle ahead. Under
+    /// [`Invariant::LeaderAware`] each follower credits the follower ahead of it (a
+    /// cooperating planner that declares its braking limit) and starts as close as that
+    /// allows; the adversarial leader is scripted, not cooperating, so its follower takes
+    /// it as a wall, as it would any vehicle that does not keep the protocol.
+    pub invariant: Invariant,
 }
 
 /// Result of a platoon run.
@@ -57,6 +64,10 @@ pub struct PlatoonOutcome {
     pub fallback_verification: u64,
     /// Steps that applied the certified previous plan without a solve.
     pub reused_steps: u64,
+    /// Follower steps closer to the vehicle ahead than Lemma 3's wall allows (always 0
+    /// under the paper's invariant, where each would be a violation): how much the
+    /// leader-aware invariant's credit is used.
+    pub credited_steps: u64,
 }
 
 /// Horizon of the followers' planners.
@@ -124,6 +135,7 @@ pub fn random_spec(i: u64, seed: u64) -> PlatoonSpec {
         seed: rng.random(),
         f32_planners: i % 4 == 3,
         reuse: false,
+        invariant: Invariant::Paper,
     }
 }
 
@@ -147,6 +159,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
         .map(|_| {
             let mut p = Planner::new(params, CostWeights::default()).expect("valid weights");
             p.set_reuse(policy).expect("the default policy is valid");
+            p.set_invariant(spec.invariant);
             p
         })
         .collect();
@@ -166,6 +179,7 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
         fallback_solver: 0,
         fallback_verification: 0,
         reused_steps: 0,
+        credited_steps: 0,
     };
     let steps = (spec.duration_s / lim.h).round() as u64;
     let mut commands = vec![0.0f64; n];
@@ -173,12 +187,10 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     for step in 0..steps {
         let t = step as f64 * lim.h;
         findings.check(&lim, &cars, None, 1);
+        out.credited_steps += closer_than_walls(&lim, &cars);
         // Every vehicle decides on the state at t, then all move.
         seen.clear();
-        seen.extend(cars.iter().map(|c| Vehicle {
-            x: F::from_f64(c.x),
-            length: F::from_f64(c.length),
-        }));
+        seen.extend(cars.iter().map(seen_as::<F>));
         let a = leader.accel(t, &lim, &mut rng);
         let v0 = cars[0].v;
         commands[0] = (v0 + a * lim.h).clamp(
@@ -199,21 +211,58 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     out
 }
 
+/// Followers in `cars` (front first) closer to the vehicle ahead than Lemma 3's wall
+/// allows: gap − d0 ≤ dS(v).
+fn closer_than_walls(lim: &Limits, cars: &[Truth]) -> u64 {
+    let close = |w: &[Truth]| {
+        let gap = w[0].x - w[1].x - 0.5 * (w[0].length + w[1].length);
+        gap - lim.d0 <= lim.safe_distance(w[1].v)
+    };
+    cars.windows(2).filter(|w| close(w)).count() as u64
+}
+
+/// How the followers see `c`: exactly where it is; with its speed and braking limit
+/// when it keeps the invariant (a follower: it cooperates and declares its limit), so a
+/// follower keeping the leader-aware invariant credits it; the scripted leader is a wall.
+fn seen_as<F: Real>(c: &Truth) -> Vehicle<F> {
+    let wall = Vehicle::wall(F::from_f64(c.x), F::from_f64(c.length));
+    if !c.keeps_invariant {
+        return wall;
+    }
+    Vehicle {
+        v: F::from_f64(c.v),
+        brake: BrakeLimit::from_mps2(c.brake),
+        ..wall
+    }
+}
+
 /// The platoon at t = 0: the leader at the front; each follower behind its predecessor
 /// by the extent, d0, dS(v) and the f32 safety margin, plus a random extra — so the
-/// invariant holds, with the planners' margins, from the start.
+/// invariant holds, with the planners' margins, from the start. Under the leader-aware
+/// invariant a follower behind a follower starts closer by what it credits that one
+/// with (never closer than the extent, d0 and the margin).
 fn initial_platoon(spec: &PlatoonSpec, lim: &Limits, rng: &mut impl Rng) -> Vec<Truth> {
     let pf64 = Params::<f64>::table_i();
     let n = spec.vehicles.max(2);
     let length = pf64.length();
     let margin = f64::from(f32::SAFETY_MARGIN_M) + 0.01;
+    let aware = spec.invariant == Invariant::LeaderAware;
     let mut cars: Vec<Truth> = Vec::with_capacity(n);
     let mut x = 0.0;
+    let mut v_ahead = 0.0;
     for i in 0..n {
         let v = rng.random_range(0.0..lim.v_max);
         if i > 0 {
-            x -= length + lim.d0 + lim.safe_distance(v) + margin + rng.random_range(0.0..20.0);
+            // The planners' credit (a lower bound of the monitor's exact one).
+            let credit = if aware && i > 1 {
+                planner_core::safety::leader_credit(&pf64, v_ahead, lim.brake)
+            } else {
+                0.0
+            };
+            let room = (lim.safe_distance(v) - credit).max(0.0);
+            x -= length + lim.d0 + room + margin + rng.random_range(0.0..20.0);
         }
+        v_ahead = v;
         cars.push(Truth {
             x,
             y: 0.5 * crate::world::LANE_WIDTH_M,
@@ -222,7 +271,7 @@ fn initial_platoon(spec: &PlatoonSpec, lim: &Limits, rng: &mut impl Rng) -> Vec<
             width: pf64.width(),
             lane: 0,
             keeps_invariant: i > 0,
-            leader_aware: false,
+            leader_aware: aware && i > 0,
             brake: 7.9,
             v,
             v_before: v,
@@ -284,6 +333,8 @@ fn follower_command<F: Real>(
 pub struct SweepSummary {
     /// Platoons run.
     pub cases: u64,
+    /// The invariant the followers kept (`paper`, `leader-aware`).
+    pub invariant: &'static str,
     /// Vehicles in all platoons.
     pub vehicles: u64,
     /// Planner steps.
@@ -296,6 +347,8 @@ pub struct SweepSummary {
     pub fallback_solver_or_verification: u64,
     /// Steps that applied a certified previous plan without a solve (with `--reuse`).
     pub reused_steps: u64,
+    /// Follower steps closer than Lemma 3's wall allows (leader-aware credit used).
+    pub credited_steps: u64,
     /// Collisions seen by the monitor.
     pub collisions: u64,
     /// Invariant violations seen by the monitor.
@@ -308,11 +361,24 @@ pub struct SweepSummary {
     pub wall_seconds: f64,
 }
 
+/// How a sweep's followers plan: whether they reuse certified plans, and the
+/// invariant they keep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Following {
+    /// Followers reuse their certified previous plan.
+    pub reuse: bool,
+    /// The invariant they keep toward the vehicle ahead.
+    pub invariant: Invariant,
+}
+
 /// Runs `cases` random platoons of a sweep on all cores: (spec, outcome) per case, in
-/// case order.
-/// case order; with `reuse`, the followers reuse certified plans.
-pub fn run_cases(cases: u64, seed: u64, reuse: bool) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
-    run_range(0, cases, seed, reuse)
+/// case order, the followers planning as `following` says.
+pub fn run_cases(
+    cases: u64,
+    seed: u64,
+    following: Following,
+) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
+    run_range(0, cases, seed, following)
 }
 
 /// Runs the platoons `first..end` of a sweep on all cores, in case order.
@@ -320,11 +386,12 @@ pub fn run_range(
     first: u64,
     end: u64,
     seed: u64,
-    reuse: bool,
+    following: Following,
 ) -> Vec<(PlatoonSpec, PlatoonOutcome)> {
     super::par::map_indexed(end.saturating_sub(first) as usize, 0, |i| {
         let spec = PlatoonSpec {
-            reuse,
+            reuse: following.reuse,
+            invariant: following.invariant,
             ..random_spec(first + i as u64, seed)
         };
         let out = run(&spec);
@@ -333,18 +400,19 @@ pub fn run_range(
 }
 
 /// Runs `cases` random platoons on all cores and sums up what the monitor saw.
-pub fn sweep(cases: u64, seed: u64, reuse: bool) -> SweepSummary {
-    sweep_range(0, cases, seed, reuse)
+pub fn sweep(cases: u64, seed: u64, following: Following) -> SweepSummary {
+    sweep_range(0, cases, seed, following)
 }
 
 /// [`sweep`] over the platoons `first..end` only (a shard).
-pub fn sweep_range(first: u64, end: u64, seed: u64, reuse: bool) -> SweepSummary {
+pub fn sweep_range(first: u64, end: u64, seed: u64, following: Following) -> SweepSummary {
     let t0 = std::time::Instant::now();
     let mut total = SweepSummary {
+        invariant: crate::world::invariant_name(following.invariant),
         min_gap_m: f64::INFINITY,
         ..Default::default()
     };
-    for (spec, out) in run_range(first, end, seed, reuse) {
+    for (spec, out) in run_range(first, end, seed, following) {
         total.cases += 1;
         total.vehicles += spec.vehicles as u64;
         total.planner_steps += out.planner_steps;
@@ -352,6 +420,7 @@ pub fn sweep_range(first: u64, end: u64, seed: u64, reuse: bool) -> SweepSummary
         total.fallback_no_room += out.fallback_no_room;
         total.fallback_solver_or_verification += out.fallback_solver + out.fallback_verification;
         total.reused_steps += out.reused_steps;
+        total.credited_steps += out.credited_steps;
         total.collisions += out.findings.collisions;
         total.invariant_violations += out.findings.invariant_violations;
         total.limit_violations += out.findings.limit_violations;
@@ -365,11 +434,12 @@ impl core::fmt::Display for SweepSummary {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
             f,
-            "Theorem 1: {} random platoons, {} vehicles, {} planner steps in {:.1} s\n  \
+            "Theorem 1: {} random platoons ({} invariant), {} vehicles, {} planner steps in {:.1} s\n  \
              {} collisions, {} invariant violations, {} limit violations; smallest gap {:.3} m\n  \
              fallback steps: {} ({} standstills with no room, {} solver or verification); \
-             certified plan reuses: {}",
+             certified plan reuses: {}; steps closer than a wall allows: {}",
             self.cases,
+            self.invariant,
             self.vehicles,
             self.planner_steps,
             self.wall_seconds,
@@ -380,7 +450,8 @@ impl core::fmt::Display for SweepSummary {
             self.fallback_steps,
             self.fallback_no_room,
             self.fallback_solver_or_verification,
-            self.reused_steps
+            self.reused_steps,
+            self.credited_steps
         )
     }
 }

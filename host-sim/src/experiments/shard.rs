@@ -225,6 +225,9 @@ pub struct GridSettings {
     pub runs: u64,
     /// Seed.
     pub seed: u64,
+    /// The invariant ("paper" or "leader-aware"; "paper" in shards of older versions).
+    #[serde(default = "paper")]
+    pub invariant: String,
 }
 
 /// `experiment demand`'s settings.
@@ -303,11 +306,19 @@ fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
             ))
         }
         "faults-grid" => {
-            use super::fault_grid::{grid_report, Cell, GridRun};
+            use super::fault_grid::{grid_report, Cell, GridPlan, GridRun};
             let s: GridSettings = parse("settings", &h.settings)?;
             let r: Runs<GridRun> = parse("runs", merged)?;
             let cells = Cell::grid(&s.losses, &s.delays);
-            serde_json::to_value(grid_report(&cells, s.runs, s.seed, &r.runs, r.wall_seconds))
+            let invariant = crate::scenario::common::parse_invariant(&s.invariant)
+                .map_err(MergeError::Shape)?;
+            let plan = GridPlan {
+                cells: &cells,
+                runs: s.runs,
+                seed: s.seed,
+                invariant,
+            };
+            serde_json::to_value(grid_report(&plan, &r.runs, r.wall_seconds))
         }
         "demand" => {
             let s: DemandSettings = parse("settings", &h.settings)?;

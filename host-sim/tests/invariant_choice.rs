@@ -1,0 +1,131 @@
+//! The invariant is chosen on every sweep and experiment that runs planners in traffic
+//! (`--invariant paper|leader-aware`), and what is chosen is what the planners keep:
+//! Theorem 1's platoons, the random grids, the grid of intersections, the fault grid and
+//! the attack experiment (docs/capacity.md).
+
+use host_sim::experiments::fault_grid::{grid_world, run_count, Cell, GridPlan};
+use host_sim::experiments::network::{grid_case, grids, NetworkSettings};
+use host_sim::experiments::platoon::{sweep, Following};
+use planner_core::Invariant;
+use std::process::Command;
+
+#[test]
+fn leader_aware_followers_close_up_on_followers_and_stay_safe() {
+    let follow = |invariant| {
+        sweep(
+            12,
+            1,
+            Following {
+                reuse: false,
+                invariant,
+            },
+        )
+    };
+    let (paper, aware) = (follow(Invariant::Paper), follow(Invariant::LeaderAware));
+    for s in [&paper, &aware] {
+        assert_eq!(
+            (s.collisions, s.invariant_violations, s.limit_violations),
+            (0, 0, 0),
+            "{s}"
+        );
+    }
+    assert_eq!(
+        (paper.invariant, aware.invariant),
+        ("paper", "leader-aware")
+    );
+    // Under the paper's invariant a follower closer than the wall would be a violation;
+    // under the leader-aware one most follower steps are that close.
+    assert_eq!(paper.credited_steps, 0, "{paper}");
+    assert!(
+        aware.credited_steps * 3 > aware.planner_steps,
+        "{} of {} steps credited",
+        aware.credited_steps,
+        aware.planner_steps
+    );
+}
+
+#[test]
+fn a_grid_keeps_the_invariant_asked_for_and_names_it_in_its_file() {
+    let s = NetworkSettings {
+        invariant: Invariant::LeaderAware,
+        ..grid_case(1, 0, 30.0)
+    };
+    assert!(s.to_toml().contains("invariant = \"leader-aware\""));
+    assert_eq!(
+        s.world().expect("a valid grid").invariant,
+        Invariant::LeaderAware
+    );
+    // A paper grid's file is as it always was: no invariant key.
+    assert!(!grid_case(1, 0, 30.0).to_toml().contains("invariant"));
+    let r = grids((1, 0), 1, 30.0, Invariant::LeaderAware, 0);
+    assert_eq!(r.invariant, "leader-aware");
+    assert_eq!(
+        r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries,
+        0
+    );
+}
+
+#[test]
+fn every_world_of_the_fault_grid_keeps_the_invariant_asked_for() {
+    let cells = Cell::grid(&[0.5], &[0.1]);
+    for invariant in [Invariant::Paper, Invariant::LeaderAware] {
+        let plan = GridPlan {
+            cells: &cells,
+            runs: 1,
+            seed: 1,
+            invariant,
+        };
+        let n = run_count(&cells, 1);
+        for job in 0..n {
+            let w = grid_world(&plan, job).expect("a job of the grid");
+            assert_eq!(w.invariant, invariant, "job {job}: {}", w.name);
+        }
+        assert!(grid_world(&plan, n).is_none());
+    }
+}
+
+/// `host-sim ARGS --json`, its exit code 0, its JSON.
+fn json(args: &[&str]) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args(args)
+        .arg("--json")
+        .output()
+        .expect("host-sim runs");
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON")
+}
+
+#[test]
+fn the_command_line_takes_the_invariant_and_reports_it() {
+    let aware = ["--invariant", "leader-aware"];
+    for args in [
+        &["platoons", "--cases", "3"][..],
+        &["grids", "--cases", "1", "--duration", "20"],
+        &["experiment", "network", "--grid", "2x2", "--duration", "20"],
+        &[
+            "experiment",
+            "attacks",
+            "--only",
+            "lying-vehicle",
+            "--world",
+            "multilane",
+            "--no-baseline",
+        ],
+    ] {
+        let v = json(&[args, &aware[..]].concat());
+        assert_eq!(v["invariant"], "leader-aware", "{args:?}");
+        let v = json(args);
+        assert_eq!(v["invariant"], "paper", "{args:?}");
+    }
+    // The plain fault experiment has no leader-aware form: refused, not ignored.
+    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args(["experiment", "faults", "--invariant", "leader-aware"])
+        .output()
+        .expect("host-sim runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--invariant: only with --grid"));
+}
