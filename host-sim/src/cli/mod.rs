@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod experiment;
+pub mod export;
 pub mod fleet;
 pub mod output;
 pub mod run;
@@ -197,6 +198,10 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// A scenario in another simulator's format: `export sumo SCENARIO OUTDIR` writes
+    /// SUMO plain XML that netconvert builds into the same network.
+    #[command(subcommand)]
+    Export(export::Export),
     /// The paper's experiments.
     #[command(subcommand)]
     Experiment(experiment::Experiment),
@@ -293,6 +298,7 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Worlds(a) => sweep::worlds(a),
         Command::Merge { files, json } => sweep::merge(&files, json),
         Command::Experiment(e) => experiment::run(e),
+        Command::Export(e) => export::run(e),
         Command::Scale(a) => bench::scale(a),
         Command::BenchPlanner(a) => bench::bench(a),
         Command::BenchCan(a) => bench::bench_can(a),

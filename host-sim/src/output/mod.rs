@@ -3,5 +3,6 @@
 
 pub mod plot;
 pub mod staged;
+pub mod sumo;
 pub mod trace;
 pub mod viewer;
