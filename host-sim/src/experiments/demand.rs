@@ -18,8 +18,7 @@ use super::sweep::case_seed;
 use crate::monitor::Limits;
 use crate::scenario::junction::{build_layout, LayoutToml};
 use crate::world::network::{Junction, Network};
-use crate::world::spawn::Entry;
-use crate::world::{Arrivals, Finish, SolverChoice, World, WorldSpec, LENGTH_M};
+use crate::world::{Finish, SolverChoice, World, WorldSpec, LENGTH_M};
 use planner_core::crossing::Algorithm;
 use planner_core::Invariant;
 use serde::{Deserialize, Serialize};
@@ -146,20 +145,7 @@ impl Plan {
 pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> WorldSpec {
     let lt = LayoutToml::default();
     let layout = build_layout(&lt).unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
-    let entries = (0..4u8)
-        .flat_map(|heading| {
-            (0..layout.spec.lanes).map(move |lane| {
-                (
-                    Entry::Stub {
-                        junction: 0,
-                        heading,
-                        lane,
-                    },
-                    rate,
-                )
-            })
-        })
-        .collect();
+    let arrivals = crate::scenario::junction::stub_arrivals(&layout, rate);
     WorldSpec {
         name: format!("demand-{}-{rate}-{seed}", algorithm.name()),
         duration_s: duration,
@@ -180,7 +166,7 @@ pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> World
         vehicles: Vec::new(),
         faults: crate::bus::Faults::NONE,
         sensing: None,
-        arrivals: Arrivals::Poisson(entries),
+        arrivals,
         deadlock_window_s: crate::monitor::liveness::DEADLOCK_WINDOW_S,
         finish: Finish::Duration,
         clock_start: planner_core::Instant::EPOCH,

@@ -442,8 +442,9 @@ fn flows(
     duration_s: f64,
     out: &mut String,
 ) {
-    use crate::world::spawn::Entry;
+    use crate::world::spawn::{trip_choices, Entry};
     for (k, (entry, rate_vph)) in entries.iter().enumerate() {
+        let trips = trip_choices(net, entry);
         let (routes, lane): (Vec<Vec<String>>, u8) = match *entry {
             Entry::Stub {
                 junction,
@@ -453,19 +454,16 @@ fn flows(
                 let Some(jn) = net.junctions.get(junction) else {
                     continue;
                 };
-                let n = jn.layout.spec.lanes;
-                let rs = lane_movements(lane, n)
+                let rs = trips
                     .iter()
-                    .map(|&m| edges_through(net, junction, heading, &[m]))
+                    .map(|(ms, _)| edges_through(net, junction, heading, ms))
                     .collect();
-                (rs, n - 1 - lane)
+                (rs, jn.layout.spec.lanes - 1 - lane)
             }
             Entry::Segment { seg, lane } => {
-                let rs = net
-                    .exits()
-                    .into_iter()
-                    .filter_map(|to| net.path(seg, to))
-                    .map(|ms| edges_from(net, seg, &ms))
+                let rs = trips
+                    .iter()
+                    .map(|(ms, _)| edges_from(net, seg, ms))
                     .collect();
                 (rs, lane)
             }

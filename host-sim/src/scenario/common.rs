@@ -224,6 +224,33 @@ impl RawHeader {
     }
 }
 
+/// `[arrivals]`: an open system.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArrivalsToml {
+    /// Poisson arrivals per entry lane (vehicles per hour).
+    pub rate_vph: f64,
+}
+
+impl ArrivalsToml {
+    /// The rate of `[arrivals]`, if given, checked: 0 to 3,600 vehicles per hour per lane.
+    pub fn rate(
+        a: Option<&Spanned<ArrivalsToml>>,
+        e: &Errors,
+    ) -> Result<Option<f64>, ScenarioError> {
+        match a {
+            None => Ok(None),
+            Some(a) if (0.0..=3600.0).contains(&a.get_ref().rate_vph) => {
+                Ok(Some(a.get_ref().rate_vph))
+            }
+            Some(a) => Err(e.at(
+                Some(a.span()),
+                "arrivals.rate_vph must be in [0, 3600] vehicles per hour per lane",
+            )),
+        }
+    }
+}
+
 /// The invariant named `name` (`"paper"` or `"leader-aware"`), or why not.
 pub fn parse_invariant(name: &str) -> Result<Invariant, String> {
     match name {

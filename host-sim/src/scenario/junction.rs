@@ -2,7 +2,7 @@
 //! one) with its own inlet and outlet tracks, its vehicles by inlet, lane, movement and
 //! position along the inlet; a network of one junction and no segment.
 
-use super::common::{Header, RawHeader, SensingToml};
+use super::common::{ArrivalsToml, Header, RawHeader, SensingToml};
 use super::error::{Errors, FieldError, ScenarioError};
 use crate::bus::Faults;
 use crate::monitor::Limits;
@@ -223,8 +223,10 @@ struct RawJunction {
     seed: u64,
     algorithm: AlgorithmToml,
     intersection: Spanned<LayoutToml>,
-    #[serde(rename = "vehicle")]
+    #[serde(default, rename = "vehicle")]
     vehicles: Vec<Spanned<JunctionVehicle>>,
+    #[serde(default)]
+    arrivals: Option<Spanned<ArrivalsToml>>,
     #[serde(default)]
     faults: Option<Spanned<Faults>>,
     #[serde(default)]
@@ -265,6 +267,9 @@ pub struct JunctionScenario {
     pub layout: Layout<f64>,
     /// Vehicles.
     pub placements: Vec<Placement>,
+    /// Poisson arrivals at every inlet lane (vehicles per hour per lane), if any: the
+    /// open system of `experiment demand`, as a file.
+    pub rate_vph: Option<f64>,
 }
 
 /// Why a layout is refused: the field at fault and what is wrong, in words.
@@ -387,12 +392,17 @@ impl JunctionScenario {
         let lt = raw.intersection.into_inner();
         let layout =
             build_layout(&lt).map_err(|m| e.field(Some(span.clone()), "intersection", &m))?;
-        if raw.vehicles.is_empty() || raw.vehicles.len() > MANAGER_CAP {
+        let rate_vph = ArrivalsToml::rate(raw.arrivals.as_ref(), &e)?;
+        let fewest = usize::from(rate_vph.is_none());
+        if raw.vehicles.len() < fewest || raw.vehicles.len() > MANAGER_CAP {
             // The first vehicle too many, or the intersection none is at.
             let at = raw.vehicles.get(MANAGER_CAP).map_or(span, Spanned::span);
             return Err(e.at(
                 Some(at),
-                format!("1 to {MANAGER_CAP} vehicles, got {}", raw.vehicles.len()),
+                format!(
+                    "{fewest} to {MANAGER_CAP} vehicles (at least one without [arrivals]), got {}",
+                    raw.vehicles.len()
+                ),
             ));
         }
         let mut placements: Vec<(Placement, Range<usize>)> = Vec::new();
@@ -415,6 +425,7 @@ impl JunctionScenario {
             layout_toml: lt,
             layout,
             placements: placements.into_iter().map(|(p, _)| p).collect(),
+            rate_vph,
         })
     }
 
@@ -444,6 +455,7 @@ impl JunctionScenario {
             layout: build_layout(&lt).map_err(|m| m.to_string())?,
             layout_toml: lt,
             placements,
+            rate_vph: None,
         })
     }
 
@@ -475,7 +487,9 @@ impl JunctionScenario {
                 .collect(),
             faults: self.header.faults,
             sensing: self.header.sensing,
-            arrivals: Arrivals::None,
+            arrivals: self
+                .rate_vph
+                .map_or(Arrivals::None, |r| stub_arrivals(&self.layout, r)),
             deadlock_window_s: self.header.deadlock_window_s,
             finish: Finish::Duration,
             clock_start: planner_core::Instant::EPOCH,
@@ -499,6 +513,8 @@ impl JunctionScenario {
             faults: Faults,
             #[serde(skip_serializing_if = "Option::is_none")]
             sensing: Option<SensingToml>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            arrivals: Option<ArrivalsToml>,
             #[serde(rename = "vehicle")]
             vehicles: Vec<JunctionVehicle>,
         }
@@ -527,10 +543,29 @@ impl JunctionScenario {
             intersection: self.layout_toml,
             faults: self.header.faults,
             sensing: Some(SensingToml::of(self.header.sensing)),
+            arrivals: self.rate_vph.map(|rate_vph| ArrivalsToml { rate_vph }),
             vehicles,
         };
         toml::to_string(&file).unwrap_or_else(|e| format!("# cannot write: {e}"))
     }
+}
+
+/// Poisson arrivals at `rate_vph` at the start of every inlet lane of junction 0.
+pub fn stub_arrivals(layout: &Layout<f64>, rate_vph: f64) -> Arrivals {
+    Arrivals::Poisson(
+        (0..4u8)
+            .flat_map(|heading| {
+                (0..layout.spec.lanes).map(move |lane| {
+                    let entry = crate::world::spawn::Entry::Stub {
+                        junction: 0,
+                        heading,
+                        lane,
+                    };
+                    (entry, rate_vph)
+                })
+            })
+            .collect(),
+    )
 }
 
 /// The world's vehicle of a placement at junction 0.
@@ -643,6 +678,7 @@ pub fn keys() -> Vec<(&'static str, &'static [&'static str])> {
             "[[vehicle]] at an intersection",
             fields::<JunctionVehicle>(),
         ),
+        ("[arrivals] at an intersection", fields::<ArrivalsToml>()),
     ]
 }
 

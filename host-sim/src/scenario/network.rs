@@ -43,6 +43,7 @@
 //! a vehicle changes lanes between, toward a lane serving its next movement. A segment
 //! too short for the changes a route through it needs is refused with the reason.
 
+pub use super::common::ArrivalsToml;
 use super::common::{coord_ok, Header, RawHeader, SensingToml, MAX_COORD_M};
 use super::error::{Errors, ScenarioError};
 use super::junction::{build_layout, AlgorithmToml, Heading, LayoutToml, MovementToml};
@@ -162,14 +163,6 @@ pub struct NetVehicleToml {
     /// An exit segment, reached by the shortest path.
     #[serde(default)]
     pub destination: Option<u16>,
-}
-
-/// `[arrivals]`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ArrivalsToml {
-    /// Poisson arrivals per entry lane (vehicles per hour).
-    pub rate_vph: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -294,18 +287,7 @@ impl NetworkScenario {
         }
         check_spacing(&vehicles, &network)
             .map_err(|(i, m)| e.at(raw.vehicles.get(i).map(Spanned::span), m))?;
-        let rate_vph = match &raw.arrivals {
-            None => None,
-            Some(a) if a.get_ref().rate_vph >= 0.0 && a.get_ref().rate_vph <= 3600.0 => {
-                Some(a.get_ref().rate_vph)
-            }
-            Some(a) => {
-                return Err(e.at(
-                    Some(a.span()),
-                    "arrivals.rate_vph must be in [0, 3600] vehicles per hour per lane",
-                ))
-            }
-        };
+        let rate_vph = ArrivalsToml::rate(raw.arrivals.as_ref(), &e)?;
         if vehicles.is_empty() && rate_vph.is_none() {
             return Err(e.at(
                 Some(raw.duration_s.span()),

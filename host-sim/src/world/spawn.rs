@@ -33,6 +33,41 @@ pub enum Entry {
     },
 }
 
+/// The trips an arrival at entry `e` may draw, each with its route when it starts on a
+/// junction's own inlet: at a stub, each movement its lane serves; on a boundary
+/// segment, the movements of a shortest path to each exit it leads to (the loader
+/// refuses an entry that leads to none). The world draws among them evenly; the SUMO
+/// export writes a flow for each.
+pub fn trip_choices(net: &super::network::Network, e: &Entry) -> Vec<(Vec<Movement>, Option<u8>)> {
+    match *e {
+        Entry::Stub {
+            junction,
+            heading,
+            lane,
+        } => {
+            let Some(jn) = net.junctions.get(junction) else {
+                return Vec::new();
+            };
+            planner_core::intersection::lane_movements(lane, jn.layout.spec.lanes)
+                .iter()
+                .map(|&m| {
+                    let route = jn
+                        .layout
+                        .route_index(heading, lane, m)
+                        .and_then(|r| u8::try_from(r).ok());
+                    (vec![m], route)
+                })
+                .collect()
+        }
+        Entry::Segment { seg, .. } => net
+            .exits()
+            .into_iter()
+            .filter_map(|to| net.path(seg, to))
+            .map(|ms| (ms, None))
+            .collect(),
+    }
+}
+
 /// Draws an arrival's trip at an entry: its movements, and at a stub its route.
 pub type DrawTrip<'a> = dyn FnMut(&Entry, &mut ChaCha8Rng) -> (Vec<Movement>, Option<u8>) + 'a;
 

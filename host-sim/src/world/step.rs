@@ -4,7 +4,7 @@ use super::junction::ManagerNode;
 use super::junction::{manager_node, LEFT_REPEAT_S};
 use super::network::{End, Network};
 use super::sensor::{roadside, sense, Seen, Sensed};
-use super::spawn::{entry_speed, start_at, Entry};
+use super::spawn::{entry_speed, start_at, trip_choices, Entry};
 use super::vehicle::{At, Brain, Driver, PlannerSetup, StepCtx, Trip, Vehicle, VehicleTruth};
 use super::DriverKind;
 use super::{Arrivals, TraceRow, VehicleSpec, World, LENGTH_M, WIDTH_M};
@@ -640,48 +640,19 @@ impl<const N: usize, B: Bus> World<N, B> {
     }
 }
 
-/// A random trip from entry `e`: at a stub, a movement its lane serves (its route); on a
-/// boundary segment, the movements of a shortest path to a random exit.
+/// A random trip from entry `e`, drawn evenly among its [`trip_choices`] (one draw, as
+/// before they were listed: the same trips for the same seeds).
 pub(crate) fn draw_trip(
     net: &Network,
     e: &Entry,
     rng: &mut ChaCha8Rng,
 ) -> (Vec<Movement>, Option<u8>) {
-    match *e {
-        Entry::Stub {
-            junction,
-            heading,
-            lane,
-        } => {
-            let Some(jn) = net.junctions.get(junction) else {
-                return (Vec::new(), None);
-            };
-            let ms = planner_core::intersection::lane_movements(lane, jn.layout.spec.lanes);
-            let m = ms
-                .get(rng.random_range(0..ms.len()))
-                .copied()
-                .unwrap_or(Movement::Straight);
-            let route = jn
-                .layout
-                .route_index(heading, lane, m)
-                .and_then(|r| u8::try_from(r).ok());
-            (vec![m], route)
-        }
-        Entry::Segment { seg, .. } => {
-            // A destination among the exits this entry leads to (the loader refuses an
-            // entry that leads to none).
-            let paths: Vec<Vec<Movement>> = net
-                .exits()
-                .into_iter()
-                .filter_map(|to| net.path(seg, to))
-                .collect();
-            if paths.is_empty() {
-                return (Vec::new(), None);
-            }
-            let k = rng.random_range(0..paths.len());
-            (paths.into_iter().nth(k).unwrap_or_default(), None)
-        }
+    let choices = trip_choices(net, e);
+    if choices.is_empty() {
+        return (Vec::new(), None);
     }
+    let k = rng.random_range(0..choices.len());
+    choices.into_iter().nth(k).unwrap_or_default()
 }
 
 /// What a vehicle's move did to its place.

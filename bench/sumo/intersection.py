@@ -1,0 +1,164 @@
+#!/usr/bin/env python3
+"""One intersection, ours and SUMO's side by side: throughput and mean delay per inlet lane
+at each arrival rate, as ratios — in one run.
+
+SUMO is a benchmark dependency, never a test or runtime one: this script installs PyPI
+`eclipse-sumo` into a virtual environment of its own (bench/sumo/.venv, or $SUMO_VENV) the
+first time (lane_capacity.py's `sumo_bin`), then, for every rate:
+
+- ours: `host-sim experiment demand --json` (the SPEC §8 intersection, Poisson arrivals at
+  every inlet lane, each arrival a movement its lane serves, drawn evenly);
+- SUMO: the same world written as a scenario file (`[arrivals]` at the rate) and exported
+  with `host-sim export sumo --control C` — the same layout (A_S as the junction's shape,
+  so edges end at the stop line), lane permissions, speeds, vehicle type and Poisson
+  flows — built by netconvert and run under each control C (actuated signal, fixed-time
+  signal, all-way stop) with two drivers: human (Krauss, sigma 0.5, tau 1 s) and
+  automated (Krauss, sigma 0, tau 0.5 s); step 0.1 s, the same seeds.
+
+Delay is counted as host-sim counts it: from arrival to leaving the intersection, less the
+free-flow time — SUMO's timeLoss plus its departDelay (the wait before insertion) — over
+the vehicles that finished; throughput is vehicles finished per hour per inlet lane.
+
+Usage: python3 bench/sumo/intersection.py [--rates 100,200,300,400] [--duration 600]
+       [--seeds 2] [--algorithms PIPE,PLATOON] [--invariant leader-aware] [--json]
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lane_capacity import host_sim, sumo_bin  # noqa: E402  (the same venv and binary)
+
+LANES = 8  # inlet lanes of the SPEC §8 intersection
+CONTROLS = ["actuated", "static", "allway-stop"]
+DRIVERS = {
+    "human": {"carFollowModel": "Krauss", "sigma": "0.5", "tau": "1.0"},
+    "automated": {"carFollowModel": "Krauss", "sigma": "0", "tau": "0.5"},
+}
+
+
+def ours(hs, rates, duration, seeds, algorithms, invariant):
+    out = subprocess.run(
+        [hs, "experiment", "demand", "--rates", ",".join(map(str, rates)),
+         "--duration", str(duration), "--seeds", str(seeds),
+         "--algorithms", ",".join(algorithms), "--invariant", invariant, "--json"],
+        check=True, capture_output=True, text=True,
+    ).stdout
+    rows = {}
+    for r in json.loads(out)["results"]:
+        rows[(r["algorithm"], r["rate_vph_per_lane"])] = {
+            "throughput": r["throughput_vph"] / LANES,
+            "delay": r["mean_delay_s"],
+            "bounded": r["bounded"],
+            "unsafe": r["collisions"] + r["invariant_violations"] + r["unpermitted_entries"],
+        }
+    return rows
+
+
+def scenario(rate, duration, seed):
+    return (f'name = "demand"\nduration_s = {duration}\nseed = {seed}\n'
+            f'algorithm = "pipelined"\n\n[intersection]\n\n[arrivals]\nrate_vph = {rate}\n')
+
+
+def with_driver(routes, driver):
+    """The routes file with the vehicle type driven by `driver`."""
+    tree = ET.parse(routes)
+    for vt in tree.getroot().iter("vType"):
+        vt.attrib.update(DRIVERS[driver])
+    out = routes.with_name(f"demand-{driver}.rou.xml")
+    tree.write(out)
+    return out
+
+
+def sumo_run(work, net, routes, duration, seed):
+    """(vehicles finished per hour per inlet lane, mean delay in s) of one SUMO run."""
+    trips = work / "trips.xml"
+    subprocess.run(
+        [sumo_bin("sumo"), "-n", str(net), "-r", str(routes), "--begin", "0",
+         "--end", str(duration), "--step-length", "0.1", "--seed", str(seed),
+         "--no-step-log", "--no-warnings", "--tripinfo-output", str(trips)],
+        check=True, capture_output=True, text=True,
+    )
+    done = list(ET.parse(trips).getroot().iter("tripinfo"))
+    delays = [float(t.get("timeLoss")) + float(t.get("departDelay")) for t in done]
+    mean = sum(delays) / len(delays) if delays else float("nan")
+    return len(done) * 3600.0 / duration / LANES, mean
+
+
+def sumo(hs, rates, duration, seeds):
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for rate in rates:
+            for control in CONTROLS:
+                runs = {d: [] for d in DRIVERS}
+                for seed in range(1, seeds + 1):
+                    (work / "demand.toml").write_text(scenario(rate, duration, seed))
+                    subprocess.run([hs, "export", "sumo", str(work / "demand.toml"), str(work),
+                                    "--control", control], check=True, capture_output=True)
+                    subprocess.run([sumo_bin("netconvert"), "-c", "demand.netccfg"], cwd=work,
+                                   check=True, capture_output=True)
+                    for d in DRIVERS:
+                        routes = with_driver(work / "demand.rou.xml", d)
+                        runs[d].append(sumo_run(work, work / "demand.net.xml", routes,
+                                                duration, seed))
+                for d, rs in runs.items():
+                    rows[(control, d, rate)] = {
+                        "throughput": sum(r[0] for r in rs) / len(rs),
+                        "delay": sum(r[1] for r in rs) / len(rs),
+                    }
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rates", default="100,200,300,400")
+    ap.add_argument("--duration", type=float, default=600.0)
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--algorithms", default="PIPE,PLATOON")
+    ap.add_argument("--invariant", default="leader-aware")
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args()
+    rates = [float(r) for r in a.rates.split(",")]
+    algorithms = a.algorithms.split(",")
+    hs = host_sim()
+    mine = ours(hs, rates, a.duration, a.seeds, algorithms, a.invariant)
+    theirs = sumo(hs, rates, a.duration, a.seeds)
+    if a.json:
+        print(json.dumps({
+            "ours": [{"algorithm": k[0], "rate": k[1], **v} for k, v in mine.items()],
+            "sumo": [{"control": k[0], "driver": k[1], "rate": k[2], **v}
+                     for k, v in theirs.items()],
+        }, indent=1))
+        return
+    cell = lambda r: f"{r['throughput']:.0f} / {r['delay']:.1f}"
+    head = ["rate"] + [f"**{x}**" for x in algorithms]
+    head += [f"SUMO {c}, human · automated" for c in CONTROLS]
+    best = algorithms[-1]
+    head += [f"{best} delay / SUMO actuated human", f"{best} throughput / SUMO actuated human"]
+    print("Per inlet lane, throughput (veh/h) / mean delay (s); * = our queues not bounded; "
+          f"{a.duration:.0f} s x {a.seeds} seeds, {a.invariant} invariant")
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    for rate in rates:
+        row = [f"{rate:.0f}"]
+        for x in algorithms:
+            r = mine[(x, rate)]
+            row.append(cell(r) + ("" if r["bounded"] else "*"))
+        for c in CONTROLS:
+            row.append(cell(theirs[(c, "human", rate)]) + " · " + cell(theirs[(c, "automated", rate)]))
+        ref, r = theirs[("actuated", "human", rate)], mine[(best, rate)]
+        row.append(f"{r['delay'] / ref['delay']:.2f}" if ref["delay"] > 0 else "–")
+        row.append(f"{r['throughput'] / ref['throughput']:.2f}")
+        print("| " + " | ".join(row) + " |")
+    unsafe = sum(r["unsafe"] for r in mine.values())
+    print(f"ours: {unsafe} collisions, invariant violations and unpermitted entries")
+
+
+if __name__ == "__main__":
+    main()
