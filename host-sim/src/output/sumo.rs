@@ -24,7 +24,7 @@
 //! it (`bench/sumo/`). What SUMO cannot hold is said, not approximated silently: a
 //! vehicle already inside A_S at t = 0 departs at its inlet's end.
 
-use crate::world::network::{Junction, Network, Segment};
+use crate::world::network::{turned, Junction, Network, Segment};
 use crate::world::vehicle::At;
 use crate::world::{Arrivals, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M};
 use planner_core::intersection::{lane_movements, Movement};
@@ -114,16 +114,6 @@ fn outlet_edge(net: &Network, jn: &Junction, h: u8) -> String {
         Some(sg) => format!("s{}", sg.id),
         None => stub_edge(jn, false, h),
     }
-}
-
-/// The heading after movement `m` from heading `h`.
-fn turned(h: u8, m: Movement) -> u8 {
-    let turn = match m {
-        Movement::Straight => 0,
-        Movement::Left => 1,
-        Movement::Right => 3,
-    };
-    (h + turn) % 4
 }
 
 /// A point of segment `sg` on the line between its direction and the opposite one (its

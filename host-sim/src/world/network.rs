@@ -99,6 +99,17 @@ pub struct Network {
     pub junctions: Vec<Junction>,
 }
 
+/// The heading of travel after movement `m` from heading `h` (0 east, 1 north, 2 west,
+/// 3 south; a left turn is a quarter turn counter-clockwise).
+pub fn turned(h: u8, m: Movement) -> u8 {
+    let turn = match m {
+        Movement::Straight => 0,
+        Movement::Left => 1,
+        Movement::Right => 3,
+    };
+    (h + turn) % 4
+}
+
 /// (x, y) rotated by `quarter_turns` × 90° counter-clockwise.
 pub fn rotate((x, y): (f64, f64), quarter_turns: u8) -> (f64, f64) {
     match quarter_turns % 4 {
@@ -296,12 +307,7 @@ impl Network {
     pub fn after(&self, seg: usize, m: Movement) -> Option<usize> {
         let sg = self.segments.get(seg)?;
         let j = sg.into_junction()?;
-        let turn = match m {
-            Movement::Straight => 0,
-            Movement::Left => 1,
-            Movement::Right => 3,
-        };
-        let out = (sg.heading + turn) % 4;
+        let out = turned(sg.heading, m);
         *self.junctions.get(j)?.outlets.get(usize::from(out))?
     }
 
