@@ -266,8 +266,7 @@ impl StateWire {
             beta: lane(self.beta_flags & 0x0F),
             stamp: restore_millis(self.stamp, now),
             cooperative: self.beta_flags & NOT_COOPERATIVE == 0,
-            // `State` has no room for it (`Located` sets it): a follower takes the sender
-            // as a wall.
+            // Each message kind reads its own braking limit byte.
             brake: None,
         })
     }
@@ -279,8 +278,11 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
     let mut w = Writer { b: &mut b, at: 0 };
     match m {
         Message::State(s) => {
-            // Frame 0: id, x, lanes; frame 1: y, heading, speed, β; frame 2: yaw rate,
-            // stamp, CRC (no field straddles two frames).
+            // Frame 0: id, x, lanes | 1: y, heading, speed, β and flags | 2: yaw rate,
+            // stamp, braking limit | 3: reserved (zero), CRC (no field straddles two
+            // frames). The braking limit is what lets a follower credit the sender with
+            // its least travel (the leader-aware invariant); it costs a fourth classic
+            // frame, and nothing on CAN FD beyond the next frame length.
             let q = StateWire::of(s)?;
             w.put(&s.id.to_le_bytes());
             w.put(&q.x.to_le_bytes());
@@ -291,6 +293,7 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
             w.put(&[q.beta_flags]);
             w.put(&q.yaw.to_le_bytes());
             w.put(&q.stamp.to_le_bytes());
+            w.put(&[s.brake.map_or(0, planner_core::BrakeLimit::tenths)]);
         }
         Message::Located { segment, state: s } => {
             // Frame 0: id, segment, lanes, β and flags, braking limit | 1: x, y | 2:
@@ -907,8 +910,9 @@ fn decode_body<F: Real>(
     let t = |at: usize| restore_millis(rd_u32(b, at), now);
     let byte = |i: usize| b.get(i).copied().unwrap_or(0);
     Ok(match kind {
-        MessageKind::State => Message::State(
-            StateWire {
+        MessageKind::State => Message::State(VehicleState {
+            brake: planner_core::BrakeLimit::from_tenths(byte(20)),
+            ..StateWire {
                 x: rd_u32(b, 2) as i32,
                 lanes: byte(6),
                 y: rd_u16(b, 7) as i16,
@@ -918,8 +922,8 @@ fn decode_body<F: Real>(
                 yaw: rd_u16(b, 14) as i16,
                 stamp: rd_u32(b, 16),
             }
-            .state(rd_u16(b, 0), now)?,
-        ),
+            .state(rd_u16(b, 0), now)?
+        }),
         MessageKind::Located => Message::Located {
             segment: rd_u16(b, 2),
             state: VehicleState {
@@ -1076,11 +1080,12 @@ mod tests {
     fn round_trip_and_e2e_checks() {
         let m = Message::State(state());
         let frames: Frames<TestFrame> = encode(&m, 0x07, 3).unwrap();
-        assert_eq!(frames.len(), 3);
+        assert_eq!(frames.len(), 4);
         let mut r = Reassembler::<4>::new();
-        assert_eq!(r.push::<f64, _>(&frames[0], NOW), Ok(None));
-        assert_eq!(r.push::<f64, _>(&frames[1], NOW), Ok(None));
-        let Ok(Some(Message::State(s))) = r.push::<f64, _>(&frames[2], NOW) else {
+        for f in &frames[..3] {
+            assert_eq!(r.push::<f64, _>(f, NOW), Ok(None));
+        }
+        let Ok(Some(Message::State(s))) = r.push::<f64, _>(&frames[3], NOW) else {
             panic!("a state");
         };
         let e = state();
@@ -1095,19 +1100,21 @@ mod tests {
         );
         // The same message again: duplicate (same counter), reassembler unchanged.
         let before = r.clone().slots;
-        assert_eq!(r.push::<f64, _>(&frames[0], NOW), Ok(None));
-        assert_eq!(r.push::<f64, _>(&frames[1], NOW), Ok(None));
+        for f in &frames[..3] {
+            assert_eq!(r.push::<f64, _>(f, NOW), Ok(None));
+        }
         assert_eq!(
-            r.push::<f64, _>(&frames[2], NOW),
+            r.push::<f64, _>(&frames[3], NOW),
             Err(DecodeError::Duplicate)
         );
         // A newer counter but an older stamp: stale.
         let mut old = state();
         old.stamp = secs(1.0);
         let frames: Frames<TestFrame> = encode(&Message::State(old), 0x07, 4).unwrap();
-        let _ = r.push::<f64, _>(&frames[0], NOW);
-        let _ = r.push::<f64, _>(&frames[1], NOW);
-        assert_eq!(r.push::<f64, _>(&frames[2], NOW), Err(DecodeError::Stale));
+        for f in &frames[..3] {
+            let _ = r.push::<f64, _>(f, NOW);
+        }
+        assert_eq!(r.push::<f64, _>(&frames[3], NOW), Err(DecodeError::Stale));
         assert_eq!(r.slots[0].last_counter, before[0].last_counter);
         // A flipped bit: CRC.
         let mut newer = state();
@@ -1117,9 +1124,10 @@ mod tests {
         d.copy_from_slice(frames[1].data());
         d[3] ^= 0x10;
         frames[1] = TestFrame::new(frames[1].id(), &d).unwrap();
-        let _ = r.push::<f64, _>(&frames[0], NOW);
-        let _ = r.push::<f64, _>(&frames[1], NOW);
-        assert_eq!(r.push::<f64, _>(&frames[2], NOW), Err(DecodeError::Crc));
+        for f in &frames[..3] {
+            let _ = r.push::<f64, _>(f, NOW);
+        }
+        assert_eq!(r.push::<f64, _>(&frames[3], NOW), Err(DecodeError::Crc));
         // A continuation without its first frame.
         let mut r2 = Reassembler::<4>::new();
         assert_eq!(
@@ -1128,10 +1136,11 @@ mod tests {
         );
         // Sender address and id disagree.
         let frames: Frames<TestFrame> = encode(&Message::State(state()), 0x08, 1).unwrap();
-        let _ = r2.push::<f64, _>(&frames[0], NOW);
-        let _ = r2.push::<f64, _>(&frames[1], NOW);
+        for f in &frames[..3] {
+            let _ = r2.push::<f64, _>(f, NOW);
+        }
         assert_eq!(
-            r2.push::<f64, _>(&frames[2], NOW),
+            r2.push::<f64, _>(&frames[3], NOW),
             Err(DecodeError::SenderMismatch)
         );
     }
@@ -1578,27 +1587,27 @@ mod tests {
             let st = Message::State(state());
             let f = fd(&st, 0x07, 2);
             let d = f.data();
-            assert_eq!(d.len(), 24);
+            assert_eq!(d.len(), 32);
             let mut r = Reassembler::<8>::new();
             // A classic first frame of another message is pending.
             let classic: Frames<TestFrame> = encode(&st, 0x07, 9).unwrap();
             assert_eq!(r.push::<f64, _>(&classic[0], NOW), Ok(None));
             let before = r.slots.clone();
-            let mut longer = [0u8; 32];
-            longer[..24].copy_from_slice(d);
-            let mut padded = [0u8; 24];
+            let mut longer = [0u8; 48];
+            longer[..32].copy_from_slice(d);
+            let mut padded = [0u8; 32];
             padded.copy_from_slice(d);
-            padded[23] = 1;
-            let mut header = [0u8; 24];
+            padded[31] = 1;
+            let mut header = [0u8; 32];
             header.copy_from_slice(d);
             header[0] = 2;
-            let mut flipped = [0u8; 24];
+            let mut flipped = [0u8; 32];
             flipped.copy_from_slice(d);
             flipped[5] ^= 0x10;
             let mut other = state();
             other.id = 0x0108;
             let cases = [
-                (with_data(&f, &d[..20]), DecodeError::BadLength),
+                (with_data(&f, &d[..24]), DecodeError::BadLength),
                 (with_data(&f, &longer), DecodeError::BadLength),
                 (with_data(&f, &padded), DecodeError::BadLength),
                 (with_data(&f, &header), DecodeError::HeaderMismatch),
@@ -1729,7 +1738,8 @@ mod tests {
         assert_eq!(r.slots, kept);
         // a itself still completes.
         assert_eq!(r.push::<f64, _>(&fa[1], NOW), Ok(None));
-        let Ok(Some(Message::State(got))) = r.push::<f64, _>(&fa[2], NOW) else {
+        assert_eq!(r.push::<f64, _>(&fa[2], NOW), Ok(None));
+        let Ok(Some(Message::State(got))) = r.push::<f64, _>(&fa[3], NOW) else {
             panic!("a completes");
         };
         assert!((got.x - a.x).abs() < 0.01);
@@ -1953,43 +1963,39 @@ mod tests {
         }
 
         #[test]
-        fn a_located_state_carries_its_braking_limit_and_a_plain_one_cannot() {
+        fn both_state_kinds_carry_the_braking_limit_and_zero_means_undeclared() {
             let mut st = state();
             st.id = 7;
             st.brake = planner_core::BrakeLimit::from_mps2(4.5);
-            let located = Message::Located {
-                segment: 1,
-                state: st,
+            let brake_of = |m: Option<Message<f64>>| match m {
+                Some(Message::Located { state, .. } | Message::State(state)) => state.brake,
+                _ => panic!("a state"),
             };
-            let mut r = Reassembler::<8>::new();
-            let Ok(Some(Message::Located { state: got, .. })) = push_all(&mut r, &located, 7, 1)
-            else {
-                panic!("a located state");
-            };
-            assert_eq!(got.brake, st.brake);
-            // An older sender's zero byte: not declared.
-            st.brake = None;
-            st.stamp = st
-                .stamp
-                .saturating_add(planner_core::Duration::from_millis(10));
-            let older = Message::Located {
-                segment: 1,
-                state: st,
-            };
-            let Ok(Some(Message::Located { state: got, .. })) = push_all(&mut r, &older, 7, 2)
-            else {
-                panic!("a located state");
-            };
-            assert_eq!(got.brake, None);
-            // `State` has no room for it: the follower takes the sender as a wall.
-            let mut plain = state();
-            plain.brake = planner_core::BrakeLimit::from_mps2(4.5);
-            let mut r = Reassembler::<8>::new();
-            let Ok(Some(Message::State(got))) = push_all(&mut r, &Message::State(plain), 7, 1)
-            else {
-                panic!("a state");
-            };
-            assert_eq!(got.brake, None);
+            for located in [false, true] {
+                let message = |st: VehicleState<f64>| match located {
+                    true => Message::Located {
+                        segment: 1,
+                        state: st,
+                    },
+                    false => Message::State(st),
+                };
+                let mut r = Reassembler::<8>::new();
+                let mut declared = st;
+                let got = push_all(&mut r, &message(declared), 7, 1);
+                assert_eq!(brake_of(got.unwrap()), declared.brake, "located {located}");
+                // An older sender's zero byte: not declared, so followers take a wall.
+                declared.brake = None;
+                declared.stamp = declared
+                    .stamp
+                    .saturating_add(planner_core::Duration::from_millis(10));
+                let got = push_all(&mut r, &message(declared), 7, 2);
+                assert_eq!(brake_of(got.unwrap()), None, "located {located}");
+                // CAN FD carries the same byte.
+                let fd: crate::FdFrame = encode_fd(&message(st), 7, 3).unwrap();
+                let mut r = Reassembler::<8>::new();
+                let got = r.push::<f64, _>(&fd, NOW);
+                assert_eq!(brake_of(got.unwrap()), st.brake, "located {located}");
+            }
         }
 
         #[test]

@@ -19,6 +19,9 @@
 //! every 49.7 days, and a receiver restores the full instant as the one nearest its own
 //! clock, [`crate::codec::restore_millis`]); lanes 4 bits, 15 = none. All little-endian.
 //!
+//! **A vehicle state** (kind 1, 4 frames): id, x, lanes | y, heading, speed, β and flags |
+//! yaw rate, stamp, braking limit (0.1 m/s², 0 = not declared) | reserved (zero), CRC.
+//!
 //! **Networks** add a state with its segment (kind 7, 4 frames: id, segment, lanes, β
 //! and flags | x, y | heading, speed, yaw rate | stamp, CRC), a request with its junction
 //! (kind 8, 3 frames: id, junction, inlet, outlet, speed | s, arrival | CRC) and an exit
@@ -100,7 +103,7 @@ pub const SPEED_LIMIT: f64 = 100.0;
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum MessageKind {
-    /// V2V vehicle state (3 frames).
+    /// V2V vehicle state (4 frames).
     State = 1,
     /// V2I registration / crossing request with inlet, outlet, arrival (2 frames).
     Request = 2,
@@ -124,8 +127,8 @@ impl MessageKind {
     /// Frames a message of this kind spans.
     pub fn frames(self) -> usize {
         match self {
-            MessageKind::Located => 4,
-            MessageKind::State | MessageKind::JunctionRequest => 3,
+            MessageKind::Located | MessageKind::State => 4,
+            MessageKind::JunctionRequest => 3,
             MessageKind::Request | MessageKind::JunctionExit => 2,
             MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit | MessageKind::Sync => 1,
         }

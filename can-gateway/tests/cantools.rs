@@ -9,7 +9,7 @@
 use can_gateway::log::candump_line;
 use can_gateway::wire::{Request, TrackWire, CLOCK_ADDRESS, MANAGER_ADDRESS};
 use can_gateway::{encode, Frames, Instant, Message};
-use planner_core::VehicleState;
+use planner_core::{BrakeLimit, VehicleState};
 
 /// `ms` milliseconds after the epoch.
 fn ms(ms: u64) -> Instant {
@@ -95,6 +95,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                     signals: Vec<Vec<(&str, f64)>>,
                     log: &mut String,
                     exp: &mut String| {
+        assert_eq!(frames.len(), signals.len(), "the signals of every frame");
         for (f, sig) in frames.iter().zip(&signals) {
             line(&|t| candump_line(t, "vcan0", f), sig, log, exp);
         }
@@ -136,7 +137,8 @@ fn cantools_decodes_the_gateways_candump_log() {
             beta: (i == 2).then_some(1),
             stamp: ms(12_340 + 1_000 * i as u64),
             cooperative: i != 1,
-            brake: None,
+            // Not declared, a truck's, a car's.
+            brake: [None, BrakeLimit::from_mps2(4.5), BrakeLimit::from_mps2(7.9)][i],
         };
         let frames: Frames<F8> = encode(&Message::State(s), s.id as u8, i as u8).expect("encodes");
         let deg = 180.0 / std::f64::consts::PI;
@@ -162,8 +164,10 @@ fn cantools_decodes_the_gateways_candump_log() {
                 vec![
                     ("YawRate", s.omega * deg),
                     ("Timestamp", dbc_secs(s.stamp)),
+                    ("BrakeLimit", s.brake.map_or(0.0, |b| b.mps2())),
                     ("FrameIndex", 2.0),
                 ],
+                vec![("FrameIndex", 3.0)],
             ],
             &mut log,
             &mut expected,

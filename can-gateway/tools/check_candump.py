@@ -17,10 +17,29 @@ def crc8_j1850(data: bytes, crc: int = 0xFF) -> int:
     return crc
 
 
-FRAMES_PER_KIND = {1: 3, 2: 2, 7: 4, 8: 3, 9: 2}  # kind code -> frames per message (others: 1)
+FRAMES_PER_KIND = {}  # kind code -> frames per message, read from the DBC (frames_per_kind)
 FD_INDEX, FD_SECURED_INDEX = 15, 14  # a whole message in one CAN FD frame (+ SecOC trailer)
 FD_LENGTHS = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64]
 TRAILER_LEN = 6
+
+
+def frames_per_kind(db):
+    """Classic frames per message kind, as the DBC lays them out (its identifiers: PDU
+    specific = kind code x 16 + frame index; indexes 14 and 15 are CAN FD)."""
+    counts = {}
+    for msg in db.messages:
+        ps = (msg.frame_id >> 8) & 0xFF
+        if ps & 0x0F < FD_SECURED_INDEX:
+            counts[ps >> 4] = counts.get(ps >> 4, 0) + 1
+    return counts
+
+
+def load_dbc(dbc_path):
+    """The DBC as cantools reads it; the frames per kind taken from it for reassembly."""
+    db = cantools.database.load_file(dbc_path, frame_id_mask=0x1FFFFF00)
+    FRAMES_PER_KIND.clear()
+    FRAMES_PER_KIND.update(frames_per_kind(db))
+    return db
 
 
 def check_crc(sa, kind, counter, body):
@@ -71,7 +90,7 @@ def reassemble(frames):
 
 
 def main(dbc_path: str, log_path: str, expected_path: str) -> int:
-    db = cantools.database.load_file(dbc_path, frame_id_mask=0x1FFFFF00)
+    db = load_dbc(dbc_path)
     frames = []
     for line in open(log_path):
         line = line.strip()

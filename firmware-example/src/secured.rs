@@ -5,7 +5,7 @@
 //! controller is in loopback (as in the approach scenario), so the node verifies what it
 //! signed itself: its key store holds its own key under its address. Each message is a
 //! vehicle state, signed with a fresh freshness value (the period's time in ms), sent as
-//! classic CAN (three data frames and the authenticator frame) or as one CAN FD frame,
+//! classic CAN (four data frames and the authenticator frame) or as one CAN FD frame,
 //! and pushed frame by frame into a reassembler that checks CRC, counter, freshness and
 //! the AES-128-CMAC; only that pushing is timed. Before each CAN FD message a copy of it
 //! with one payload bit flipped is pushed and must be refused, so the figures are those of

@@ -45,10 +45,10 @@ fn multilane_fleet_on_can_frames() {
     assert_eq!(f.tasks, f.run.vehicles);
     assert_eq!(f.periods, 1501);
     assert!(f.can.rejected.is_empty(), "{:?}", f.can.rejected);
-    // Three frames per state, one state per vehicle and period.
-    assert_eq!(f.can.frames_sent, 3 * v * f.periods);
+    // Four frames per state, one state per vehicle and period.
+    assert_eq!(f.can.frames_sent, 4 * v * f.periods);
     // Everyone hears every other vehicle's frames and every SYNC.
-    assert_eq!(f.can.frames_received, v * ((v - 1) * 3 + 1) * f.periods);
+    assert_eq!(f.can.frames_received, v * ((v - 1) * 4 + 1) * f.periods);
     assert_eq!(f.state_latency.count, v * (v - 1) * (f.periods - 1));
     assert_eq!(f.run.lane_changes.changes, 8);
     // As on the in-process bus, to within a period (the planners see rounded states).

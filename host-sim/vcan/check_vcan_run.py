@@ -20,10 +20,9 @@ import os
 import sys
 from collections import Counter, defaultdict
 
-import cantools
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "can-gateway", "tools"))
-from check_candump import reassemble  # noqa: E402
+from check_candump import load_dbc, reassemble  # noqa: E402
 
 KIND = {1: "State", 2: "Request", 3: "Grant", 4: "Revoke", 5: "Exit", 6: "Sync",
         7: "Located", 8: "JunctionRequest", 9: "JunctionExit"}
@@ -78,7 +77,7 @@ def check_summary(s, vm_status):
 def main(dbc_path, summary_path, log_path, trace_path, vm_status):
     s = json.load(open(summary_path))
     crossing = check_summary(s, vm_status)
-    db = cantools.database.load_file(dbc_path, frame_id_mask=0x1FFFFF00)
+    db = load_dbc(dbc_path)
     frames = []
     for n, line in enumerate(open(log_path), 1):
         line = line.strip()
@@ -116,7 +115,7 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
     if incomplete:
         fail(f"incomplete messages at the end of the log: {incomplete}")
     last_counter = {}
-    states = {}  # (id, stamp ms) -> signals of the three frames
+    states = {}  # (id, stamp ms) -> signals of its frames
     requests = defaultdict(list)  # vehicle -> [(inlet, outlet, s, v)] in bus order
     kinds = Counter()
     exits = Counter()  # (vehicle, junction) -> JunctionExit messages
@@ -185,6 +184,9 @@ def main(dbc_path, summary_path, log_path, trace_path, vm_status):
             ("Heading", sig["Heading"], math.degrees(float(row["theta"])),
              0.00625 + math.degrees(5e-7)),
         ]
+        if "BrakeLimit" in sig:  # declared rounded up to 0.1 m/s² (a truck's 4.45 sends 4.5)
+            pairs.append(("BrakeLimit", sig["BrakeLimit"],
+                          math.ceil(float(row["brake"]) * 10 - 1e-6) / 10, 1e-6))
         if prev is not None:  # the state's speed is the one applied over the last period
             pairs.append(("Speed", sig["Speed"], float(prev["v"]), 0.01 + 5e-7))
         for name, got, want, tol in pairs:

@@ -61,7 +61,7 @@
 //! | N | `size_of` `Planner` | `size_of` `LanePlanner` | stack per call: approach | stack per call: lane change, both planners | peak stack, whole firmware | instructions per single-lane step, median / worst | per lane-change step, median / worst |
 //! |---|---|---|---|---|---|---|---|
 //! | 20 | 5,272 B | 8,780 B | 3,200 B | 3,752 B | 4,016 B | 50,730 / 330,535 | 198,235 / 204,005 |
-//! | 50 | 12,992 B | 16,620 B | 6,472 B | 7,600 B | 7,856 B | 125,470 / 1,050,420 | 254,475 / 700,780 |
+//! | 50 | 12,992 B | 16,620 B | 6,472 B | 7,576 B | 7,832 B | 125,470 / 1,050,420 | 254,485 / 700,780 |
 //! <!-- resources: end -->
 
 use crate::mpc::CostWeights;

@@ -939,8 +939,9 @@ impl<'a> WireMap<'a> {
 }
 
 /// Frames one drain of a node reads at most (a bound on the loop; a period carries
-/// three frames per vehicle).
-pub const DRAIN_LIMIT: usize = 4 * 3 * crate::scenario::road::MAX_VEHICLES;
+/// one state per vehicle, of at most [`can_gateway::wire::MAX_FRAMES`] frames).
+pub const DRAIN_LIMIT: usize =
+    4 * can_gateway::wire::MAX_FRAMES * crate::scenario::road::MAX_VEHICLES;
 
 /// The message-level [`Bus`] over CAN: one [`CanNode`] per vehicle and per junction
 /// manager, each on its own port (its own SocketCAN socket, or hub port). A message is
