@@ -160,3 +160,28 @@ fn a_straight_road_on_can_frames_credits_leaders_as_in_process() {
         "{on_can} credited, {wall} behind walls"
     );
 }
+
+/// `scale --invariant`: the same platoons behind the same random leaders, the followers
+/// under each invariant. Crediting the leader lets them hold their reference speed
+/// closer behind it, so the closed-loop cost falls — and nothing becomes unsafe.
+#[test]
+fn scale_runs_under_the_invariant_asked_for() {
+    let run = |invariant: &str| {
+        let v = json(&[
+            "scale",
+            "--vehicles",
+            "40",
+            "--duration",
+            "10",
+            "--invariant",
+            invariant,
+        ]);
+        assert_eq!(v["invariant"], invariant);
+        for k in ["collisions", "invariant_violations", "limit_violations"] {
+            assert_eq!(v[k], 0, "{k} under {invariant}");
+        }
+        v["tracking_cost_per_step"].as_f64().expect("a cost")
+    };
+    let (paper, aware) = (run("paper"), run("leader-aware"));
+    assert!(aware < 0.9 * paper, "{aware} leader-aware, {paper} paper");
+}

@@ -65,6 +65,9 @@ pub struct ScaleArgs {
     /// With --reuse: most consecutive steps without a solve.
     #[arg(long, default_value_t = planner_core::ReusePolicy::<f64>::default().max_age)]
     reuse_max_age: u8,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, value_enum, default_value = "paper")]
+    pub invariant: super::InvariantArg,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -189,6 +192,7 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
         seed: a.seed,
         reuse: a.reuse.then_some(policy),
         solver: a.solver.choice(),
+        invariant: a.invariant.invariant(),
     };
     if a.compare {
         let r = compare(&settings);

@@ -48,6 +48,9 @@ pub struct ScaleReport {
     pub threads: usize,
     /// The planners' speed solver.
     pub solver: SolverChoice,
+    /// The invariant every planner keeps toward the vehicle ahead (`paper` or
+    /// `leader-aware`).
+    pub invariant: &'static str,
     /// Simulated time (s).
     pub sim_seconds: f64,
     /// Wall-clock time (s).
@@ -62,6 +65,9 @@ pub struct ScaleReport {
     pub invariant_violations: u64,
     /// Limit violations seen by the monitors.
     pub limit_violations: u64,
+    /// Smallest bumper-to-bumper gap between two vehicles of a lane (m): how close the
+    /// invariant lets followers come.
+    pub min_gap_m: f64,
     /// Planner fallback steps (excluding forced standstills).
     pub fallback_steps: u64,
     /// Wall-clock time of one planner step (a vehicle's decide: hear, plan, verify).
@@ -216,6 +222,8 @@ pub struct ScaleSettings {
     pub reuse: Option<ReusePolicy<f64>>,
     /// The planners' speed solver.
     pub solver: SolverChoice,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    pub invariant: planner_core::Invariant,
 }
 
 /// One road's world run to its end: its summary, counters and step costs.
@@ -224,7 +232,9 @@ fn run_road(s: &ScaleSettings, r: usize, n: usize) -> (Summary, Counters, StepCo
         Kind::Platoons => road(r, n, s.duration_s, s.seed),
         Kind::Traffic => traffic_road(r, n, s.duration_s, s.seed),
     };
-    let mut sim = World::<20>::new(road.world(), s.solver, None);
+    let mut spec = road.world();
+    spec.invariant = s.invariant;
+    let mut sim = World::<20>::new(spec, s.solver, None);
     sim.set_reuse(s.reuse);
     sim.measure_step_costs();
     let summary = super::multilane::run_world(&mut sim, &mut |_| {});
@@ -259,6 +269,7 @@ pub fn run(s: &ScaleSettings) -> ScaleReport {
         roads: roads.len(),
         threads,
         solver: s.solver,
+        invariant: crate::world::invariant_name(s.invariant),
         sim_seconds: s.duration_s,
         wall_seconds: wall,
         realtime_factor: s.duration_s / wall,
@@ -266,6 +277,10 @@ pub fn run(s: &ScaleSettings) -> ScaleReport {
         collisions: sum(|s| s.collisions),
         invariant_violations: sum(|s| s.invariant_violations),
         limit_violations: sum(|s| s.limit_violations),
+        min_gap_m: runs
+            .iter()
+            .map(|(s, _, _)| s.min_gap_m)
+            .fold(f64::INFINITY, f64::min),
         fallback_steps: sum(|s| s.fallback_steps),
         step: costs.percentiles(),
         solves_per_step: per_step(counters.solved_steps),
@@ -286,14 +301,16 @@ impl core::fmt::Display for ScaleReport {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
             f,
-            "{} vehicles on {} roads ({:?}), {} threads: {:.1} s simulated in {:.2} s = {:.2}x real time, \
+            "{} vehicles on {} roads ({:?}, {} invariant), {} threads: {:.1} s simulated in {:.2} s = {:.2}x real time, \
              {:.0} planner steps/s\n  step p50 {:.1} µs, p90 {:.1} µs, p99 {:.1} µs, max {:.0} µs; \
              {:.2} solves ({:.0} % by the active-set step), {:.2} reuses, {:.1} solver iterations, {:.1} lateral iterations per step; {} lane changes\n  \
              closed-loop cost {:.4} per step; certified gap {:.2e} per reuse\n  \
-             {} collisions, {} invariant violations, {} limit violations, {} fallback steps",
+             {} collisions, {} invariant violations, {} limit violations, {} fallback steps; \
+             smallest gap {:.3} m",
             self.vehicles,
             self.roads,
             self.kind,
+            self.invariant,
             self.threads,
             self.sim_seconds,
             self.wall_seconds,
@@ -314,7 +331,8 @@ impl core::fmt::Display for ScaleReport {
             self.collisions,
             self.invariant_violations,
             self.limit_violations,
-            self.fallback_steps
+            self.fallback_steps,
+            self.min_gap_m
         )
     }
 }
