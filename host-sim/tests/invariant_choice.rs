@@ -108,6 +108,8 @@ fn the_command_line_takes_the_invariant_and_reports_it() {
         &["platoons", "--cases", "3"][..],
         &["grids", "--cases", "1", "--duration", "20"],
         &["experiment", "network", "--grid", "2x2", "--duration", "20"],
+        &["worlds", "--vehicles", "20", "--duration", "2"],
+        &["scale", "--vehicles", "4", "--duration", "1"],
         &[
             "experiment",
             "attacks",

@@ -124,7 +124,7 @@ fn random_grids_come_out_clean() {
 #[test]
 fn worlds_of_any_size_have_no_blind_step() {
     use host_sim::experiments::worlds::{grid_fleet, worlds};
-    let r = worlds(&[100, 400], 2.0, None).expect("the worlds run");
+    let r = worlds(&[100, 400], 2.0, None, planner_core::Invariant::Paper).expect("the worlds run");
     assert_eq!(r.worlds.len(), 2);
     for w in &r.worlds {
         assert_eq!(

@@ -74,7 +74,7 @@ impl PrecisionArg {
 }
 
 /// The invariant kept toward the vehicle ahead.
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum InvariantArg {
     /// Lemma 3 as the paper writes it: the leader may stop at once.
     Paper,

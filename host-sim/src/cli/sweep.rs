@@ -282,6 +282,9 @@ pub struct WorldsArgs {
     /// by up to as many more (at most 10, the loader's bound).
     #[arg(long)]
     delay: Option<f64>,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, value_enum, default_value = "paper")]
+    invariant: super::InvariantArg,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -300,7 +303,12 @@ pub fn worlds(a: WorldsArgs) -> ExitCode {
     if a.vehicles.contains(&0) {
         return bad("--vehicles: every size must be at least 1");
     }
-    let r = match host_sim::experiments::worlds::worlds(&a.vehicles, a.duration, a.delay) {
+    let r = match host_sim::experiments::worlds::worlds(
+        &a.vehicles,
+        a.duration,
+        a.delay,
+        a.invariant.invariant(),
+    ) {
         Ok(r) => r,
         Err(e) if e.starts_with("internal") => {
             eprintln!("error: {e}");

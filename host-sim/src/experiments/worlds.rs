@@ -161,6 +161,9 @@ pub struct WorldRow {
 /// The `worlds` report.
 #[derive(Debug, Clone, Serialize)]
 pub struct WorldsReport {
+    /// The invariant every planner kept toward the vehicle ahead (`paper` or
+    /// `leader-aware`).
+    pub invariant: &'static str,
     /// One row per size (and per bus, with a delay).
     pub worlds: Vec<WorldRow>,
     /// Blind steps over every run.
@@ -172,27 +175,30 @@ pub struct WorldsReport {
 }
 
 /// Runs a world of each of `sizes` vehicles for `duration_s`, and again with every
-/// message delayed by `delay_s` (if given); or why a size cannot be built.
+/// message delayed by `delay_s` (if given), every planner keeping `invariant`; or why a
+/// size cannot be built.
 pub fn worlds(
     sizes: &[usize],
     duration_s: f64,
     delay_s: Option<f64>,
+    invariant: planner_core::Invariant,
 ) -> Result<WorldsReport, String> {
     let mut rows = Vec::new();
     for &n in sizes {
         let side =
             smallest_grid(n).ok_or_else(|| format!("no grid up to 8x8 holds {n} vehicles"))?;
         let text = grid_fleet((side, side), n, BLOCK_M, duration_s)?;
-        let clean = run(&text, n, side, 0.0, None)?;
+        let clean = run(&text, (n, side), invariant, 0.0, None)?;
         let per_second = clean.wall_seconds / clean.sim_seconds.max(1e-9);
         rows.push(clean);
         if let Some(d) = delay_s {
-            let mut slow = run(&text, n, side, d, Some(per_second))?;
+            let mut slow = run(&text, (n, side), invariant, d, Some(per_second))?;
             slow.delay_s = d;
             rows.push(slow);
         }
     }
     Ok(WorldsReport {
+        invariant: crate::world::invariant_name(invariant),
         blind_steps: rows.iter().map(|r| r.blind_steps).sum(),
         collisions: rows.iter().map(|r| r.collisions).sum(),
         invariant_violations: rows.iter().map(|r| r.invariant_violations).sum(),
@@ -200,17 +206,19 @@ pub fn worlds(
     })
 }
 
-/// One run of `text` (`n` vehicles on a `side` × `side` grid), its messages delayed and
-/// jittered by `delay_s` each; `clean`: the clean bus's wall seconds per simulated second.
+/// One run of `text` (`n` vehicles on a `side` × `side` grid) under `invariant`, its
+/// messages delayed and jittered by `delay_s` each; `clean`: the clean bus's wall seconds
+/// per simulated second.
 fn run(
     text: &str,
-    n: usize,
-    side: u8,
+    (n, side): (usize, u8),
+    invariant: planner_core::Invariant,
     delay_s: f64,
     clean: Option<f64>,
 ) -> Result<WorldRow, String> {
     let mut spec =
         scenario::parse(text, Path::new("grid-fleet.toml")).map_err(|e| e.to_string())?;
+    spec.invariant = invariant;
     spec.faults = Faults {
         delay_s,
         jitter_s: delay_s,
