@@ -405,8 +405,8 @@ fn bench_can_carries_every_message_in_each_configuration() {
     let rows = v["results"].as_array().expect("rows");
     let configs: Vec<&str> = rows.iter().filter_map(|r| r["config"].as_str()).collect();
     assert_eq!(configs, ["classic", "classic+secoc", "fd", "fd+secoc"]);
-    // A state is 3 classic frames, 4 with its authenticator, and 1 CAN FD frame either way.
-    for (r, frames) in rows.iter().zip([1200, 1600, 400, 400]) {
+    // A state is 4 classic frames, 5 with its authenticator, and 1 CAN FD frame either way.
+    for (r, frames) in rows.iter().zip([1600, 2000, 400, 400]) {
         assert_eq!(r["received"], 400, "{r}");
         assert_eq!(r["frames"], frames, "{r}");
     }
