@@ -9,8 +9,17 @@
 //! lane_change, yield, fallback, waiting, crossing, done), and where it is: `s<id>` on
 //! segment id (a straight road is `s0`), `j<id>` at intersection id; then what an outside
 //! checker needs to judge mixed vehicles: the vehicle's length and width (m), its braking
-//! limit (m/s²), and the invariant it keeps toward a cooperating vehicle ahead (`paper` or
-//! `leader-aware`; toward anything else, the paper's).
+//! limit (m/s²), and the invariant it keeps (`paper`, `leader-aware`, or `none` for a
+//! scripted or random driver, which keeps none and which no follower credits).
+//!
+//! **Toward whom.** On a segment a vehicle keeping an invariant claims it toward the next
+//! vehicle ahead in every lane its rectangle overlaps (lane j spans y ∈ [j Wl, (j+1) Wl]
+//! in the segment's frame) and toward the segment's dead end; under `leader-aware` it
+//! credits that vehicle with the least distance it still travels braking at the larger of
+//! the two `brake` limits unless the vehicle ahead is `none`, and under `paper` it credits
+//! nothing — exactly the pairs and rule of [`crate::monitor::road`], so the trace alone
+//! lets an outside checker judge every pair (`host-sim/tools/check_trace.py` does, for a
+//! straight road).
 
 use crate::world::network::{Network, Place};
 use crate::world::TraceRow;
@@ -81,7 +90,7 @@ impl<W: Write> TraceWriter<W> {
             r.length,
             r.width,
             r.brake,
-            crate::world::invariant_name(r.invariant),
+            r.invariant.map_or("none", crate::world::invariant_name),
         ) {
             self.error = Some(e);
         }

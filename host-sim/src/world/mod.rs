@@ -215,8 +215,10 @@ pub struct TraceRow {
     pub width: f64,
     /// Its braking limit |amin| (m/s²).
     pub brake: f64,
-    /// The invariant it keeps toward a cooperating vehicle ahead.
-    pub invariant: planner_core::Invariant,
+    /// The invariant it keeps toward a cooperating vehicle ahead; `None` for a driver
+    /// that keeps none (scripted or random: its followers never credit it, and nothing
+    /// judges its own gaps).
+    pub invariant: Option<planner_core::Invariant>,
 }
 
 /// Everything a world is made of, validated (a scenario file loads into one).

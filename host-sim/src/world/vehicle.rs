@@ -1091,8 +1091,8 @@ impl<const N: usize> Vehicle<N> {
             width: super::WIDTH_M,
             brake: ctx.lim.brake,
             invariant: match &self.driver {
-                Driver::Planner(b) => b.setup.invariant,
-                _ => planner_core::Invariant::Paper,
+                Driver::Planner(b) => Some(b.setup.invariant),
+                _ => None,
             },
         }
     }

@@ -1,0 +1,117 @@
+//! The trace alone judges a straight road: `tools/check_trace.py`, which reads nothing but
+//! a `--trace` file (its lengths, widths, braking limits and invariants as columns, the
+//! rule in `output/trace.rs`), agrees with the monitor on the shipped straight roads under
+//! both invariants, and finds what is wrong in a trace made wrong.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+#[path = "../../can-gateway/tests/support/mod.rs"]
+#[allow(dead_code)] // skip_or_fail: this test needs no skip, python3 is a prerequisite
+mod support;
+
+fn out_dir() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("host-sim-trace-check-{}", std::process::id()));
+    std::fs::create_dir_all(&d).expect("a temporary folder");
+    d
+}
+
+/// `host-sim run scenarios/NAME --invariant INV --trace`: the trace's path.
+fn trace(name: &str, invariant: &str, dir: &Path) -> PathBuf {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios")
+        .join(name);
+    let out = dir.join(format!("{name}-{invariant}.csv"));
+    let run = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .arg("run")
+        .arg(&file)
+        .args(["--invariant", invariant, "--trace"])
+        .arg(&out)
+        .output()
+        .expect("host-sim runs");
+    assert!(
+        run.status.success(),
+        "{name}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    out
+}
+
+/// The checker's verdict on `trace`: (pairs judged, credited, violations), and its exit.
+fn check(trace: &Path) -> ((u64, u64, u64), Option<i32>) {
+    let out = Command::new(support::python())
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/check_trace.py"))
+        .arg(trace)
+        .arg("--json")
+        .output()
+        .expect("python3 runs");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!("{e}: {}", String::from_utf8_lossy(&out.stderr));
+    });
+    let n = |k: &str| v[k].as_u64().expect("a count");
+    (
+        (n("pairs"), n("credited"), n("violations")),
+        out.status.code(),
+    )
+}
+
+#[test]
+fn the_trace_alone_judges_every_pair_as_the_monitor_does() {
+    let dir = out_dir();
+    for name in ["multilane.toml", "stop-and-go.toml", "road-end.toml"] {
+        for invariant in ["paper", "leader-aware"] {
+            let ((pairs, credited, violations), code) = check(&trace(name, invariant, &dir));
+            assert_eq!((violations, code), (0, Some(0)), "{name} {invariant}");
+            assert!(pairs > 1_000, "{name} {invariant}: {pairs} pairs");
+            // Credit only where followers keep the leader-aware invariant, and there
+            // toward most leaders (scripted leaders are `none`: never credited).
+            match invariant {
+                "paper" => assert_eq!(credited, 0, "{name}"),
+                _ => assert!(credited * 10 > pairs, "{name}: {credited} of {pairs}"),
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_trace_made_wrong_is_judged_wrong() {
+    let dir = out_dir().join("wrong");
+    std::fs::create_dir_all(&dir).expect("a folder");
+    let good = trace("multilane.toml", "leader-aware", &dir);
+    let text = std::fs::read_to_string(&good).expect("the trace");
+    // The same run claimed under the paper's invariant: its followers were closer than
+    // walls allow, so the checker must find them.
+    let paper = dir.join("claimed-paper.csv");
+    std::fs::write(&paper, text.replace(",leader-aware\n", ",paper\n")).expect("written");
+    let ((_, credited, violations), code) = check(&paper);
+    assert_eq!(credited, 0);
+    assert!(violations > 0 && code == Some(1), "{violations} violations");
+    // Every vehicle but one follower that needed the credit claimed as keeping no
+    // invariant: that follower may credit none of them, so it is judged wrong again.
+    let first = Command::new(support::python())
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/check_trace.py"))
+        .arg(&paper)
+        .arg("--json")
+        .output()
+        .expect("python3 runs");
+    let v: serde_json::Value = serde_json::from_slice(&first.stdout).expect("JSON");
+    let follower = v["first"][0]["follower"]
+        .as_u64()
+        .expect("a follower")
+        .to_string();
+    let none = dir.join("claimed-none.csv");
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    for l in lines.iter_mut().skip(1) {
+        let id = l.split(',').nth(1).unwrap_or_default();
+        if id != follower {
+            if let Some(stripped) = l.strip_suffix(",leader-aware") {
+                *l = format!("{stripped},none");
+            }
+        }
+    }
+    std::fs::write(&none, lines.join("\n") + "\n").expect("written");
+    let ((_, _, violations), code) = check(&none);
+    assert!(violations > 0 && code == Some(1), "{violations} violations");
+    let _ = std::fs::remove_dir_all(dir);
+}
