@@ -200,6 +200,8 @@ struct StateWire {
     lanes: u8,
     beta_flags: u8,
     stamp: u32,
+    /// The braking limit in tenths of m/s² (0: not declared).
+    brake: u8,
 }
 
 impl StateWire {
@@ -231,6 +233,7 @@ impl StateWire {
             lanes: lane_nibble(Some(s.lane))? | lane_nibble(s.alpha)? << 4,
             beta_flags: lane_nibble(s.beta)? | flags,
             stamp: time(s.stamp),
+            brake: s.brake.map_or(0, planner_core::BrakeLimit::tenths),
         })
     }
 
@@ -266,8 +269,7 @@ impl StateWire {
             beta: lane(self.beta_flags & 0x0F),
             stamp: restore_millis(self.stamp, now),
             cooperative: self.beta_flags & NOT_COOPERATIVE == 0,
-            // Each message kind reads its own braking limit byte.
-            brake: None,
+            brake: planner_core::BrakeLimit::from_tenths(self.brake),
         })
     }
 }
@@ -293,7 +295,7 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
             w.put(&[q.beta_flags]);
             w.put(&q.yaw.to_le_bytes());
             w.put(&q.stamp.to_le_bytes());
-            w.put(&[s.brake.map_or(0, planner_core::BrakeLimit::tenths)]);
+            w.put(&[q.brake]);
         }
         Message::Located { segment, state: s } => {
             // Frame 0: id, segment, lanes, β and flags, braking limit | 1: x, y | 2:
@@ -303,8 +305,7 @@ fn payload<F: Real>(m: &Message<F>) -> Result<([u8; MAX_FRAMES * CHUNK], usize),
             let q = StateWire::of(s)?;
             w.put(&s.id.to_le_bytes());
             w.put(&segment.to_le_bytes());
-            let brake = s.brake.map_or(0, planner_core::BrakeLimit::tenths);
-            w.put(&[q.lanes, q.beta_flags, brake]);
+            w.put(&[q.lanes, q.beta_flags, q.brake]);
             w.put(&q.x.to_le_bytes());
             w.put(&q.y.to_le_bytes());
             w.put(&[0]);
@@ -910,9 +911,8 @@ fn decode_body<F: Real>(
     let t = |at: usize| restore_millis(rd_u32(b, at), now);
     let byte = |i: usize| b.get(i).copied().unwrap_or(0);
     Ok(match kind {
-        MessageKind::State => Message::State(VehicleState {
-            brake: planner_core::BrakeLimit::from_tenths(byte(20)),
-            ..StateWire {
+        MessageKind::State => Message::State(
+            StateWire {
                 x: rd_u32(b, 2) as i32,
                 lanes: byte(6),
                 y: rd_u16(b, 7) as i16,
@@ -921,25 +921,24 @@ fn decode_body<F: Real>(
                 beta_flags: byte(13),
                 yaw: rd_u16(b, 14) as i16,
                 stamp: rd_u32(b, 16),
+                brake: byte(20),
             }
-            .state(rd_u16(b, 0), now)?
-        }),
+            .state(rd_u16(b, 0), now)?,
+        ),
         MessageKind::Located => Message::Located {
             segment: rd_u16(b, 2),
-            state: VehicleState {
-                brake: planner_core::BrakeLimit::from_tenths(byte(6)),
-                ..StateWire {
-                    lanes: byte(4),
-                    beta_flags: byte(5),
-                    x: rd_u32(b, 7) as i32,
-                    y: rd_u16(b, 11) as i16,
-                    heading: rd_u16(b, 14) as i16,
-                    speed: rd_u16(b, 16),
-                    yaw: rd_u16(b, 18) as i16,
-                    stamp: rd_u32(b, 21),
-                }
-                .state(rd_u16(b, 0), now)?
-            },
+            state: StateWire {
+                lanes: byte(4),
+                beta_flags: byte(5),
+                brake: byte(6),
+                x: rd_u32(b, 7) as i32,
+                y: rd_u16(b, 11) as i16,
+                heading: rd_u16(b, 14) as i16,
+                speed: rd_u16(b, 16),
+                yaw: rd_u16(b, 18) as i16,
+                stamp: rd_u32(b, 21),
+            }
+            .state(rd_u16(b, 0), now)?,
         },
         MessageKind::JunctionRequest => {
             let (inlet, outlet) = (track_of(byte(3))?, track_of(byte(4))?);
@@ -1907,6 +1906,7 @@ mod tests {
                 lanes: 0xF1,
                 beta_flags: NO_LANE,
                 stamp: 1,
+                brake: 0,
             }
         }
 
