@@ -37,8 +37,9 @@ fn trace(name: &str, invariant: &str, dir: &Path) -> PathBuf {
     out
 }
 
-/// The checker's verdict on `trace`: (pairs judged, credited, violations), and its exit.
-fn check(trace: &Path) -> ((u64, u64, u64), Option<i32>) {
+/// The checker's JSON verdict on `trace` (`pairs`, `credited`, `violations`, `first`: the
+/// first violations), and its exit code.
+fn check(trace: &Path) -> (serde_json::Value, Option<i32>) {
     let out = Command::new(support::python())
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/check_trace.py"))
         .arg(trace)
@@ -48,11 +49,13 @@ fn check(trace: &Path) -> ((u64, u64, u64), Option<i32>) {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
         panic!("{e}: {}", String::from_utf8_lossy(&out.stderr));
     });
+    (v, out.status.code())
+}
+
+/// (pairs judged, credited, violations) of a verdict.
+fn counts(v: &serde_json::Value) -> (u64, u64, u64) {
     let n = |k: &str| v[k].as_u64().expect("a count");
-    (
-        (n("pairs"), n("credited"), n("violations")),
-        out.status.code(),
-    )
+    (n("pairs"), n("credited"), n("violations"))
 }
 
 #[test]
@@ -60,7 +63,8 @@ fn the_trace_alone_judges_every_pair_as_the_monitor_does() {
     let dir = out_dir();
     for name in ["multilane.toml", "stop-and-go.toml", "road-end.toml"] {
         for invariant in ["paper", "leader-aware"] {
-            let ((pairs, credited, violations), code) = check(&trace(name, invariant, &dir));
+            let (v, code) = check(&trace(name, invariant, &dir));
+            let (pairs, credited, violations) = counts(&v);
             assert_eq!((violations, code), (0, Some(0)), "{name} {invariant}");
             assert!(pairs > 1_000, "{name} {invariant}: {pairs} pairs");
             // Credit only where followers keep the leader-aware invariant, and there
@@ -84,18 +88,12 @@ fn a_trace_made_wrong_is_judged_wrong() {
     // walls allow, so the checker must find them.
     let paper = dir.join("claimed-paper.csv");
     std::fs::write(&paper, text.replace(",leader-aware\n", ",paper\n")).expect("written");
-    let ((_, credited, violations), code) = check(&paper);
+    let (v, code) = check(&paper);
+    let (_, credited, violations) = counts(&v);
     assert_eq!(credited, 0);
     assert!(violations > 0 && code == Some(1), "{violations} violations");
     // Every vehicle but one follower that needed the credit claimed as keeping no
     // invariant: that follower may credit none of them, so it is judged wrong again.
-    let first = Command::new(support::python())
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/check_trace.py"))
-        .arg(&paper)
-        .arg("--json")
-        .output()
-        .expect("python3 runs");
-    let v: serde_json::Value = serde_json::from_slice(&first.stdout).expect("JSON");
     let follower = v["first"][0]["follower"]
         .as_u64()
         .expect("a follower")
@@ -111,7 +109,8 @@ fn a_trace_made_wrong_is_judged_wrong() {
         }
     }
     std::fs::write(&none, lines.join("\n") + "\n").expect("written");
-    let ((_, _, violations), code) = check(&none);
+    let (v, code) = check(&none);
+    let (_, _, violations) = counts(&v);
     assert!(violations > 0 && code == Some(1), "{violations} violations");
     let _ = std::fs::remove_dir_all(dir);
 }
