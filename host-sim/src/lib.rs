@@ -15,8 +15,9 @@
 //! - [`output`]: traces, plots and the viewer;
 //! - [`reference`]: the Clarabel reference, random instances, the planner benchmark.
 //!
-//! Modules depend on each other one way (`tests/layout.rs` checks it): `monitor` and
-//! `reference` on nothing; `bus` on `reference`; `world` on those three; `scenario` (the
+//! Modules depend on each other one way, folders and the files inside them alike (the
+//! workspace's `tests/tests/layout.rs` checks it): `monitor`, `reference` and `bus` on
+//! nothing; `world` on those three; `scenario` (the
 //! file formats, which build a world) on `world`; `fleet` and `experiments` on all of
 //! these; `output` on `experiments`; the binary's `cli` on everything.
 #![deny(missing_docs)]

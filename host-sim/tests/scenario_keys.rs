@@ -40,7 +40,7 @@ fn documented() -> BTreeMap<String, BTreeSet<String>> {
 fn every_key_the_loader_accepts_is_documented_and_no_other() {
     let docs = documented();
     let mut problems = Vec::new();
-    for (table, keys) in host_sim::scenario::keys::tables() {
+    for (table, keys) in host_sim::scenario::tables() {
         let accepted: BTreeSet<String> = keys.iter().map(|k| k.to_string()).collect();
         match docs.get(table) {
             None => problems.push(format!("no `### {table}` section in docs/scenarios.md")),

@@ -265,7 +265,7 @@ fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
         .vehicles
         .iter()
         .map(|v| match v.at {
-            host_sim::world::vehicle::At::Lane { lane, .. } => lane.abs_diff(v.trip.target_lane),
+            host_sim::world::at::At::Lane { lane, .. } => lane.abs_diff(v.trip.target_lane),
             _ => 0,
         })
         .collect();

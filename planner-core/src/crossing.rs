@@ -195,6 +195,20 @@ pub const PLAUSIBLE_POSITION_M: f64 = 0.5;
 /// Slack (m/s) on a reported speed above vmax.
 pub const PLAUSIBLE_SPEED_MPS: f64 = 0.5;
 
+/// Where a vehicle first heard stands: what [`Manager::observe`] computed of its report.
+#[derive(Debug, Clone, Copy)]
+struct Start<F> {
+    /// Its centre's distance along the path past the stop line, as far back as the
+    /// reports' rounding allows.
+    progress: F,
+    /// Its front's distance to the stop line.
+    to_line: F,
+    /// Stopped in the stop-line zone.
+    stopped: bool,
+    /// It can no longer stop before the line.
+    committed: bool,
+}
+
 /// A registered vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -573,36 +587,57 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 e.committed = committed;
             }
             None => {
-                // Only an unregistered vehicle needs its pose: is it inside A_C yet?
-                let pose = route.path.pose_at(s);
-                if !self.layout.in_comm_region(pose.x, pose.y) {
-                    return Ok(());
-                }
-                if r.v > self.vehicles.v_max() + F::from_f64(PLAUSIBLE_SPEED_MPS) {
-                    return Err(ManagerError::Implausible);
-                }
-                self.entries
-                    .push(Entry {
-                        id: r.id,
-                        route: r.route,
-                        tau: now,
-                        progress: s - entry,
-                        to_line,
-                        v: r.v,
-                        stopped_at: stopped.then_some(now),
-                        permitted: false,
-                        // First heard committed (see above): a manager restarted while
-                        // the vehicle crossed or was about to.
-                        committed,
-                        heard_at: now,
-                        suspect: false,
-                        measured: None,
-                        waiting_since: None,
-                    })
-                    .map_err(|_| ManagerError::Full)?;
+                let start = Start {
+                    progress: s - entry,
+                    to_line,
+                    stopped,
+                    committed,
+                };
+                self.register(r, start, now)?;
             }
         }
         Ok(())
+    }
+
+    /// Registers a vehicle first heard in `r`, if it is inside A_C (until then it has
+    /// no business with this manager).
+    fn register(
+        &mut self,
+        r: &CrossingReport<F>,
+        start: Start<F>,
+        now: Instant,
+    ) -> Result<(), ManagerError> {
+        let route = self
+            .layout
+            .route(usize::from(r.route))
+            .ok_or(ManagerError::UnknownRoute)?;
+        // Only an unregistered vehicle needs its pose: is it inside A_C yet?
+        let pose = route.path.pose_at(r.s - self.half_step);
+        if !self.layout.in_comm_region(pose.x, pose.y) {
+            return Ok(());
+        }
+        if r.v > self.vehicles.v_max() + F::from_f64(PLAUSIBLE_SPEED_MPS) {
+            return Err(ManagerError::Implausible);
+        }
+        self.entries
+            .push(Entry {
+                id: r.id,
+                route: r.route,
+                tau: now,
+                progress: start.progress,
+                to_line: start.to_line,
+                v: r.v,
+                stopped_at: start.stopped.then_some(now),
+                permitted: false,
+                // First heard committed (see [`Manager::observe`]): a manager restarted
+                // while the vehicle crossed or was about to.
+                committed: start.committed,
+                heard_at: now,
+                suspect: false,
+                measured: None,
+                waiting_since: None,
+            })
+            .map_err(|_| ManagerError::Full)
     }
 
     /// Forgets vehicle `id` (e.g. its messages stopped: its permission lapses) — unless

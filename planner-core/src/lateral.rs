@@ -475,33 +475,64 @@ pub fn solve_lateral_in<F: Real, const N: usize>(
     if N == 0 {
         return Ok(([F::ZERO; N], 0));
     }
-    let h = inp.h;
-    let w = inp.weights;
-    let per_step = F::ONE / F::from_usize(N);
     let LateralWork { qp, ipm } = work;
     // Cleared in place, field by field (no QP-sized temporary); `ipm` is overwritten.
     qp.clear();
+    let maps = tracking_terms(qp, inp);
+    rate_terms_and_bounds(qp, inp, &maps);
+    check_constraints(qp, inp, &maps);
+    let (u, iters) = qp.solve_with(ipm)?;
+    let mut omega = [F::ZERO; N];
+    for (k, o) in omega.iter_mut().enumerate() {
+        *o = u[block_of(k, N)];
+    }
+    Ok((omega, iters))
+}
+
+/// What the linearised dynamics give the constraints: the affine maps of θ and y at each
+/// checked step, and per block the ω bounds and the number of steps it covers.
+struct Maps<F> {
+    theta: [[F; BLOCKS]; CHECKS],
+    y: [[F; BLOCKS]; CHECKS],
+    y_const: [F; CHECKS],
+    lo: [F; BLOCKS],
+    hi: [F; BLOCKS],
+    count: [F; BLOCKS],
+}
+
+/// weight (a·u + c)² added to the cost: P += 2w a aᵀ, q += 2w c a.
+fn add_square<F: Real>(qp: &mut DenseQp<F>, a: &[F; BLOCKS], c: F, weight: F) {
+    for i in 0..BLOCKS {
+        for j in 0..BLOCKS {
+            qp.p[i][j] += F::TWO * weight * a[i] * a[j];
+        }
+        qp.q[i] += F::TWO * weight * c * a[i];
+    }
+}
+
+/// The dynamics linearised step by step along the nominal ω, the position and heading
+/// tracking terms of the cost, and the maps the constraints need.
+fn tracking_terms<F: Real, const N: usize>(
+    qp: &mut DenseQp<F>,
+    inp: &LateralInput<'_, F, N>,
+) -> Maps<F> {
+    let h = inp.h;
+    let w = inp.weights;
+    let per_step = F::ONE / F::from_usize(N);
     // Affine maps θ_{k+1} = cθ·u + θ0, y_{k+1} = cy·u + y_c, built step by step.
     let mut c_theta = [F::ZERO; BLOCKS];
     let mut c_y = [F::ZERO; BLOCKS];
     let mut y_c = inp.y;
     let mut theta_nom = inp.theta;
-    let mut maps_theta = [[F::ZERO; BLOCKS]; CHECKS];
-    let mut maps_y = [[F::ZERO; BLOCKS]; CHECKS];
-    let mut consts_y = [F::ZERO; CHECKS];
-    let mut next_check = 0usize;
-    let mut lo_b = [F::from_f64(-1e9); BLOCKS];
-    let mut hi_b = [F::from_f64(1e9); BLOCKS];
-    let mut count = [F::ZERO; BLOCKS];
-    let add_square = |qp: &mut DenseQp<F>, a: &[F; BLOCKS], c: F, weight: F| {
-        // weight (a·u + c)²: P += 2w a aᵀ, q += 2w c a.
-        for i in 0..BLOCKS {
-            for j in 0..BLOCKS {
-                qp.p[i][j] += F::TWO * weight * a[i] * a[j];
-            }
-            qp.q[i] += F::TWO * weight * c * a[i];
-        }
+    let mut maps = Maps {
+        theta: [[F::ZERO; BLOCKS]; CHECKS],
+        y: [[F::ZERO; BLOCKS]; CHECKS],
+        y_const: [F::ZERO; CHECKS],
+        lo: [F::from_f64(-1e9); BLOCKS],
+        hi: [F::from_f64(1e9); BLOCKS],
+        count: [F::ZERO; BLOCKS],
     };
+    let mut next_check = 0usize;
     for k in 0..N {
         let b = block_of(k, N);
         let omega_nom = inp.omega_nominal[k];
@@ -517,9 +548,9 @@ pub fn solve_lateral_in<F: Real, const N: usize>(
         y_c += vh * (sn + cs * (inp.theta - phi_nom));
         c_theta[b] += h;
         theta_nom += h * omega_nom;
-        lo_b[b] = lo_b[b].max(inp.omega_lo[k]);
-        hi_b[b] = hi_b[b].min(inp.omega_hi[k]);
-        count[b] += F::ONE;
+        maps.lo[b] = maps.lo[b].max(inp.omega_lo[k]);
+        maps.hi[b] = maps.hi[b].min(inp.omega_hi[k]);
+        maps.count[b] += F::ONE;
         add_square(qp, &c_y, y_c - inp.y_ref[k], w.position * per_step);
         add_square(
             qp,
@@ -528,17 +559,33 @@ pub fn solve_lateral_in<F: Real, const N: usize>(
             w.heading * per_step,
         );
         while next_check < CHECKS && check_step(next_check, N) == k {
-            maps_theta[next_check] = c_theta;
-            maps_y[next_check] = c_y;
-            consts_y[next_check] = y_c;
+            maps.theta[next_check] = c_theta;
+            maps.y[next_check] = c_y;
+            maps.y_const[next_check] = y_c;
             next_check += 1;
         }
     }
+    maps
+}
+
+/// Per block: the rate and rate-change terms of the cost, and the bounds on ω.
+fn rate_terms_and_bounds<F: Real, const N: usize>(
+    qp: &mut DenseQp<F>,
+    inp: &LateralInput<'_, F, N>,
+    maps: &Maps<F>,
+) {
+    let w = inp.weights;
+    let per_step = F::ONE / F::from_usize(N);
     for b in 0..BLOCKS {
         let mut e = [F::ZERO; BLOCKS];
         e[b] = F::ONE;
         // Σ_k ω_k² over the block.
-        add_square(qp, &e, F::ZERO, w.rate * per_step * count[b].max(F::ONE));
+        add_square(
+            qp,
+            &e,
+            F::ZERO,
+            w.rate * per_step * maps.count[b].max(F::ONE),
+        );
         let mut d = e;
         let c = if b == 0 {
             -inp.omega_prev
@@ -548,10 +595,10 @@ pub fn solve_lateral_in<F: Real, const N: usize>(
         };
         add_square(qp, &d, c, w.rate_change);
         // Empty Ω (rounding) or unused block: pin to the middle, with a sliver of room.
-        let (lo, hi) = if hi_b[b] >= lo_b[b] {
-            (lo_b[b], hi_b[b])
+        let (lo, hi) = if maps.hi[b] >= maps.lo[b] {
+            (maps.lo[b], maps.hi[b])
         } else {
-            let m = F::HALF * (lo_b[b] + hi_b[b]);
+            let m = F::HALF * (maps.lo[b] + maps.hi[b]);
             (m, m)
         };
         let room = F::from_f64(1e-9);
@@ -560,14 +607,22 @@ pub fn solve_lateral_in<F: Real, const N: usize>(
         qp.g_mat[2 * b + 1] = e.map(|x| -x);
         qp.g[2 * b + 1] = -lo + room;
     }
+}
+
+/// At each checked step: the heading bounds and the four corners inside the band.
+fn check_constraints<F: Real, const N: usize>(
+    qp: &mut DenseQp<F>,
+    inp: &LateralInput<'_, F, N>,
+    maps: &Maps<F>,
+) {
     let (tmin, tmax) = inp.theta_bounds;
     let (ylo, yhi) = inp.band;
     let (hl, hw) = (inp.half_length, inp.half_width);
     for c in 0..CHECKS {
         let base = 2 * BLOCKS + 6 * c;
-        let at = maps_theta[c];
-        let ay = maps_y[c];
-        let cy = consts_y[c];
+        let at = maps.theta[c];
+        let ay = maps.y[c];
+        let cy = maps.y_const[c];
         let th0 = inp.theta;
         let neg = |a: [F; BLOCKS]| a.map(|x| -x);
         let comb = |s: F| {
@@ -593,10 +648,4 @@ pub fn solve_lateral_in<F: Real, const N: usize>(
         qp.g_mat[base + 5] = neg(comb(-F::ONE));
         qp.g[base + 5] = -(ylo + hw) + cy - hl * th0;
     }
-    let (u, iters) = qp.solve_with(ipm)?;
-    let mut omega = [F::ZERO; N];
-    for (k, o) in omega.iter_mut().enumerate() {
-        *o = u[block_of(k, N)];
-    }
-    Ok((omega, iters))
 }

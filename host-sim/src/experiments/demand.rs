@@ -223,7 +223,7 @@ fn arrivals(w: &World<20>, jn: Option<&Junction>) -> Vec<Arrival> {
         .all_vehicles()
         .map(|v| {
             let route = match v.at {
-                crate::world::vehicle::At::Crossing { route, .. } => Some(route),
+                crate::world::at::At::Crossing { route, .. } => Some(route),
                 _ => None,
             };
             let free = free_flow(jn, route);

@@ -150,8 +150,8 @@ pub fn measure(
         .vehicles
         .first()
         .map(|v| match v.at {
-            crate::world::vehicle::At::Lane { x, .. } => x,
-            crate::world::vehicle::At::Crossing { .. } => 0.0,
+            crate::world::at::At::Lane { x, .. } => x,
+            crate::world::at::At::Crossing { .. } => 0.0,
         })
         .unwrap_or(0.0);
     let at = detector_x(mode, leader_x);

@@ -22,7 +22,8 @@
 //! What of it the receivers accepted, the [`super::ledger::Ledger`] counts.
 
 use super::can::{vehicle_address, CanError, CanPort, WireMap};
-use crate::world::vehicle::{announce, At, VehicleTruth};
+use crate::world::at::At;
+use crate::world::vehicle::{announce, VehicleTruth};
 use can_gateway::codec::{encode_fd_secured, encode_secured, SecuredFrames};
 use can_gateway::secoc::{FreshnessTx, Key};
 use can_gateway::wire::{self, MessageKind};

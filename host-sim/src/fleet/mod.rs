@@ -723,7 +723,7 @@ impl<const N: usize> Harness<N> {
         let in_world = cars.iter().filter(|v| v.log.left_at.is_none()).count();
         let unfinished = cars
             .iter()
-            .filter(|v| v.log.left_at.is_none() && crate::world::step::unmet(v, net))
+            .filter(|v| v.log.left_at.is_none() && v.unmet(net))
             .count();
         let run = summarize(
             cars.iter(),

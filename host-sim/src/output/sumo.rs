@@ -24,8 +24,8 @@
 //! it (`bench/sumo/`). What SUMO cannot hold is said, not approximated silently: a
 //! vehicle already inside A_S at t = 0 departs at its inlet's end.
 
+use crate::world::at::At;
 use crate::world::network::{turned, Junction, Network, Segment};
-use crate::world::vehicle::At;
 use crate::world::{Arrivals, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M};
 use planner_core::intersection::{lane_movements, Movement};
 use std::fmt::Write as _;

@@ -6,9 +6,10 @@ use super::common::{ArrivalsToml, Header, RawHeader, SensingToml};
 use super::error::{Errors, FieldError, ScenarioError};
 use crate::bus::Faults;
 use crate::monitor::Limits;
+use crate::world::at::At;
 use crate::world::junction::MANAGER_CAP;
 use crate::world::network::{Junction, Network};
-use crate::world::vehicle::{At, Trip};
+use crate::world::vehicle::Trip;
 use crate::world::{
     Arrivals, Finish, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M,
 };

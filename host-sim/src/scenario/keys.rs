@@ -1,7 +1,8 @@
 //! The keys every scenario table accepts, read from the loader's own types: serde's
 //! derive hands each struct's accepted field names to the deserializer, and
-//! [`fields`] catches them there. `docs/scenarios.md` is tested against this list, so a key
-//! the loader accepts cannot go undocumented.
+//! [`fields`] catches them there. [`super::tables`] lists every table with them;
+//! `docs/scenarios.md` is tested against that list, so a key the loader accepts cannot go
+//! undocumented.
 
 use serde::de::{self, Deserialize, Deserializer, Visitor};
 use std::fmt;
@@ -57,26 +58,18 @@ impl<'de> Deserializer<'de> for &mut Probe {
     }
 }
 
-/// Every table of every format: (its name as docs/scenarios.md heads it, its keys).
-pub fn tables() -> Vec<(&'static str, &'static [&'static str])> {
-    let mut t = Vec::new();
-    t.extend(super::road::keys());
-    t.extend(super::junction::keys());
-    t.extend(super::network::keys());
-    t.push(("[faults]", fields::<crate::bus::Faults>()));
-    t.push(("[faults.silent]", fields::<crate::bus::Silent>()));
-    t.push(("[faults.liar]", fields::<crate::bus::Liar>()));
-    t.push(("[faults.manager_down]", fields::<crate::bus::ManagerDown>()));
-    t.push(("[sensing]", fields::<super::common::SensingToml>()));
-    t
-}
-
 #[cfg(test)]
 mod tests {
     #[test]
     fn fields_are_read_from_the_derive() {
-        let f = super::fields::<crate::scenario::junction::LayoutToml>();
-        assert!(f.contains(&"half_size") && f.contains(&"lanes"), "{f:?}");
+        #[derive(serde::Deserialize)]
+        #[allow(dead_code)]
+        struct Probed {
+            half_size: f64,
+            lanes: u8,
+        }
+        let f = super::fields::<Probed>();
+        assert_eq!(f, ["half_size", "lanes"]);
         assert!(super::fields::<u32>().is_empty());
     }
 }

@@ -131,3 +131,20 @@ fn faults_fit(spec: &WorldSpec, e: &error::Errors<'_>) -> Result<(), ScenarioErr
     }
     Ok(())
 }
+
+/// Every table of every format: (its name as docs/scenarios.md heads it, its keys).
+pub fn tables() -> Vec<(&'static str, &'static [&'static str])> {
+    let mut t = Vec::new();
+    t.extend(road::keys());
+    t.extend(junction::keys());
+    t.extend(network::keys());
+    t.push(("[faults]", keys::fields::<crate::bus::Faults>()));
+    t.push(("[faults.silent]", keys::fields::<crate::bus::Silent>()));
+    t.push(("[faults.liar]", keys::fields::<crate::bus::Liar>()));
+    t.push((
+        "[faults.manager_down]",
+        keys::fields::<crate::bus::ManagerDown>(),
+    ));
+    t.push(("[sensing]", keys::fields::<common::SensingToml>()));
+    t
+}

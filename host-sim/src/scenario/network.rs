@@ -49,9 +49,10 @@ use super::error::{Errors, ScenarioError};
 use super::junction::{build_layout, AlgorithmToml, Heading, LayoutToml, MovementToml};
 use crate::bus::Faults;
 use crate::monitor::Limits;
+use crate::world::at::At;
 use crate::world::network::{rotate, End, Junction, Network, Segment};
 use crate::world::spawn::Entry;
-use crate::world::vehicle::{At, Trip};
+use crate::world::vehicle::Trip;
 use crate::world::{
     Arrivals, Finish, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M,
 };

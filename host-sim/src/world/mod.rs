@@ -17,6 +17,7 @@
 //! 7. the monitors judge the ground truth: safety, then liveness
 //! ```
 
+pub mod at;
 pub mod cost;
 pub mod heard;
 pub mod junction;
@@ -275,7 +276,7 @@ pub struct VehicleSpec {
     /// Id.
     pub id: u16,
     /// Where it starts.
-    pub at: vehicle::At,
+    pub at: at::At,
     /// Initial speed (m/s).
     pub v: f64,
     /// How it is driven.
@@ -546,7 +547,7 @@ impl<const N: usize, B: Bus> World<N, B> {
 
     /// Every (non-scripted) vehicle has met its goals.
     pub fn all_done(&self) -> bool {
-        self.vehicles.iter().all(|v| !step::unmet(v, &self.net))
+        self.vehicles.iter().all(|v| !v.unmet(&self.net))
             && self.pending.is_empty()
             && self.streams.iter().all(|s| s.queue.is_empty())
     }

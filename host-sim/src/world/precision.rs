@@ -8,7 +8,6 @@
 //! would be flashed with). On a CAN bus the codec runs in `f32` too
 //! ([`crate::fleet::can::CanNode::with_precision`]).
 
-use super::vehicle::CROSS_HORIZON;
 use planner_core::crossing::{CrossingPlanner, CrossingReport, Manager, ManagerError};
 use planner_core::intersection::{Layout, LayoutSpec, Path, Route, Segment};
 use planner_core::lane_change::StartBlock;
@@ -17,6 +16,9 @@ use planner_core::{
     Pose, Road, Sensing, StepStatus,
 };
 use serde::{Deserialize, Serialize};
+
+/// Horizon of the crossing planners (both precisions).
+pub const CROSS_HORIZON: usize = 20;
 
 /// The precision of the planners, the managers and the codec.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

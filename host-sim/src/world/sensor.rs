@@ -15,8 +15,8 @@
 //!   vehicle crossing there inside its communication region A_C: its position along its
 //!   route's path, with the same error ([`roadside`]).
 
+use super::at::At;
 use super::network::Network;
-use super::vehicle::At;
 use super::{LANE_WIDTH_M, LENGTH_M, WIDTH_M};
 use planner_core::{Other, Sensing};
 use rand::Rng;

@@ -4,7 +4,7 @@
 //! literature's demand test). A vehicle enters only where it keeps the invariant toward
 //! the vehicle ahead; until then it waits outside, and that wait counts as delay.
 
-use super::vehicle::At;
+use super::at::At;
 use super::START_MARGIN_M;
 use crate::monitor::Limits;
 use planner_core::intersection::Movement;

@@ -1,11 +1,12 @@
 //! The world's period: see the module docs of [`super`] for the order of things.
 
+use super::at::At;
 use super::junction::ManagerNode;
 use super::junction::{manager_node, LEFT_REPEAT_S};
 use super::network::{End, Network};
 use super::sensor::{roadside, sense, Seen, Sensed};
 use super::spawn::{entry_speed, start_at, trip_choices, Entry};
-use super::vehicle::{At, Brain, Driver, PlannerSetup, StepCtx, Trip, Vehicle, VehicleTruth};
+use super::vehicle::{Brain, Driver, PlannerSetup, StepCtx, Trip, Vehicle, VehicleTruth};
 use super::DriverKind;
 use super::{Arrivals, TraceRow, VehicleSpec, World, LENGTH_M, WIDTH_M};
 use crate::bus::{Bus, BusError, Message, Received};
@@ -56,30 +57,6 @@ pub fn node_of(j: usize) -> u16 {
 pub(crate) fn set_setup<const N: usize>(v: &mut Vehicle<N>, setup: PlannerSetup) {
     if let Driver::Planner(b) = &mut v.driver {
         b.set_setup(setup);
-    }
-}
-
-/// `true` if `v` still has a goal: a lane change to make, a goal x to reach, or a trip
-/// through a junction to finish (a vehicle at or past a junction, or heading for one).
-/// Scripted and random drivers have none.
-pub(crate) fn unmet<const N: usize>(v: &Vehicle<N>, net: &Network) -> bool {
-    if !v.is_planner() {
-        return false;
-    }
-    match v.at {
-        At::Crossing { .. } => true,
-        At::Lane {
-            seg, lane, alpha, ..
-        } => {
-            let towards_junction = net
-                .segments
-                .get(seg)
-                .is_some_and(|s| matches!(s.end, End::Junction(..) | End::Exit(_)));
-            towards_junction
-                || lane != v.trip.target_lane
-                || alpha.is_some()
-                || (v.trip.goal_x.is_some() && v.log.reached_at.is_none())
-        }
     }
 }
 

@@ -1,6 +1,5 @@
 //! What a run produced: the `--json` summary of `host-sim run`.
 
-use super::step::unmet;
 use super::vehicle::{Counters, Vehicle};
 use super::{Arrivals, SolverChoice, World, WorldSpec};
 use crate::bus::{Bus, FaultStats};
@@ -355,12 +354,12 @@ impl<const N: usize, B: Bus> World<N, B> {
                 unfinished: self
                     .vehicles
                     .iter()
-                    .filter(|v| unmet(v, &self.net) && self.due(v))
+                    .filter(|v| v.unmet(&self.net) && self.due(v))
                     .count(),
                 under_way: self
                     .vehicles
                     .iter()
-                    .filter(|v| unmet(v, &self.net) && !self.due(v))
+                    .filter(|v| v.unmet(&self.net) && !self.due(v))
                     .count(),
                 findings: &self.monitor.findings,
                 counters: &self.counters,

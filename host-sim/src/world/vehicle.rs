@@ -10,9 +10,10 @@
 //! hands over to the crossing planner along its route (Sec. VI); once outside A_C on its
 //! outlet it hands back to the multi-lane planner on the next segment, or leaves.
 
+use super::at::At;
 use super::heard::{Reject, View, VIEW_CAP};
 use super::network::{End, Network, Place};
-use super::precision::{params32, sensing32, CrossingF32, LaneF32, Precision};
+use super::precision::{params32, sensing32, CrossingF32, LaneF32, Precision, CROSS_HORIZON};
 use super::sensor::Sensed;
 use super::Phase;
 use super::{AnySolver, Mode, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M};
@@ -31,8 +32,6 @@ use planner_core::{
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-/// Horizon of the crossing planners.
-pub const CROSS_HORIZON: usize = 20;
 /// How far (m) from its lane's centre line, and how far from straight (rad), a vehicle
 /// may be when it hands over from the multi-lane planner to the crossing planner, which
 /// drives the lane's centre line: the difference is where the vehicle is taken to be
@@ -190,47 +189,6 @@ pub enum Driver<const N: usize> {
         /// Until when.
         until: f64,
     },
-}
-
-/// Where a vehicle is and its pose there.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum At {
-    /// On a segment, in its frame.
-    Lane {
-        /// Segment index.
-        seg: usize,
-        /// x (m).
-        x: f64,
-        /// y (m).
-        y: f64,
-        /// Heading relative to the segment (rad).
-        theta: f64,
-        /// ℓ.
-        lane: u8,
-        /// α.
-        alpha: Option<u8>,
-        /// β.
-        beta: Option<u8>,
-    },
-    /// In a junction, along a route's path.
-    Crossing {
-        /// Junction index.
-        junction: usize,
-        /// Route.
-        route: u8,
-        /// Centre's distance along the route's path (m).
-        s: f64,
-    },
-}
-
-impl At {
-    /// The place.
-    pub fn place(&self) -> Place {
-        match *self {
-            At::Lane { seg, .. } => Place::Segment(seg),
-            At::Crossing { junction, .. } => Place::Junction(junction),
-        }
-    }
 }
 
 /// What a vehicle is to do besides staying safe.
@@ -628,7 +586,7 @@ impl<const N: usize> Vehicle<N> {
             v: self.v,
             v_before: self.v_before,
             planner: self.is_planner(),
-            unmet: super::step::unmet(self, net),
+            unmet: self.unmet(net),
             target_lane: self.trip.target_lane,
             leader_aware: matches!(&self.driver,
                 Driver::Planner(b) if b.setup.invariant == planner_core::Invariant::LeaderAware),
@@ -831,6 +789,30 @@ impl<const N: usize> Vehicle<N> {
                 && alpha.is_none()
                 && beta.is_none()
         })
+    }
+
+    /// `true` if it still has a goal: a lane change to make, a goal x to reach, or a trip
+    /// through a junction to finish (a vehicle at or past a junction, or heading for one).
+    /// Scripted and random drivers have none.
+    pub fn unmet(&self, net: &Network) -> bool {
+        if !self.is_planner() {
+            return false;
+        }
+        match self.at {
+            At::Crossing { .. } => true,
+            At::Lane {
+                seg, lane, alpha, ..
+            } => {
+                let towards_junction = net
+                    .segments
+                    .get(seg)
+                    .is_some_and(|s| matches!(s.end, End::Junction(..) | End::Exit(_)));
+                towards_junction
+                    || lane != self.trip.target_lane
+                    || alpha.is_some()
+                    || (self.trip.goal_x.is_some() && self.log.reached_at.is_none())
+            }
+        }
     }
 
     /// `true` if, on a segment ending at a junction, the vehicle may hand over to its

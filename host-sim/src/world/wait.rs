@@ -1,9 +1,10 @@
 //! Who waits on whom, for the deadlock report (see [`crate::monitor::liveness`]): from
 //! ground truth, each vehicle's intention, and the managers' records.
 
+use super::at::At;
 use super::junction::ManagerNode;
 use super::network::{End, Network};
-use super::vehicle::{At, VehicleTruth};
+use super::vehicle::VehicleTruth;
 use super::LENGTH_M;
 use crate::monitor::liveness::{Deadlock, DeadlockDetector, Status, WaitsOn, MOVING_MPS};
 use crate::monitor::Limits;

@@ -31,7 +31,7 @@
 
 pub mod active_set;
 
-use crate::banded::{get, Penta};
+use crate::banded::{get, NotPositiveDefinite, Penta};
 use crate::mpc::SingleLaneProblem;
 use crate::real::Real;
 use crate::reuse::Duals;
@@ -1071,7 +1071,8 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
 
     /// The interior-point iteration from the start [`IpmSolver::start`] left, `spent`
     /// Newton steps already taken by this solve; on failure, the error and the steps it
-    /// took.
+    /// took. Each iteration: residuals and the convergence test, the Newton matrix, the
+    /// predictor–corrector direction (Mehrotra), the step to a fraction of the boundary.
     fn interior_point(
         &mut self,
         pr: &SingleLaneProblem<F, N>,
@@ -1080,22 +1081,10 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         trace: &mut dyn FnMut(IterationInfo<F>),
     ) -> Result<Solution<F, N>, (SolveError, u32)> {
         let st = self.settings;
-        let two = F::TWO;
         self.have_duals = false;
         let m = F::from_usize(FAMILIES * N);
-        let w = pr.weights;
-        let inv_b = F::ONE / pr.brake;
         for it in 0..st.max_iter {
-            self.evaluate(pr);
-            let (max_rd, scale) = self.dual_residual(pr);
-            let mut max_rp = F::ZERO;
-            let mut gap_sum = F::ZERO;
-            for f in self.fam.iter() {
-                for ((&g, &s), &l) in f.g.iter().zip(f.s.iter()).zip(f.lam.iter()) {
-                    max_rp = max_rp.max((g + s).abs());
-                    gap_sum += s * l;
-                }
-            }
+            let (max_rd, scale, max_rp, gap_sum) = self.residuals(pr);
             if !(gap_sum.is_finite() && max_rd.is_finite() && max_rp.is_finite()) {
                 return Err((SolveError::NonFinite, it));
             }
@@ -1128,89 +1117,10 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 });
             }
             let mu = gap_sum / m;
-
-            // Newton matrix: ∇²J + Σ λ ∇²g + Σ (λ/s) ∇g ∇gᵀ (+ δ I when factorised).
-            for f in self.fam.iter_mut() {
-                for (is, &s) in f.inv_s.iter_mut().zip(f.s.iter()) {
-                    *is = F::ONE / s;
-                }
-                for (il, &l) in f.inv_l.iter_mut().zip(f.lam.iter()) {
-                    *il = F::ONE / l;
-                }
-            }
-            {
-                let [up, lo, ac, de, sa] = &self.fam;
-                for k in 0..N {
-                    let ls = get(&sa.lam, k);
-                    put(
-                        &mut self.w1,
-                        k,
-                        two * w.reference_speed
-                            + get(&up.lam, k) * get(&up.inv_s, k)
-                            + get(&lo.lam, k) * get(&lo.inv_s, k)
-                            + ls * inv_b,
-                    );
-                    put(
-                        &mut self.w2,
-                        k,
-                        two * w.smoothness
-                            + get(&ac.lam, k) * get(&ac.inv_s, k)
-                            + get(&de.lam, k) * get(&de.inv_s, k),
-                    );
-                    put(&mut self.w3, k, ls * get(&sa.inv_s, k));
-                }
-            }
-            self.assemble(two * w.target_position * pr.h * pr.h);
-            // The unregularised matrix is only needed by iterative refinement.
-            if st.refinement_steps > 0 {
-                self.kkt_raw.clone_from(&self.kkt);
-            }
-            for d in self.kkt.d.iter_mut() {
-                *d += st.regularization;
-            }
-            if self.kkt.factor(st.pivot_floor).is_err() {
+            if self.factor_newton_matrix(pr).is_err() {
                 return Err((SolveError::Numerical { iteration: it }, it));
             }
-
-            // Predictor (affine scaling): rc = s∘λ.
-            for f in self.fam.iter_mut() {
-                for ((rc, &s), &l) in f.rc.iter_mut().zip(f.s.iter()).zip(f.lam.iter()) {
-                    *rc = s * l;
-                }
-            }
-            self.build_rhs();
-            self.newton_solve(st.refinement_steps);
-            let alpha_aff = self.recover_and_step_length().min(F::ONE);
-            let mut mu_aff = F::ZERO;
-            for f in self.fam.iter() {
-                for (((&s, &l), &ds), &dl) in
-                    f.s.iter()
-                        .zip(f.lam.iter())
-                        .zip(f.ds.iter())
-                        .zip(f.dl.iter())
-                {
-                    mu_aff += (s + alpha_aff * ds) * (l + alpha_aff * dl);
-                }
-            }
-            mu_aff = mu_aff / m;
-            let ratio = (mu_aff / mu).max(F::ZERO).min(F::ONE);
-            let sigma = ratio * ratio * ratio;
-
-            // Corrector: rc = s∘λ + Δs_aff∘Δλ_aff − σμ.
-            for f in self.fam.iter_mut() {
-                for ((((rc, &s), &l), &ds), &dl) in
-                    f.rc.iter_mut()
-                        .zip(f.s.iter())
-                        .zip(f.lam.iter())
-                        .zip(f.ds.iter())
-                        .zip(f.dl.iter())
-                {
-                    *rc = s * l + ds * dl - sigma * mu;
-                }
-            }
-            self.build_rhs();
-            self.newton_solve(st.refinement_steps);
-            let alpha_max = self.recover_and_step_length();
+            let alpha_max = self.predictor_corrector(m, mu);
             // Fraction to the boundary τ → 1 as μ → 0: near the optimum the blocking
             // slacks are the active constraints', which the Newton step sends to ~0, so
             // a fixed τ would cap every step at τ and converge only linearly.
@@ -1222,23 +1132,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             if !(alpha > F::ZERO) {
                 return Err((SolveError::Numerical { iteration: it }, it));
             }
-            // v_k += α (dz_k − dz_{k−1}).
-            let mut dz_prev = F::ZERO;
-            for (v, &dz) in self.v.iter_mut().zip(self.dz.iter()) {
-                *v += alpha * (dz - dz_prev);
-                dz_prev = dz;
-            }
-            for f in self.fam.iter_mut() {
-                for (((s, l), &ds), &dl) in
-                    f.s.iter_mut()
-                        .zip(f.lam.iter_mut())
-                        .zip(f.ds.iter())
-                        .zip(f.dl.iter())
-                {
-                    *s += alpha * ds;
-                    *l += alpha * dl;
-                }
-            }
+            self.take_step(alpha);
         }
         Err((
             SolveError::IterationLimit {
@@ -1246,6 +1140,138 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             },
             st.max_iter,
         ))
+    }
+
+    /// At the current iterate: the largest dual residual and its scale, the largest
+    /// primal residual |g + s| and the complementarity gap Σ s·λ.
+    fn residuals(&mut self, pr: &SingleLaneProblem<F, N>) -> (F, F, F, F) {
+        self.evaluate(pr);
+        let (max_rd, scale) = self.dual_residual(pr);
+        let mut max_rp = F::ZERO;
+        let mut gap_sum = F::ZERO;
+        for f in self.fam.iter() {
+            for ((&g, &s), &l) in f.g.iter().zip(f.s.iter()).zip(f.lam.iter()) {
+                max_rp = max_rp.max((g + s).abs());
+                gap_sum += s * l;
+            }
+        }
+        (max_rd, scale, max_rp, gap_sum)
+    }
+
+    /// Newton matrix ∇²J + Σ λ ∇²g + Σ (λ/s) ∇g ∇gᵀ (+ δ I), assembled and factorised;
+    /// `Err` when the factorisation meets a pivot below the floor.
+    fn factor_newton_matrix(
+        &mut self,
+        pr: &SingleLaneProblem<F, N>,
+    ) -> Result<(), NotPositiveDefinite> {
+        let st = self.settings;
+        let two = F::TWO;
+        let w = pr.weights;
+        let inv_b = F::ONE / pr.brake;
+        for f in self.fam.iter_mut() {
+            for (is, &s) in f.inv_s.iter_mut().zip(f.s.iter()) {
+                *is = F::ONE / s;
+            }
+            for (il, &l) in f.inv_l.iter_mut().zip(f.lam.iter()) {
+                *il = F::ONE / l;
+            }
+        }
+        let [up, lo, ac, de, sa] = &self.fam;
+        for k in 0..N {
+            let ls = get(&sa.lam, k);
+            put(
+                &mut self.w1,
+                k,
+                two * w.reference_speed
+                    + get(&up.lam, k) * get(&up.inv_s, k)
+                    + get(&lo.lam, k) * get(&lo.inv_s, k)
+                    + ls * inv_b,
+            );
+            put(
+                &mut self.w2,
+                k,
+                two * w.smoothness
+                    + get(&ac.lam, k) * get(&ac.inv_s, k)
+                    + get(&de.lam, k) * get(&de.inv_s, k),
+            );
+            put(&mut self.w3, k, ls * get(&sa.inv_s, k));
+        }
+        self.assemble(two * w.target_position * pr.h * pr.h);
+        // The unregularised matrix is only needed by iterative refinement.
+        if st.refinement_steps > 0 {
+            self.kkt_raw.clone_from(&self.kkt);
+        }
+        for d in self.kkt.d.iter_mut() {
+            *d += st.regularization;
+        }
+        self.kkt.factor(st.pivot_floor)
+    }
+
+    /// Mehrotra's predictor (affine scaling) and corrector on the factorised matrix; the
+    /// direction is left in `dz`, `ds`, `dl`, and the longest step to the boundary along
+    /// it returned.
+    fn predictor_corrector(&mut self, m: F, mu: F) -> F {
+        let st = self.settings;
+        // Predictor (affine scaling): rc = s∘λ.
+        for f in self.fam.iter_mut() {
+            for ((rc, &s), &l) in f.rc.iter_mut().zip(f.s.iter()).zip(f.lam.iter()) {
+                *rc = s * l;
+            }
+        }
+        self.build_rhs();
+        self.newton_solve(st.refinement_steps);
+        let alpha_aff = self.recover_and_step_length().min(F::ONE);
+        let mut mu_aff = F::ZERO;
+        for f in self.fam.iter() {
+            for (((&s, &l), &ds), &dl) in
+                f.s.iter()
+                    .zip(f.lam.iter())
+                    .zip(f.ds.iter())
+                    .zip(f.dl.iter())
+            {
+                mu_aff += (s + alpha_aff * ds) * (l + alpha_aff * dl);
+            }
+        }
+        mu_aff = mu_aff / m;
+        let ratio = (mu_aff / mu).max(F::ZERO).min(F::ONE);
+        let sigma = ratio * ratio * ratio;
+
+        // Corrector: rc = s∘λ + Δs_aff∘Δλ_aff − σμ.
+        for f in self.fam.iter_mut() {
+            for ((((rc, &s), &l), &ds), &dl) in
+                f.rc.iter_mut()
+                    .zip(f.s.iter())
+                    .zip(f.lam.iter())
+                    .zip(f.ds.iter())
+                    .zip(f.dl.iter())
+            {
+                *rc = s * l + ds * dl - sigma * mu;
+            }
+        }
+        self.build_rhs();
+        self.newton_solve(st.refinement_steps);
+        self.recover_and_step_length()
+    }
+
+    /// The step of length `alpha` along the direction: v_k += α (dz_k − dz_{k−1}), and
+    /// the slacks and duals.
+    fn take_step(&mut self, alpha: F) {
+        let mut dz_prev = F::ZERO;
+        for (v, &dz) in self.v.iter_mut().zip(self.dz.iter()) {
+            *v += alpha * (dz - dz_prev);
+            dz_prev = dz;
+        }
+        for f in self.fam.iter_mut() {
+            for (((s, l), &ds), &dl) in
+                f.s.iter_mut()
+                    .zip(f.lam.iter_mut())
+                    .zip(f.ds.iter())
+                    .zip(f.dl.iter())
+            {
+                *s += alpha * ds;
+                *l += alpha * dl;
+            }
+        }
     }
 }
 
