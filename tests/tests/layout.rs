@@ -62,10 +62,18 @@ fn module_path(root: &Path, file: &Path) -> ModPath {
     parts
 }
 
-/// The code of a file: its unit-test module and every comment removed.
+/// The code of a file: its inline unit-test module (`#[cfg(test)] mod tests {`, at the
+/// end of a file) and every comment removed.
 fn code_of(text: &str) -> String {
-    let text = text.split("#[cfg(test)]\nmod ").next().unwrap_or("");
-    text.lines()
+    let lines: Vec<&str> = text.lines().collect();
+    let end = lines
+        .windows(2)
+        .position(|w| {
+            w[0].trim() == "#[cfg(test)]" && w[1].starts_with("mod ") && w[1].ends_with('{')
+        })
+        .unwrap_or(lines.len());
+    lines[..end]
+        .iter()
         .map(|l| l.split("//").next().unwrap_or(""))
         .collect::<Vec<_>>()
         .join("\n")

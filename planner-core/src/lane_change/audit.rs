@@ -1,11 +1,17 @@
 //! Tests of `lane_change`'s private steps, written against the mutants
-//! `cargo mutants -f planner-core/src/lane_change.rs` found unnoticed (docs/mutants.md):
+//! `cargo mutants -f planner-core/src/lane_change.rs` (now `lane_change/`) found unnoticed (docs/mutants.md):
 //! the lengths of (23)(24), the reference S-curve, the bookkeeping of a change (declare,
 //! hold, start, complete, re-centre), the sets of (15)(21) with sensing, the fusion of
 //! vehicles behind, (17) and the entry check at their boundaries, and the step's
 //! shortcut for straight lane keeping. Each test states the rule it pins.
 
+use super::certify::*;
+use super::gaps::*;
+use super::steer::*;
 use super::*;
+use crate::free_space::D_TURN_M;
+use crate::lanes::Band;
+use crate::unicycle::{lateral_half_extent, step};
 use heapless::Vec;
 
 type Lp = LanePlanner<f64, 20>;
