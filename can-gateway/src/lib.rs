@@ -6,6 +6,7 @@
 //! sequence into either a message or a typed error, never a panic.
 //!
 //! - [`wire`]: the frame layout (29-bit J1939-style identifiers), units and resolutions;
+//! - [`layout`]: where each field sits in each kind's payload (written once);
 //! - [`crc`]: CRC-8 SAE J1850;
 //! - [`codec`]: encoding messages into frames and reassembling frames into messages;
 //! - [`frame`]: classic and CAN FD frame values for in-process buses, logs and tests;
@@ -37,6 +38,7 @@
 pub mod codec;
 pub mod crc;
 pub mod frame;
+pub mod layout;
 pub mod log;
 pub mod secoc;
 pub mod wire;

@@ -19,6 +19,9 @@
 //! every 49.7 days, and a receiver restores the full instant as the one nearest its own
 //! clock, [`crate::codec::restore_millis`]); lanes 4 bits, 15 = none. All little-endian.
 //!
+//! **Layouts** (where each field sits, byte by byte): [`crate::layout`], the one place
+//! they are written; in short:
+//!
 //! **A vehicle state** (kind 1, 4 frames): id, x, lanes | y, heading, speed, β and flags |
 //! yaw rate, stamp, braking limit (0.1 m/s², 0 = not declared) | reserved (zero), CRC.
 //!
