@@ -19,6 +19,7 @@
 
 pub mod at;
 pub mod cost;
+pub mod handover;
 pub mod heard;
 pub mod junction;
 pub mod network;
@@ -30,6 +31,7 @@ pub mod step;
 pub mod summary;
 pub mod vehicle;
 pub mod wait;
+pub mod watch;
 
 use crate::bus::{Bus, Faults, InProcessBus};
 use crate::monitor::liveness::{Deadlock, DeadlockDetector};
@@ -328,7 +330,7 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     rng: Box<ChaCha8Rng>,
     /// The roadside sensors' noise (its own stream: the other draws stay as they were).
     roadside_rng: Box<ChaCha8Rng>,
-    monitor: step::WorldMonitor,
+    monitor: watch::WorldMonitor,
     detector: DeadlockDetector,
     deadlock: Option<Deadlock>,
     counters: Counters,
@@ -376,7 +378,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         let vehicles = spec
             .vehicles
             .iter()
-            .map(|v| step::build_vehicle::<N>(v, setup, seed, &net))
+            .map(|v| vehicle::build_vehicle::<N>(v, setup, seed, &net))
             .collect();
         let managers = net
             .junctions
@@ -414,7 +416,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         Self {
             total_steps: (spec.duration_s / lim.h).round() as u64,
             detector: DeadlockDetector::new(spec.deadlock_window_s),
-            monitor: step::WorldMonitor::new(&net),
+            monitor: watch::WorldMonitor::new(&net),
             spec,
             net,
             vehicles,
@@ -454,7 +456,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// now on).
     fn give_setup(&mut self) {
         for v in &mut self.vehicles {
-            step::set_setup(v, self.setup);
+            vehicle::set_setup(v, self.setup);
         }
     }
 

@@ -5,7 +5,12 @@
 //! the vehicle ahead; until then it waits outside, and that wait counts as delay.
 
 use super::at::At;
+use super::network::Network;
+use super::vehicle::{Brain, Driver, Trip, Vehicle};
+use super::watch::segment_truth;
 use super::START_MARGIN_M;
+use super::{World, LENGTH_M};
+use crate::bus::{Bus, BusError};
 use crate::monitor::Limits;
 use planner_core::intersection::Movement;
 use rand::Rng;
@@ -205,6 +210,196 @@ impl Ids {
         }
         None
     }
+}
+
+impl<const N: usize, B: Bus> World<N, B> {
+    /// Vehicles entering: those of a closed system coming back, and open arrivals, each
+    /// once it keeps the invariant toward the vehicle ahead where it enters.
+    pub(super) fn arrive(&mut self) -> Result<(), BusError> {
+        let now = self.t;
+        let mut still = Vec::new();
+        for (id, route) in std::mem::take(&mut self.pending) {
+            let entry = self.stub_of(0, route);
+            let v_max = self.entry_limit(&entry);
+            // The paper's closed system spawns at vImax where the invariant allows it.
+            match self.room(&entry) {
+                r if entry_speed(&self.lim, r, v_max).is_some_and(|s| s >= v_max) => {
+                    self.departing.retain(|&(d, _, _)| d != id);
+                    self.enter(id, &entry, Some(route), Vec::new(), v_max, now)?;
+                }
+                _ => still.push((id, route)),
+            }
+        }
+        self.pending = still;
+        let mut streams = std::mem::take(&mut self.streams);
+        for s in &mut streams {
+            let net = &self.net;
+            s.arrive(now, &mut self.rng, &mut |e, rng| draw_trip(net, e, rng));
+            let Some(head) = s.queue.front() else {
+                continue;
+            };
+            let v_max = self.entry_limit(&s.entry);
+            if let Some(v) = entry_speed(&self.lim, self.room(&s.entry), v_max) {
+                let Some(id) = self.free_id() else {
+                    continue;
+                };
+                let (route, movements) = (head.route, head.movements.clone());
+                let since = head.since;
+                s.queue.pop_front();
+                self.enter(id, &s.entry, route, movements, v, since)?;
+            }
+        }
+        self.streams = streams;
+        Ok(())
+    }
+
+    /// An id for a vehicle entering now ([`super::spawn::Ids`]).
+    pub(super) fn free_id(&mut self) -> Option<u16> {
+        let used: std::collections::HashSet<u16> = self
+            .vehicles
+            .iter()
+            .map(|v| v.id)
+            .chain(self.departing.iter().map(|d| d.0))
+            .chain(self.pending.iter().map(|p| p.0))
+            .collect();
+        self.ids.take(|id| used.contains(&id))
+    }
+
+    /// The stub entry of junction `j`'s route `route`.
+    pub(super) fn stub_of(&self, j: usize, route: u8) -> Entry {
+        let inlet = self
+            .net
+            .junctions
+            .get(j)
+            .and_then(|jn| jn.layout.route(usize::from(route)))
+            .map(|r| r.inlet)
+            .unwrap_or(planner_core::intersection::Track {
+                heading: 0,
+                lane: 0,
+            });
+        Entry::Stub {
+            junction: j,
+            heading: inlet.heading,
+            lane: inlet.lane,
+        }
+    }
+
+    /// The speed limit at an entry.
+    pub(super) fn entry_limit(&self, e: &Entry) -> f64 {
+        match *e {
+            Entry::Stub { junction, .. } => self
+                .net
+                .junctions
+                .get(junction)
+                .map_or(self.lim.v_max, |j| j.layout.spec.v_limit),
+            Entry::Segment { seg, .. } => self
+                .net
+                .segments
+                .get(seg)
+                .map_or(self.lim.v_max, |s| s.v_max),
+        }
+    }
+
+    /// The room (bumper gap − d0, m) ahead of a vehicle entering at `e`, to the nearest
+    /// vehicle on the same inlet track or lane (∞ if none).
+    pub(super) fn room(&self, e: &Entry) -> f64 {
+        let start = 0.5 * LENGTH_M;
+        let mut room = f64::INFINITY;
+        for v in &self.vehicles {
+            let ahead = match (*e, v.at) {
+                (
+                    Entry::Stub {
+                        junction,
+                        heading,
+                        lane,
+                    },
+                    At::Crossing {
+                        junction: j,
+                        route,
+                        s,
+                    },
+                ) if j == junction => {
+                    let same = self
+                        .net
+                        .junctions
+                        .get(j)
+                        .and_then(|jn| jn.layout.route(usize::from(route)))
+                        .filter(|r| r.inlet.heading == heading && r.inlet.lane == lane);
+                    match same {
+                        Some(r) if s < r.path.entry() + 0.5 * LENGTH_M => Some(s),
+                        _ => None,
+                    }
+                }
+                (Entry::Segment { seg, lane }, _) => {
+                    segment_truth(&v.truth(&self.net), &self.net, seg)
+                        .filter(|c| {
+                            let (lo, hi) = crate::monitor::lateral_span(c);
+                            let (a, b) = (
+                                f64::from(lane) * super::LANE_WIDTH_M,
+                                f64::from(lane + 1) * super::LANE_WIDTH_M,
+                            );
+                            hi > a && lo < b
+                        })
+                        .map(|c| c.x)
+                }
+                _ => None,
+            };
+            if let Some(x) = ahead {
+                room = room.min(x - start - LENGTH_M - self.lim.d0);
+            }
+        }
+        room
+    }
+
+    /// A vehicle `id` enters at `e` at speed `v` (it has waited since `since`).
+    pub(super) fn enter(
+        &mut self,
+        id: u16,
+        e: &Entry,
+        route: Option<u8>,
+        movements: Vec<Movement>,
+        v: f64,
+        since: f64,
+    ) -> Result<(), BusError> {
+        let at = start_at(e, route, 0.5 * LENGTH_M);
+        let movements = match (route, *e) {
+            (Some(r), Entry::Stub { junction, .. }) => self
+                .net
+                .junctions
+                .get(junction)
+                .and_then(|j| j.layout.route(usize::from(r)))
+                .map_or(movements, |r| vec![r.movement]),
+            _ => movements,
+        };
+        let trip = Trip {
+            target_lane: 0,
+            goal_x: None,
+            v_ref: None,
+            movements,
+        };
+        let driver = Driver::Planner(Box::new(Brain::new(id, self.setup)));
+        let mut car = Vehicle::new(id, at, v, driver, trip, since);
+        car.note_free_flow(&self.net);
+        car.retarget(&self.net);
+        self.bus.attach(id)?;
+        self.vehicles.push(car);
+        Ok(())
+    }
+}
+
+/// A random trip from entry `e`, drawn evenly among its [`trip_choices`] (one draw, as
+/// before they were listed: the same trips for the same seeds).
+pub(crate) fn draw_trip(
+    net: &Network,
+    e: &Entry,
+    rng: &mut ChaCha8Rng,
+) -> (Vec<Movement>, Option<u8>) {
+    let choices = trip_choices(net, e);
+    if choices.is_empty() {
+        return (Vec::new(), None);
+    }
+    let k = rng.random_range(0..choices.len());
+    choices.into_iter().nth(k).unwrap_or_default()
 }
 
 #[cfg(test)]

@@ -15,8 +15,8 @@ use super::heard::{Reject, View, VIEW_CAP};
 use super::network::{End, Network, Place};
 use super::precision::{params32, sensing32, CrossingF32, LaneF32, Precision, CROSS_HORIZON};
 use super::sensor::Sensed;
-use super::Phase;
 use super::{AnySolver, Mode, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M};
+use super::{DriverKind, Phase, VehicleSpec};
 use crate::bus::{Clock, Message, Received};
 use crate::monitor::Limits;
 use crate::reference::ClarabelSolver;
@@ -29,7 +29,7 @@ use planner_core::{
     LaneInputError, LaneObservation, LanePlanner, Method, Other, Params, ParamsSpec, Planner, Pose,
     ReusePolicy, Road, Sensing, Settings, StepStatus, VehicleState,
 };
-use rand::Rng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// How far (m) from its lane's centre line, and how far from straight (rad), a vehicle
@@ -1202,4 +1202,43 @@ pub fn admissible(lim: &Limits, v: f64, accel: f64) -> f64 {
         (v - lim.brake * lim.h).max(0.0),
         (v + lim.a_max * lim.h).min(lim.v_max),
     )
+}
+
+/// A vehicle of `spec` at t = 0, with planners set up as `setup`.
+pub(crate) fn build_vehicle<const N: usize>(
+    spec: &VehicleSpec,
+    setup: PlannerSetup,
+    seed: u64,
+    net: &Network,
+) -> Vehicle<N> {
+    let driver = match spec.driver {
+        DriverKind::Planner => Driver::Planner(Box::new(Brain::new(spec.id, setup))),
+        DriverKind::Script => Driver::Script(spec.script.clone()),
+        DriverKind::Random => Driver::Random {
+            rng: Box::new(ChaCha8Rng::seed_from_u64(
+                seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(spec.id),
+            )),
+            accel: 0.0,
+            until: 0.0,
+        },
+    };
+    let mut v = Vehicle::new(spec.id, spec.at, spec.v, driver, spec.trip.clone(), 0.0);
+    v.cooperative = spec.cooperative;
+    v.note_free_flow(net);
+    if let At::Lane { x, lane, .. } = spec.at {
+        if spec.trip.target_lane == lane {
+            v.log.in_target_at = Some(0.0);
+        }
+        if spec.trip.goal_x.is_some_and(|g| x >= g) {
+            v.log.reached_at = Some(0.0);
+        }
+    }
+    v
+}
+
+/// Gives a vehicle's brain a new setup (its planners are built with it from now on).
+pub(crate) fn set_setup<const N: usize>(v: &mut Vehicle<N>, setup: PlannerSetup) {
+    if let Driver::Planner(b) = &mut v.driver {
+        b.set_setup(setup);
+    }
 }
