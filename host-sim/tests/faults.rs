@@ -144,7 +144,16 @@ fn multilane_experiment_with_loss_and_delay_is_safe_and_completes() {
         delay_s: 0.05,
         ..Faults::NONE
     };
-    let r = host_sim::experiments::multilane::experiment(12, 1, SolverChoice::Ours, f, 0);
+    let r = host_sim::experiments::multilane::experiment(
+        &host_sim::experiments::multilane::MultilaneSettings {
+            seeds: 12,
+            seed: 1,
+            solver: SolverChoice::Ours,
+            faults: f,
+            invariant: planner_core::Invariant::Paper,
+        },
+        0,
+    );
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
         (0, 0, 0),

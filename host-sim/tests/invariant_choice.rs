@@ -125,13 +125,59 @@ fn the_command_line_takes_the_invariant_and_reports_it() {
         let v = json(args);
         assert_eq!(v["invariant"], "paper", "{args:?}");
     }
-    // The plain fault experiment has no leader-aware form: refused, not ignored.
-    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .args(["experiment", "faults", "--invariant", "leader-aware"])
-        .output()
-        .expect("host-sim runs");
-    assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--invariant: only with --grid"));
+    // The paper's experiments take it too, and say so in each report (the plain fault
+    // comparison in each of its four).
+    let faults = [
+        "experiment",
+        "faults",
+        "--seeds",
+        "1",
+        "--throughput-seeds",
+        "1",
+        "--duration",
+        "10",
+    ];
+    for (args, at) in [
+        (
+            &["experiment", "multilane", "--seeds", "1"][..],
+            "/invariant",
+        ),
+        (
+            &[
+                "experiment",
+                "throughput",
+                "--seeds",
+                "1",
+                "--duration",
+                "10",
+            ],
+            "/invariant",
+        ),
+        (&faults[..], "/multilane_faulty/invariant"),
+        (&faults[..], "/throughput_clean/invariant"),
+    ] {
+        let v = json(&[args, &aware[..]].concat());
+        assert_eq!(v.pointer(at), Some(&"leader-aware".into()), "{args:?}");
+        let v = json(args);
+        assert_eq!(v.pointer(at), Some(&"paper".into()), "{args:?}");
+    }
+}
+
+/// The Fig. 9 world is built with the invariant its settings ask for.
+#[test]
+fn the_throughput_world_keeps_the_invariant_asked_for() {
+    use host_sim::experiments::throughput::{closed_world, ThroughputSettings};
+    for invariant in [Invariant::Paper, Invariant::LeaderAware] {
+        let s = ThroughputSettings {
+            seeds: 1,
+            seed: 1,
+            duration: 10.0,
+            faults: host_sim::bus::Faults::NONE,
+            invariant,
+        };
+        let w = closed_world(planner_core::crossing::Algorithm::Fifo, 1, &s);
+        assert_eq!(w.invariant, invariant);
+    }
 }
 
 /// Over CAN a straight road's vehicles declare their braking limit in the plain state

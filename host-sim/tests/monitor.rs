@@ -9,8 +9,8 @@ use host_sim::monitor::junction::{JunctionWatch, OnRoute};
 use host_sim::monitor::{Findings, Limits, Truth};
 use host_sim::world::at::At;
 use host_sim::world::network::{End, Network};
-use host_sim::world::watch::{segment_truth, WorldMonitor};
 use host_sim::world::vehicle::VehicleTruth;
+use host_sim::world::watch::{segment_truth, WorldMonitor};
 use host_sim::world::{LANE_WIDTH_M, LENGTH_M};
 use std::f64::consts::FRAC_PI_4;
 

@@ -288,15 +288,32 @@ fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
 /// lane change completes, nothing collides.
 #[test]
 fn multilane_experiment_completes_with_either_solver() {
-    let r = host_sim::experiments::multilane::experiment(8, 1, SolverChoice::Ours, Faults::NONE, 0);
+    let r = host_sim::experiments::multilane::experiment(
+        &host_sim::experiments::multilane::MultilaneSettings {
+            seeds: 8,
+            seed: 1,
+            solver: SolverChoice::Ours,
+            faults: Faults::NONE,
+            invariant: planner_core::Invariant::Paper,
+        },
+        0,
+    );
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
         (0, 0, 0)
     );
     assert_eq!(r.completed, r.runs, "{r:?}");
     assert!(r.max_lane_change_distance_m < r.bound_m, "{r:?}");
-    let c =
-        host_sim::experiments::multilane::experiment(1, 1, SolverChoice::Clarabel, Faults::NONE, 0);
+    let c = host_sim::experiments::multilane::experiment(
+        &host_sim::experiments::multilane::MultilaneSettings {
+            seeds: 1,
+            seed: 1,
+            solver: SolverChoice::Clarabel,
+            faults: Faults::NONE,
+            invariant: planner_core::Invariant::Paper,
+        },
+        0,
+    );
     assert_eq!(
         (c.collisions, c.invariant_violations, c.completed),
         (0, 0, 1),
@@ -353,7 +370,16 @@ fn bad_intersection_scenarios_are_rejected_with_file_line() {
 /// seed; all safe; the pipelined algorithm crosses the most.
 #[test]
 fn throughput_all_algorithms_safe_and_pipelined_fastest() {
-    let r = host_sim::experiments::throughput::throughput(1, 1, 120.0, Faults::NONE, 0);
+    let r = host_sim::experiments::throughput::throughput(
+        &host_sim::experiments::throughput::ThroughputSettings {
+            seeds: 1,
+            seed: 1,
+            duration: 120.0,
+            faults: Faults::NONE,
+            invariant: planner_core::Invariant::Paper,
+        },
+        0,
+    );
     for row in &r.results {
         assert_eq!(
             (

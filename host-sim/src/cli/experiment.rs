@@ -5,13 +5,10 @@ use super::SolverArg;
 use host_sim::bus::Faults;
 use host_sim::experiments::demand::Plan;
 use host_sim::experiments::faults::{compare, FaultSettings};
-use host_sim::experiments::multilane::MultilaneCase;
-use host_sim::experiments::shard::{
-    DemandSettings, GridSettings, MultilaneSettings, Runs, Shard, ThroughputSettings,
-};
-use host_sim::experiments::throughput::ThroughputCase;
+use host_sim::experiments::multilane::{MultilaneCase, MultilaneSettings};
+use host_sim::experiments::shard::{DemandSettings, GridSettings, Runs, Shard};
+use host_sim::experiments::throughput::{ThroughputCase, ThroughputSettings};
 use host_sim::output::plot::PlotData;
-use host_sim::world::SolverChoice;
 use planner_core::crossing::Algorithm;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -47,6 +44,9 @@ pub enum Experiment {
         shard: Option<Shard>,
         #[command(flatten)]
         faults: FaultArgs,
+        /// The invariant every planner keeps toward the vehicle ahead.
+        #[arg(long, value_enum, default_value = "paper")]
+        invariant: super::InvariantArg,
     },
     /// The multi-lane and throughput experiments on a perfect bus and on a faulty one
     /// (default 20 % loss, 50 ms delay), same seeds, compared.
@@ -102,7 +102,8 @@ pub enum Experiment {
         /// print them as JSON for `host-sim merge`; with --grid, of the grid's runs.
         #[arg(long, value_name = "I/N", conflicts_with = "plot")]
         shard: Option<Shard>,
-        /// With --grid: the invariant every planner keeps toward the vehicle ahead.
+        /// The invariant every planner keeps toward the vehicle ahead (in both experiments,
+        /// or in the grid).
         #[arg(long, value_enum, default_value = "paper")]
         invariant: super::InvariantArg,
         /// Print one JSON object.
@@ -204,6 +205,9 @@ pub enum Experiment {
         solver: SolverArg,
         #[command(flatten)]
         faults: FaultArgs,
+        /// The invariant every planner keeps toward the vehicle ahead.
+        #[arg(long, value_enum, default_value = "paper")]
+        invariant: super::InvariantArg,
     },
 }
 
@@ -256,7 +260,22 @@ pub fn run(e: Experiment) -> ExitCode {
             solver,
             faults,
             shard,
-        } => multilane(seeds, seed, json, plot, solver, faults, shard),
+            invariant,
+        } => match faults.faults() {
+            Ok(faults) => multilane(
+                &MultilaneSettings {
+                    seeds,
+                    seed,
+                    solver: solver.choice(),
+                    faults,
+                    invariant: invariant.invariant(),
+                },
+                json,
+                plot,
+                shard,
+            ),
+            Err(e) => bad_input(e),
+        },
         Experiment::Faults {
             seeds,
             throughput_seeds,
@@ -282,9 +301,6 @@ pub fn run(e: Experiment) -> ExitCode {
                 };
                 return fault_grid(&g, json, plot, shard);
             }
-            if invariant != super::InvariantArg::Paper {
-                return bad_input("--invariant: only with --grid (the fault grid)");
-            }
             let args = FaultArgs {
                 loss,
                 delay,
@@ -292,7 +308,8 @@ pub fn run(e: Experiment) -> ExitCode {
                 duplicate: 0.0,
                 reorder: 0.0,
             };
-            faults(args, seeds, throughput_seeds, duration, json, shard)
+            let counts = (seeds, throughput_seeds, duration);
+            faults(args, counts, invariant.invariant(), json, shard)
         }
         Experiment::LaneCapacity(a) => lane_capacity(&a).err().unwrap_or(ExitCode::SUCCESS),
         Experiment::Throughput {
@@ -303,7 +320,22 @@ pub fn run(e: Experiment) -> ExitCode {
             plot,
             faults,
             shard,
-        } => throughput(duration, seeds, seed, json, plot, faults, shard),
+            invariant,
+        } => match faults.faults() {
+            Ok(faults) => throughput(
+                &ThroughputSettings {
+                    seeds,
+                    seed,
+                    duration,
+                    faults,
+                    invariant: invariant.invariant(),
+                },
+                json,
+                plot,
+                shard,
+            ),
+            Err(e) => bad_input(e),
+        },
         Experiment::Network {
             grid,
             rate,
@@ -550,37 +582,30 @@ fn demand(plan: &Plan, (json, plot): (bool, Option<PathBuf>), shard: Option<Shar
 }
 
 fn multilane(
-    seeds: u64,
-    seed: u64,
+    s: &MultilaneSettings,
     json: bool,
     plot: Option<PathBuf>,
-    solver: SolverArg,
-    faults: FaultArgs,
     shard: Option<Shard>,
 ) -> ExitCode {
-    let faults = match faults.faults() {
-        Ok(f) => f,
-        Err(e) => return bad_input(e),
-    };
     let plot = match plot_output(plot.as_deref()) {
         Ok(p) => p,
         Err(code) => return code,
     };
-    let solver = solver.choice();
     if let Some(sh) = shard {
-        return multilane_shard(seeds, seed, solver, faults, sh);
+        return multilane_shard(s, sh);
     }
-    let r = host_sim::experiments::multilane::experiment(seeds, seed, solver, faults, 0);
+    let r = host_sim::experiments::multilane::experiment(s, 0);
     if let Some(out) = plot {
-        let sc = host_sim::experiments::multilane::paper_scenario(seed);
+        let sc = host_sim::experiments::multilane::paper_scenario(s.seed);
         let name = format!("{} (Fig. 7 style)", sc.name);
-        let world = sc.world();
+        let mut world = sc.world();
+        world.invariant = s.invariant;
         // The manoeuvres are over well within 12 s (Fig. 7 shows the same window).
         let mut data = PlotData {
             until_s: Some(12.0),
             ..PlotData::of(&world.network)
         };
-        host_sim::experiments::multilane::run_one(world, solver, &mut |r| data.add(r));
+        host_sim::experiments::multilane::run_one(world, s.solver, &mut |r| data.add(r));
         if let Err(code) = draw_plot(out, |p| host_sim::output::plot::write(&data, &name, p)) {
             return code;
         }
@@ -594,29 +619,22 @@ fn multilane(
 }
 
 fn throughput(
-    duration: f64,
-    seeds: u64,
-    seed: u64,
+    s: &ThroughputSettings,
     json: bool,
     plot: Option<PathBuf>,
-    faults: FaultArgs,
     shard: Option<Shard>,
 ) -> ExitCode {
-    let faults = match faults.faults() {
-        Ok(f) => f,
-        Err(e) => return bad_input(e),
-    };
-    if let Err(code) = check_duration(duration, 3600.0) {
+    if let Err(code) = check_duration(s.duration, 3600.0) {
         return code;
     }
     if let Some(sh) = shard {
-        return throughput_shard(duration, seeds, seed, faults, sh);
+        return throughput_shard(s, sh);
     }
     let plot = match plot_output(plot.as_deref()) {
         Ok(p) => p,
         Err(code) => return code,
     };
-    let r = host_sim::experiments::throughput::throughput(seeds, seed, duration, faults, 0);
+    let r = host_sim::experiments::throughput::throughput(s, 0);
     if let Some(out) = plot {
         if let Err(code) = draw_plot(out, |p| host_sim::output::plot::bars(&r, p)) {
             return code;
@@ -664,44 +682,26 @@ fn shard_of<T: serde::Serialize>(
     )
 }
 
-fn multilane_shard(
-    seeds: u64,
-    seed: u64,
-    solver: SolverChoice,
-    faults: Faults,
-    sh: Shard,
-) -> ExitCode {
-    let settings = MultilaneSettings {
-        seeds,
-        seed,
-        solver,
-        faults,
-    };
+fn multilane_shard(s: &MultilaneSettings, sh: Shard) -> ExitCode {
     shard_of(
         "multilane",
-        settings,
-        seeds,
+        s,
+        s.seeds,
         sh,
-        |r| host_sim::experiments::multilane::multilane_cases(r, seed, solver, faults, 0),
+        |r| host_sim::experiments::multilane::multilane_cases(s, r, 0),
         MultilaneCase::unsafe_events,
     )
 }
 
-fn throughput_shard(duration: f64, seeds: u64, seed: u64, faults: Faults, sh: Shard) -> ExitCode {
+fn throughput_shard(s: &ThroughputSettings, sh: Shard) -> ExitCode {
     use host_sim::experiments::throughput::throughput_cases;
-    let settings = ThroughputSettings {
-        seeds,
-        seed,
-        duration,
-        faults,
-    };
-    let cases = seeds * planner_core::crossing::Algorithm::ALL.len() as u64;
+    let cases = s.seeds * planner_core::crossing::Algorithm::ALL.len() as u64;
     shard_of(
         "throughput",
-        settings,
+        s,
         cases,
         sh,
-        |r| throughput_cases(seeds, seed, r, duration, faults, 0),
+        |r| throughput_cases(s, r, 0),
         ThroughputCase::unsafe_events,
     )
 }
@@ -725,9 +725,8 @@ fn faults_shard(s: &FaultSettings, sh: Shard) -> ExitCode {
 
 fn faults(
     args: FaultArgs,
-    seeds: u64,
-    throughput_seeds: u64,
-    duration: f64,
+    (seeds, throughput_seeds, duration): (u64, u64, f64),
+    invariant: planner_core::Invariant,
     json: bool,
     shard: Option<Shard>,
 ) -> ExitCode {
@@ -743,11 +742,12 @@ fn faults(
         seeds,
         throughput_seeds,
         duration,
+        invariant,
     };
     match shard {
         Some(sh) => faults_shard(&settings, sh),
         None => {
-            let r = compare(faults, seeds, throughput_seeds, duration, 0);
+            let r = compare(&settings, 0);
             let live = r.multilane_faulty.completed == r.multilane_faulty.runs;
             finish(&r, json, r.faulty_unsafe_events == 0, live)
         }

@@ -2,8 +2,12 @@
 //! complete on a faulty bus? Both are run on the same seeds over a perfect bus and over
 //! one injecting the given faults, in one command, and compared.
 
-use super::multilane::{multilane_cases, multilane_report, MultilaneCase, MultilaneReport};
-use super::throughput::{throughput_cases, throughput_report, ThroughputCase, ThroughputReport};
+use super::multilane::{
+    multilane_cases, multilane_report, MultilaneCase, MultilaneReport, MultilaneSettings,
+};
+use super::throughput::{
+    throughput_cases, throughput_report, ThroughputCase, ThroughputReport, ThroughputSettings,
+};
 use crate::bus::Faults;
 use crate::world::SolverChoice;
 use planner_core::crossing::Algorithm;
@@ -77,6 +81,10 @@ pub struct FaultSettings {
     pub throughput_seeds: u64,
     /// Simulated seconds per throughput run.
     pub duration: f64,
+    /// The invariant every planner keeps toward the vehicle ahead (the paper's in shards
+    /// of older versions).
+    #[serde(default, with = "crate::world::invariant_serde")]
+    pub invariant: planner_core::Invariant,
 }
 
 impl FaultSettings {
@@ -88,17 +96,15 @@ impl FaultSettings {
 
     /// Runs `first..end` of [`Self::cases`]: run i is the same run whatever the range.
     pub fn run(&self, (first, end): (u64, u64), threads: usize) -> Vec<FaultCase> {
-        let solver = SolverChoice::Ours;
         let m = self.seeds;
         let t = self.throughput_seeds * Algorithm::ALL.len() as u64;
         // Each block is the part of [first, end) that falls in it, shifted to its start.
         let part =
             |lo: u64, len: u64| (first.clamp(lo, lo + len) - lo, end.clamp(lo, lo + len) - lo);
-        let bus = |faulty: bool| if faulty { self.faults } else { Faults::NONE };
         let mut out = Vec::new();
         for (k, faulty) in [false, true].into_iter().enumerate() {
             let range = part(k as u64 * m, m);
-            let runs = multilane_cases(range, 1, solver, bus(faulty), threads);
+            let runs = multilane_cases(&self.multilane(faulty), range, threads);
             out.extend(
                 runs.into_iter()
                     .map(|run| FaultCase::Multilane { faulty, run }),
@@ -106,8 +112,7 @@ impl FaultSettings {
         }
         for (k, faulty) in [false, true].into_iter().enumerate() {
             let range = part(2 * m + k as u64 * t, t);
-            let (n, d) = (self.throughput_seeds, self.duration);
-            let runs = throughput_cases(n, 1, range, d, bus(faulty), threads);
+            let runs = throughput_cases(&self.throughput(faulty), range, threads);
             out.extend(
                 runs.into_iter()
                     .map(|run| FaultCase::Throughput { faulty, run }),
@@ -131,36 +136,44 @@ impl FaultSettings {
                 }
             }
         }
-        let solver = SolverChoice::Ours;
-        let (n, d) = (self.throughput_seeds, self.duration);
         // The four parts ran interleaved on one pool: each reports the whole comparison's time.
         let w = wall_seconds;
         comparison(
             self.faults,
-            multilane_report(&multilane[0], solver, Faults::NONE, w),
-            multilane_report(&multilane[1], solver, self.faults, w),
-            throughput_report(&throughput[0], n, d, Faults::NONE, w),
-            throughput_report(&throughput[1], n, d, self.faults, w),
+            multilane_report(&multilane[0], &self.multilane(false), w),
+            multilane_report(&multilane[1], &self.multilane(true), w),
+            throughput_report(&throughput[0], &self.throughput(false), w),
+            throughput_report(&throughput[1], &self.throughput(true), w),
         )
+    }
+
+    /// The multi-lane runs' settings on the perfect bus or the faulty one (seeds 1..=K).
+    fn multilane(&self, faulty: bool) -> MultilaneSettings {
+        MultilaneSettings {
+            seeds: self.seeds,
+            seed: 1,
+            solver: SolverChoice::Ours,
+            faults: if faulty { self.faults } else { Faults::NONE },
+            invariant: self.invariant,
+        }
+    }
+
+    /// The throughput runs' settings on the perfect bus or the faulty one (seeds 1..=K).
+    fn throughput(&self, faulty: bool) -> ThroughputSettings {
+        ThroughputSettings {
+            seeds: self.throughput_seeds,
+            seed: 1,
+            duration: self.duration,
+            faults: if faulty { self.faults } else { Faults::NONE },
+            invariant: self.invariant,
+        }
     }
 }
 
-/// Runs both experiments on both buses: `seeds` multi-lane runs and `throughput_seeds`
-/// throughput runs of `duration` s per algorithm.
-pub fn compare(
-    faults: Faults,
-    seeds: u64,
-    throughput_seeds: u64,
-    duration: f64,
-    threads: usize,
-) -> FaultComparison {
+/// Runs both experiments on both buses: `s.seeds` multi-lane runs and
+/// `s.throughput_seeds` throughput runs of `s.duration` s per algorithm.
+pub fn compare(s: &FaultSettings, threads: usize) -> FaultComparison {
     let t0 = std::time::Instant::now();
-    let s = FaultSettings {
-        faults,
-        seeds,
-        throughput_seeds,
-        duration,
-    };
     let cases = s.run((0, s.cases()), threads);
     s.report(&cases, t0.elapsed().as_secs_f64())
 }

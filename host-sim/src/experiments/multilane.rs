@@ -8,8 +8,27 @@ use crate::scenario::road::{commitment_bound, Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
 use crate::world::summary::Summary;
 use crate::world::{SolverChoice, TraceRow, World, LENGTH_M, START_MARGIN_M};
+use planner_core::Invariant;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+
+/// `experiment multilane`'s settings: what every run shares (a shard's header carries
+/// them for `host-sim merge`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MultilaneSettings {
+    /// Runs.
+    pub seeds: u64,
+    /// First seed.
+    pub seed: u64,
+    /// Solver.
+    pub solver: SolverChoice,
+    /// Faults.
+    pub faults: Faults,
+    /// The invariant every planner keeps toward the vehicle ahead (the paper's in shards
+    /// of older versions).
+    #[serde(default, with = "crate::world::invariant_serde")]
+    pub invariant: Invariant,
+}
 
 /// The paper's speed v0 in the multi-lane experiment (m/s).
 pub const V0: f64 = 15.0;
@@ -132,6 +151,9 @@ pub struct MultilaneReport {
     pub solver: SolverChoice,
     /// Faults the bus injected.
     pub faults: Faults,
+    /// The invariant every planner kept toward the vehicle ahead.
+    #[serde(with = "crate::world::invariant_serde")]
+    pub invariant: Invariant,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
 }
@@ -193,17 +215,16 @@ impl MultilaneCase {
     }
 }
 
-/// Runs the paper's experiment for the runs `first..end` (seed `first_seed + i` for
-/// run i: a run depends on its index alone).
+/// Runs the paper's experiment for the runs `first..end` (seed `s.seed + i` for run i:
+/// a run depends on its index alone).
 pub fn multilane_cases(
+    s: &MultilaneSettings,
     (first, end): (u64, u64),
-    first_seed: u64,
-    solver: SolverChoice,
-    faults: Faults,
     threads: usize,
 ) -> Vec<MultilaneCase> {
+    let (solver, faults) = (s.solver, s.faults);
     super::par::map_indexed(end.saturating_sub(first) as usize, threads, |i| {
-        let seed = first_seed + first + i as u64;
+        let seed = s.seed + first + i as u64;
         let sc = paper_scenario(seed);
         let bound_m = (0..sc.vehicles.len())
             .filter_map(|k| commitment_bound(&sc.vehicles, &sc.road, k, V0))
@@ -211,6 +232,7 @@ pub fn multilane_cases(
         let mut world = sc.world();
         world.faults = faults;
         world.sensing = (!faults.is_none()).then(planner_core::Sensing::radar);
+        world.invariant = s.invariant;
         let s = run_one(world, solver, &mut |_| {});
         MultilaneCase {
             seed,
@@ -231,8 +253,7 @@ pub fn multilane_cases(
 /// The report over `cases` (in run order).
 pub fn multilane_report(
     cases: &[MultilaneCase],
-    solver: SolverChoice,
-    faults: Faults,
+    s: &MultilaneSettings,
     wall_seconds: f64,
 ) -> MultilaneReport {
     let times: Vec<f64> = cases.iter().filter_map(|c| c.done_at_s).collect();
@@ -252,23 +273,18 @@ pub fn multilane_report(
         fallback_steps: sum(|c| c.fallback_steps),
         yield_steps: sum(|c| c.yield_steps),
         planner_steps: sum(|c| c.planner_steps),
-        solver,
-        faults,
+        solver: s.solver,
+        faults: s.faults,
+        invariant: s.invariant,
         wall_seconds,
     }
 }
 
-/// `host-sim experiment multilane`: the paper's experiment on `seeds` seeds.
-pub fn experiment(
-    seeds: u64,
-    first_seed: u64,
-    solver: SolverChoice,
-    faults: Faults,
-    threads: usize,
-) -> MultilaneReport {
+/// `host-sim experiment multilane`: the paper's experiment on `s.seeds` seeds.
+pub fn experiment(s: &MultilaneSettings, threads: usize) -> MultilaneReport {
     let t0 = std::time::Instant::now();
-    let cases = multilane_cases((0, seeds), first_seed, solver, faults, threads);
-    multilane_report(&cases, solver, faults, t0.elapsed().as_secs_f64())
+    let cases = multilane_cases(s, (0, s.seeds), threads);
+    multilane_report(&cases, s, t0.elapsed().as_secs_f64())
 }
 
 impl core::fmt::Display for MultilaneReport {

@@ -188,32 +188,6 @@ pub struct Runs<T> {
     pub wall_seconds: f64,
 }
 
-/// `experiment multilane`'s settings.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-pub struct MultilaneSettings {
-    /// Runs.
-    pub seeds: u64,
-    /// First seed.
-    pub seed: u64,
-    /// Solver.
-    pub solver: crate::world::SolverChoice,
-    /// Faults.
-    pub faults: crate::bus::Faults,
-}
-
-/// `experiment throughput`'s settings.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-pub struct ThroughputSettings {
-    /// Runs per algorithm.
-    pub seeds: u64,
-    /// First seed.
-    pub seed: u64,
-    /// Simulated seconds per run.
-    pub duration: f64,
-    /// Faults.
-    pub faults: crate::bus::Faults,
-}
-
 /// `experiment faults --grid`'s settings.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct GridSettings {
@@ -285,25 +259,14 @@ fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
     }
     let report = match h.sweep.as_str() {
         "multilane" => {
-            let s: MultilaneSettings = parse("settings", &h.settings)?;
+            let s: multilane::MultilaneSettings = parse("settings", &h.settings)?;
             let r: Runs<multilane::MultilaneCase> = parse("runs", merged)?;
-            serde_json::to_value(multilane::multilane_report(
-                &r.runs,
-                s.solver,
-                s.faults,
-                r.wall_seconds,
-            ))
+            serde_json::to_value(multilane::multilane_report(&r.runs, &s, r.wall_seconds))
         }
         "throughput" => {
-            let s: ThroughputSettings = parse("settings", &h.settings)?;
+            let s: throughput::ThroughputSettings = parse("settings", &h.settings)?;
             let r: Runs<throughput::ThroughputCase> = parse("runs", merged)?;
-            serde_json::to_value(throughput::throughput_report(
-                &r.runs,
-                s.seeds,
-                s.duration,
-                s.faults,
-                r.wall_seconds,
-            ))
+            serde_json::to_value(throughput::throughput_report(&r.runs, &s, r.wall_seconds))
         }
         "faults-grid" => {
             use super::fault_grid::{grid_report, Cell, GridPlan, GridRun};

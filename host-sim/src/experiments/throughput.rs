@@ -10,9 +10,28 @@ use crate::world::summary::Summary;
 use crate::world::{Arrivals, Finish, SolverChoice, World, WorldSpec, LENGTH_M};
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{Layout, LayoutSpec};
+use planner_core::Invariant;
 use planner_core::Params;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+
+/// `experiment throughput`'s settings: what every run shares (a shard's header carries
+/// them for `host-sim merge`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ThroughputSettings {
+    /// Runs per algorithm.
+    pub seeds: u64,
+    /// First seed.
+    pub seed: u64,
+    /// Simulated seconds per run.
+    pub duration: f64,
+    /// Faults.
+    pub faults: Faults,
+    /// The invariant every planner keeps toward the vehicle ahead (the paper's in shards
+    /// of older versions).
+    #[serde(default, with = "crate::world::invariant_serde")]
+    pub invariant: Invariant,
+}
 
 /// The Fig. 8 start: one vehicle on each of the 8 inlets, random routes, at vImax,
 /// staggered along their inlets.
@@ -49,8 +68,9 @@ pub fn spec8_layout() -> Layout<f64> {
 }
 
 /// The world of a Fig. 9 run: the SPEC §8 junction under `algorithm`, the Fig. 8 start
-/// of `seed`, a closed system.
-pub fn closed_world(algorithm: Algorithm, seed: u64, duration: f64, faults: Faults) -> WorldSpec {
+/// of `seed`, a closed system, run for `s.duration` with `s.faults` and `s.invariant`.
+pub fn closed_world(algorithm: Algorithm, seed: u64, s: &ThroughputSettings) -> WorldSpec {
+    let (duration, faults) = (s.duration, s.faults);
     let layout = spec8_layout();
     let placements = fig8_placements(&layout, seed);
     WorldSpec {
@@ -78,14 +98,14 @@ pub fn closed_world(algorithm: Algorithm, seed: u64, duration: f64, faults: Faul
         finish: Finish::Duration,
         clock_start: planner_core::Instant::EPOCH,
         precision: crate::world::precision::Precision::F64,
-        invariant: planner_core::Invariant::Paper,
+        invariant: s.invariant,
     }
 }
 
-/// Runs a closed system of 8 vehicles for `duration` s under `algorithm` (Fig. 9).
-pub fn throughput_run(algorithm: Algorithm, seed: u64, duration: f64, faults: Faults) -> Summary {
+/// Runs a closed system of 8 vehicles for `s.duration` s under `algorithm` (Fig. 9).
+pub fn throughput_run(algorithm: Algorithm, seed: u64, s: &ThroughputSettings) -> Summary {
     let mut w = World::<20>::new(
-        closed_world(algorithm, seed, duration, faults),
+        closed_world(algorithm, seed, s),
         SolverChoice::Ours,
         Some(seed),
     );
@@ -134,6 +154,9 @@ pub struct ThroughputReport {
     pub duration_s: f64,
     /// Faults the bus injected.
     pub faults: Faults,
+    /// The invariant every planner kept toward the vehicle ahead.
+    #[serde(with = "crate::world::invariant_serde")]
+    pub invariant: Invariant,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
 }
@@ -186,18 +209,15 @@ pub fn throughput_jobs(seeds: u64, first_seed: u64) -> Vec<(Algorithm, u64)> {
 
 /// Runs the throughput runs `first..end` of [`throughput_jobs`].
 pub fn throughput_cases(
-    seeds: u64,
-    first_seed: u64,
+    st: &ThroughputSettings,
     (first, end): (u64, u64),
-    duration: f64,
-    faults: Faults,
     threads: usize,
 ) -> Vec<ThroughputCase> {
-    let jobs = throughput_jobs(seeds, first_seed);
+    let jobs = throughput_jobs(st.seeds, st.seed);
     let jobs = &jobs[(first as usize).min(jobs.len())..(end as usize).min(jobs.len())];
     super::par::map_indexed(jobs.len(), threads, |i| {
         let (a, seed) = jobs[i];
-        let s = throughput_run(a, seed, duration, faults);
+        let s = throughput_run(a, seed, st);
         ThroughputCase {
             algorithm: a.name().into(),
             seed,
@@ -247,9 +267,7 @@ fn row(algorithm: &'static str, mine: &[&ThroughputCase]) -> ThroughputRow {
 /// The report over `cases` (in [`throughput_jobs`] order), one row per algorithm.
 pub fn throughput_report(
     cases: &[ThroughputCase],
-    seeds: u64,
-    duration: f64,
-    faults: Faults,
+    s: &ThroughputSettings,
     wall_seconds: f64,
 ) -> ThroughputReport {
     let results = Algorithm::ALL
@@ -262,25 +280,20 @@ pub fn throughput_report(
         .collect();
     ThroughputReport {
         results,
-        seeds,
-        duration_s: duration,
-        faults,
+        seeds: s.seeds,
+        duration_s: s.duration,
+        faults: s.faults,
+        invariant: s.invariant,
         wall_seconds,
     }
 }
 
 /// Fig. 9: every algorithm on the same seeds.
-pub fn throughput(
-    seeds: u64,
-    first_seed: u64,
-    duration: f64,
-    faults: Faults,
-    threads: usize,
-) -> ThroughputReport {
+pub fn throughput(s: &ThroughputSettings, threads: usize) -> ThroughputReport {
     let t0 = std::time::Instant::now();
-    let all = (0, seeds * Algorithm::ALL.len() as u64);
-    let cases = throughput_cases(seeds, first_seed, all, duration, faults, threads);
-    throughput_report(&cases, seeds, duration, faults, t0.elapsed().as_secs_f64())
+    let all = (0, s.seeds * Algorithm::ALL.len() as u64);
+    let cases = throughput_cases(s, all, threads);
+    throughput_report(&cases, s, t0.elapsed().as_secs_f64())
 }
 
 impl core::fmt::Display for ThroughputReport {

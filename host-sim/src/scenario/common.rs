@@ -253,13 +253,7 @@ impl ArrivalsToml {
 
 /// The invariant named `name` (`"paper"` or `"leader-aware"`), or why not.
 pub fn parse_invariant(name: &str) -> Result<Invariant, String> {
-    match name {
-        "paper" => Ok(Invariant::Paper),
-        "leader-aware" => Ok(Invariant::LeaderAware),
-        _ => Err(format!(
-            "invariant must be \"paper\" or \"leader-aware\", got {name:?}"
-        )),
-    }
+    crate::world::invariant_named(name)
 }
 
 /// `true` if `x` is a usable coordinate (finite, within ±[`MAX_COORD_M`]).

@@ -184,6 +184,37 @@ pub fn invariant_name(i: planner_core::Invariant) -> &'static str {
     }
 }
 
+/// The invariant named `name` ("paper" or "leader-aware").
+pub fn invariant_named(name: &str) -> Result<planner_core::Invariant, String> {
+    match name {
+        "paper" => Ok(planner_core::Invariant::Paper),
+        "leader-aware" => Ok(planner_core::Invariant::LeaderAware),
+        _ => Err(format!(
+            "invariant must be \"paper\" or \"leader-aware\", got {name:?}"
+        )),
+    }
+}
+
+/// An invariant in JSON, by its name (`#[serde(with = "crate::world::invariant_serde")]`);
+/// settings written before it existed read as the paper's (`#[serde(default)]` on a
+/// field of type [`planner_core::Invariant`], whose default is the paper's).
+pub mod invariant_serde {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Writes the invariant's name.
+    pub fn serialize<S: Serializer>(i: &planner_core::Invariant, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(super::invariant_name(*i))
+    }
+
+    /// Reads an invariant's name.
+    pub fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<planner_core::Invariant, D::Error> {
+        let name = String::deserialize(d)?;
+        super::invariant_named(&name).map_err(serde::de::Error::custom)
+    }
+}
+
 /// One row of the trace: the state at `t` and the command for [t, t+h).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TraceRow {
