@@ -32,7 +32,7 @@ pub mod throughput;
 use crate::bus::{Clock, Faults, Message, Received};
 use crate::monitor::liveness::DeadlockDetector;
 use crate::monitor::Limits;
-use crate::world::handover::{step_place, Moved};
+use crate::world::handover::Moved;
 use crate::world::junction::ManagerNode;
 use crate::world::network::Network;
 use crate::world::sensor::{sense, Seen, Sensed};
@@ -1337,11 +1337,9 @@ fn vehicle_task<const N: usize, P: CanPort>(
             liar: ctx.faults.liar,
             returns: &sensed,
         };
-        let ((v, w), r) = car.decide(&step, &received, &mut counters);
-        car.advance(v, w, h);
+        let (r, moved) = car.period(&step, &received, &mut counters);
         let now = (k + 1) as f64 * h;
-        car.check_goal(now);
-        match step_place(&mut car, ctx.net, now) {
+        match moved {
             Moved::LeftJunction(j) => departing = Some((Some(j), now)),
             Moved::LeftWorld => departing = Some((None, now)),
             Moved::Stays => {}

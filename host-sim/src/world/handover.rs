@@ -11,7 +11,8 @@ use rand::Rng;
 
 /// What a vehicle's move did to its place.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Moved {
+pub enum Moved {
+    /// Where it was: on its segment, or in its junction.
     Stays,
     /// It left junction (index) onto a segment, or out of the world (then it is still
     /// `At::Crossing`).
@@ -25,7 +26,7 @@ pub(crate) enum Moved {
 /// ended at A_C's edge); bookkeeping of its arrival in A_C and departure from A_S; off a
 /// junction once it is on its outlet outside A_C, onto the next segment or out of the
 /// world; out of the world past an exit.
-pub(crate) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now: f64) -> Moved {
+pub(super) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now: f64) -> Moved {
     match v.at {
         At::Lane { seg, x, lane, .. } => {
             let Some(sg) = net.segments.get(seg) else {
@@ -109,14 +110,15 @@ pub(crate) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now:
 }
 
 impl<const N: usize, B: Bus> World<N, B> {
-    /// Phase 6: hand-overs between segments and junctions, and departures. A vehicle that
-    /// leaves a junction says so at once (and repeats it for [`LEFT_REPEAT_S`]); one that
-    /// leaves the world is kept for the summary and, in a closed system, comes back later.
-    pub(super) fn hand_over(&mut self) -> Result<(), BusError> {
+    /// Phase 5: departures, from what each vehicle's move did (`moves`, in vehicle order,
+    /// from its period). A vehicle that leaves a junction says so at once (and repeats it
+    /// for [`LEFT_REPEAT_S`]); one that leaves the world is kept for the summary and, in a
+    /// closed system, comes back later.
+    pub(super) fn hand_over(&mut self, moves: &[Moved]) -> Result<(), BusError> {
         let now = self.t;
         let mut leaving = Vec::new();
-        for (i, v) in self.vehicles.iter_mut().enumerate() {
-            match step_place(v, &self.net, now) {
+        for (i, (v, moved)) in self.vehicles.iter_mut().zip(moves).enumerate() {
+            match *moved {
                 Moved::Stays => {}
                 Moved::LeftJunction(j) if v.log.left_at.is_none() => {
                     let id = v.id;

@@ -11,10 +11,12 @@
 //!    a vehicle that has left a junction repeats Left for a while)
 //! 2. every junction's manager hears the reports, decides, and broadcasts its leases
 //! 3. every vehicle's sensors return what they see (when the world has sensors)
-//! 4. every vehicle hears what the bus delivered → its view → its planner → command
-//! 5. all move (the exact unicycle (1) on a segment, along the path at a junction)
-//! 6. hand-overs between segments and junctions, departures, arrivals
-//! 7. the monitors judge the ground truth: safety, then liveness
+//! 4. every vehicle's period (`Vehicle::period`, which a fleet's tasks run too): it
+//!    hears what the bus delivered → its view → its planner → command; it moves (the
+//!    exact unicycle (1) on a segment, along the path at a junction); it takes its place
+//!    after the move (hand-overs between segments and junctions)
+//! 5. departures are said and the departed leave; arrivals enter
+//! 6. the monitors judge the ground truth: safety, then liveness
 //! ```
 
 pub mod at;
@@ -23,6 +25,7 @@ pub mod handover;
 pub mod heard;
 pub mod junction;
 pub mod network;
+pub mod period;
 pub mod plausible;
 pub mod precision;
 pub mod sensor;

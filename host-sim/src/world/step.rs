@@ -1,7 +1,8 @@
 //! The world's period, its phases in order (the module docs of [`super`] list them):
-//! broadcast, manage, sense, decide, advance, hand over (`super::handover`), arrivals
-//! (`super::spawn`), the monitors (`super::watch`) and the liveness watch. Each phase is
-//! a function here or in the file named; this one only runs them.
+//! broadcast, manage, sense, each vehicle's period (`super::period`), departures
+//! (`super::handover`), arrivals (`super::spawn`), the monitors (`super::watch`) and the
+//! liveness watch. Each phase is a function here or in the file named; this one only
+//! runs them.
 
 use super::junction::{ManagerNode, LEFT_REPEAT_S};
 use super::sensor::{roadside, sense, Seen, Sensed};
@@ -17,7 +18,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         self.broadcast(t)?;
         self.manage(t)?;
         let sensed = self.sense_all();
-        let mut commands = Vec::with_capacity(self.vehicles.len());
+        let mut moves = Vec::with_capacity(self.vehicles.len());
         let mut inbox: Vec<Received> = Vec::new();
         for (i, v) in self.vehicles.iter_mut().enumerate() {
             inbox.clear();
@@ -35,22 +36,16 @@ impl<const N: usize, B: Bus> World<N, B> {
                 returns: sensed.get(i).unwrap_or(&empty),
             };
             let t0 = self.costs.is_some().then(std::time::Instant::now);
-            let (cmd, row) = v.decide(&ctx, &inbox, &mut self.counters);
+            let (row, moved) = v.period(&ctx, &inbox, &mut self.counters);
             if let (Some(c), Some(t0), true) = (&mut self.costs, t0, v.is_planner()) {
                 c.add(t0.elapsed().as_nanos() as u64);
             }
-            commands.push(cmd);
+            moves.push(moved);
             trace(&row);
-        }
-        for (v, (speed, w)) in self.vehicles.iter_mut().zip(commands) {
-            v.advance(speed, w, h);
         }
         self.steps_done += 1;
         self.t = self.steps_done as f64 * h;
-        for v in self.vehicles.iter_mut() {
-            v.check_goal(self.t);
-        }
-        self.hand_over()?;
+        self.hand_over(&moves)?;
         self.arrive()?;
         let truths: Vec<VehicleTruth> = self.vehicles.iter().map(|v| v.truth(&self.net)).collect();
         self.monitor.check(&self.lim, &self.net, &truths);
@@ -144,7 +139,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             .collect()
     }
 
-    /// Phase 7, liveness: the deadlock detector, and its report when it fires.
+    /// Phase 6, liveness: the deadlock detector, and its report when it fires.
     fn watch_liveness(&mut self) {
         let truths: Vec<VehicleTruth> = self.vehicles.iter().map(|v| v.truth(&self.net)).collect();
         let waiting = self.streams.iter().any(|s| !s.queue.is_empty()) || !self.pending.is_empty();
