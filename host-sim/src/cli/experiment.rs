@@ -22,32 +22,7 @@ pub enum Experiment {
     LaneCapacity(LaneCapacityArgs),
     /// Fig. 9: closed system of 8 vehicles at the SPEC §8 intersection; every algorithm
     /// (STOP, STOP-1, FIFO, CON, CON-fair, PIPE, PLATOON) on identical seeds.
-    Throughput {
-        /// Simulated seconds per run.
-        #[arg(long, default_value_t = 300.0)]
-        duration: f64,
-        /// Runs per algorithm (seeds from --seed).
-        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
-        seeds: u64,
-        /// First seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Print one JSON object.
-        #[arg(long)]
-        json: bool,
-        /// Draw a Fig. 9-style bar chart to a .png or .svg file.
-        #[arg(long, value_name = "out.png|out.svg")]
-        plot: Option<PathBuf>,
-        /// Run only shard I of N (0-based) of the runs and print them as JSON for
-        /// `host-sim merge`.
-        #[arg(long, value_name = "I/N", conflicts_with = "plot")]
-        shard: Option<Shard>,
-        #[command(flatten)]
-        faults: FaultArgs,
-        /// The invariant every planner keeps toward the vehicle ahead.
-        #[arg(long, value_enum, default_value = "paper")]
-        invariant: super::InvariantArg,
-    },
+    Throughput(ThroughputArgs),
     /// The multi-lane and throughput experiments on a perfect bus and on a faulty one
     /// (default 20 % loss, 50 ms delay), same seeds, compared.
     Faults {
@@ -183,32 +158,89 @@ pub enum Experiment {
     /// on a forgery or replay accepted, or an unsafe event).
     Attacks(AttacksArgs),
     /// Fig. 6/7: 3 lanes, 6 vehicles at 15 m/s, random target lanes, one run per seed.
-    Multilane {
-        /// Number of runs (seeds 1..=K, or from --seed).
-        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
-        seeds: u64,
-        /// First seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Print one JSON object.
-        #[arg(long)]
-        json: bool,
-        /// Draw the first run's trajectories (Fig. 7 style) to a .png or .svg file.
-        #[arg(long, value_name = "out.png|out.svg")]
-        plot: Option<PathBuf>,
-        /// Run only shard I of N (0-based) of the runs and print them as JSON for
-        /// `host-sim merge`.
-        #[arg(long, value_name = "I/N", conflicts_with = "plot")]
-        shard: Option<Shard>,
-        /// The planners' solver.
-        #[arg(long, value_enum, default_value = "ours")]
-        solver: SolverArg,
-        #[command(flatten)]
-        faults: FaultArgs,
-        /// The invariant every planner keeps toward the vehicle ahead.
-        #[arg(long, value_enum, default_value = "paper")]
-        invariant: super::InvariantArg,
-    },
+    Multilane(MultilaneArgs),
+}
+
+/// `experiment multilane`'s flags.
+#[derive(clap::Args)]
+pub struct MultilaneArgs {
+    /// Number of runs (seeds 1..=K, or from --seed).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+    pub(crate) seeds: u64,
+    /// First seed.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub(crate) json: bool,
+    /// Draw the first run's trajectories (Fig. 7 style) to a .png or .svg file.
+    #[arg(long, value_name = "out.png|out.svg")]
+    pub(crate) plot: Option<PathBuf>,
+    /// Run only shard I of N (0-based) of the runs and print them as JSON for
+    /// `host-sim merge`.
+    #[arg(long, value_name = "I/N", conflicts_with = "plot")]
+    pub(crate) shard: Option<Shard>,
+    /// The planners' solver.
+    #[arg(long, value_enum, default_value = "ours")]
+    pub(crate) solver: SolverArg,
+    #[command(flatten)]
+    pub(crate) faults: FaultArgs,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, value_enum, default_value = "paper")]
+    pub(crate) invariant: super::InvariantArg,
+}
+
+impl MultilaneArgs {
+    fn settings(&self) -> Result<MultilaneSettings, String> {
+        Ok(MultilaneSettings {
+            seeds: self.seeds,
+            seed: self.seed,
+            solver: self.solver.choice(),
+            faults: self.faults.faults()?,
+            invariant: self.invariant.invariant(),
+        })
+    }
+}
+
+/// `experiment throughput`'s flags.
+#[derive(clap::Args)]
+pub struct ThroughputArgs {
+    /// Simulated seconds per run.
+    #[arg(long, default_value_t = 300.0)]
+    pub(crate) duration: f64,
+    /// Runs per algorithm (seeds from --seed).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+    pub(crate) seeds: u64,
+    /// First seed.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub(crate) json: bool,
+    /// Draw a Fig. 9-style bar chart to a .png or .svg file.
+    #[arg(long, value_name = "out.png|out.svg")]
+    pub(crate) plot: Option<PathBuf>,
+    /// Run only shard I of N (0-based) of the runs and print them as JSON for
+    /// `host-sim merge`.
+    #[arg(long, value_name = "I/N", conflicts_with = "plot")]
+    pub(crate) shard: Option<Shard>,
+    #[command(flatten)]
+    pub(crate) faults: FaultArgs,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, value_enum, default_value = "paper")]
+    pub(crate) invariant: super::InvariantArg,
+}
+
+impl ThroughputArgs {
+    fn settings(&self) -> Result<ThroughputSettings, String> {
+        Ok(ThroughputSettings {
+            seeds: self.seeds,
+            seed: self.seed,
+            duration: self.duration,
+            faults: self.faults.faults()?,
+            invariant: self.invariant.invariant(),
+        })
+    }
 }
 
 /// Faults for an experiment's bus (none by default).
@@ -252,28 +284,8 @@ impl FaultArgs {
 pub fn run(e: Experiment) -> ExitCode {
     match e {
         Experiment::Attacks(a) => attacks(a),
-        Experiment::Multilane {
-            seeds,
-            seed,
-            json,
-            plot,
-            solver,
-            faults,
-            shard,
-            invariant,
-        } => match faults.faults() {
-            Ok(faults) => multilane(
-                &MultilaneSettings {
-                    seeds,
-                    seed,
-                    solver: solver.choice(),
-                    faults,
-                    invariant: invariant.invariant(),
-                },
-                json,
-                plot,
-                shard,
-            ),
+        Experiment::Multilane(a) => match a.settings() {
+            Ok(s) => multilane(&s, a.json, a.plot, a.shard),
             Err(e) => bad_input(e),
         },
         Experiment::Faults {
@@ -312,28 +324,8 @@ pub fn run(e: Experiment) -> ExitCode {
             faults(args, counts, invariant.invariant(), json, shard)
         }
         Experiment::LaneCapacity(a) => lane_capacity(&a).err().unwrap_or(ExitCode::SUCCESS),
-        Experiment::Throughput {
-            duration,
-            seeds,
-            seed,
-            json,
-            plot,
-            faults,
-            shard,
-            invariant,
-        } => match faults.faults() {
-            Ok(faults) => throughput(
-                &ThroughputSettings {
-                    seeds,
-                    seed,
-                    duration,
-                    faults,
-                    invariant: invariant.invariant(),
-                },
-                json,
-                plot,
-                shard,
-            ),
+        Experiment::Throughput(a) => match a.settings() {
+            Ok(s) => throughput(&s, a.json, a.plot, a.shard),
             Err(e) => bad_input(e),
         },
         Experiment::Network {
