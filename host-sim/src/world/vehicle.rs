@@ -693,13 +693,24 @@ impl<const N: usize> Vehicle<N> {
             }
         }
         let whole = self.hear(ctx, inbox, counters);
+        // Where it is and who drives it, matched once: each decider gets its place.
         let cmd = match self.at {
             _ if !whole => self.blind(ctx, counters),
-            At::Lane { .. } => match &self.driver {
-                Driver::Planner(_) => self.decide_lane(ctx, counters),
-                _ => self.decide_script(ctx),
-            },
-            At::Crossing { .. } => self.decide_crossing(ctx, counters),
+            At::Lane { .. } if !self.is_planner() => self.decide_script(ctx),
+            At::Lane {
+                seg,
+                x,
+                y,
+                theta,
+                lane,
+                ..
+            } => self.decide_lane((seg, Pose { x, y, theta }, lane), ctx, counters),
+            // Scripted and random drivers are built on roads only; were one in a junction,
+            // it would brake.
+            At::Crossing { .. } if !self.is_planner() => self.fallback(ctx, counters),
+            At::Crossing {
+                junction, route, s, ..
+            } => self.decide_crossing((junction, route, s), ctx, counters),
         };
         if self.log.reached_at.is_some() && self.mode == Mode::Cruise {
             self.mode = Mode::Done;
@@ -710,8 +721,15 @@ impl<const N: usize> Vehicle<N> {
     /// A step whose view overflowed: the vehicle may not know of one near it, so it applies
     /// the certified fallback (max braking with straightening), safe whatever is there.
     fn blind(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
-        counters.fallback_steps += 1;
         counters.blind_steps += 1;
+        self.fallback(ctx, counters)
+    }
+
+    /// The certified fallback (max braking with straightening, Lemma 2): for a blind step,
+    /// and for a vehicle whose place and driver do not fit together (a junction the
+    /// network does not have; a scripted driver in a junction) — never an instant stop.
+    fn fallback(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
+        counters.fallback_steps += 1;
         self.mode = Mode::Fallback;
         let p = params(self.speed_limit(ctx.net));
         let v = planner_core::safety::max_braking_command(&p, self.v);
@@ -837,22 +855,19 @@ impl<const N: usize> Vehicle<N> {
             })
     }
 
-    fn decide_lane(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
-        let At::Lane {
-            seg,
-            x,
-            y,
-            theta,
-            lane,
-            ..
-        } = self.at
-        else {
-            return (0.0, 0.0);
-        };
+    /// A planner on segment `seg` at `pose` in lane `lane`: messages → its view → the
+    /// multi-lane planner → command, and what it did logged and counted.
+    fn decide_lane(
+        &mut self,
+        (seg, pose, lane): (usize, Pose<f64>, u8),
+        ctx: &StepCtx<'_>,
+        counters: &mut Counters,
+    ) -> (f64, f64) {
+        let Pose { x, y, theta } = pose;
         let road = self.road(ctx.net, seg);
         let v_max = ctx.net.segments.get(seg).map_or(ctx.lim.v_max, |s| s.v_max);
         let Driver::Planner(b) = &mut self.driver else {
-            return (0.0, 0.0);
+            return self.fallback(ctx, counters);
         };
         if b.lane.is_none() {
             b.lane = Some(b.lane_planner(lane, v_max));
@@ -873,7 +888,7 @@ impl<const N: usize> Vehicle<N> {
             v_ref: self.trip.v_ref.unwrap_or(v_max),
         };
         let Some(planner) = b.lane.as_mut() else {
-            return (0.0, 0.0);
+            return self.fallback(ctx, counters);
         };
         counters.planner_steps += 1;
         match planner.step(&obs) {
@@ -947,12 +962,16 @@ impl<const N: usize> Vehicle<N> {
         }
     }
 
-    fn decide_crossing(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
-        let At::Crossing { junction, route, s } = self.at else {
-            return (0.0, 0.0);
-        };
+    /// A planner at `junction` on `route`, `s` along its path: reports and grants → the
+    /// crossing planner → command.
+    fn decide_crossing(
+        &mut self,
+        (junction, route, s): (usize, u8, f64),
+        ctx: &StepCtx<'_>,
+        counters: &mut Counters,
+    ) -> (f64, f64) {
         let Some(jn) = ctx.net.junctions.get(junction) else {
-            return (0.0, 0.0);
+            return self.fallback(ctx, counters);
         };
         let layout = &jn.layout;
         let v_limit = ctx
@@ -960,14 +979,14 @@ impl<const N: usize> Vehicle<N> {
             .route_limit(junction, route)
             .unwrap_or(layout.spec.v_limit);
         let Driver::Planner(b) = &mut self.driver else {
-            return (0.0, 0.0);
+            return self.fallback(ctx, counters);
         };
         if b.crossing.is_none() {
             b.crossing = Some(b.crossing_planner((self.id, route), layout, v_limit));
         }
         let mapped = b.view.on_path(ctx.net, junction, route);
         let Some(c) = b.crossing.as_mut() else {
-            return (0.0, 0.0);
+            return self.fallback(ctx, counters);
         };
         // Its view of the junction, as it stands this period.
         c.clear_reports();
@@ -993,7 +1012,7 @@ impl<const N: usize> Vehicle<N> {
                         (cmd.v, Some(FallbackReason::NoRoom))
                     }
                     StepStatus::Fallback(why) => {
-                        if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+                        if debug_fallbacks() {
                             eprintln!(
                                 "t={:.2} id={} route={route} s={s:.2} v={:.2} permitted={permitted} {why:?} gap={:.3}",
                                 ctx.t, self.id, self.v, cmd.gap
@@ -1185,7 +1204,7 @@ fn mode_of(
             Mode::Yield
         }
         StepStatus::Fallback(why) => {
-            if std::env::var_os("HOST_SIM_DEBUG").is_some() {
+            if debug_fallbacks() {
                 eprintln!("t={t:.2} id={id} fallback {why:?}");
             }
             counters.fallback_steps += 1;
@@ -1194,6 +1213,13 @@ fn mode_of(
         // A status planner-core adds later: its command was verified all the same.
         _ => Mode::moving(changing),
     }
+}
+
+/// `HOST_SIM_DEBUG` is set: print every certified-fallback step (docs/architecture.md,
+/// "Diagnostics"). Read from the environment once per process, not in the loop.
+fn debug_fallbacks() -> bool {
+    static DEBUG: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *DEBUG.get_or_init(|| std::env::var_os("HOST_SIM_DEBUG").is_some())
 }
 
 /// The speed reached from `v` by `accel` over one period, kept admissible.
