@@ -35,7 +35,7 @@ use crate::monitor::Limits;
 use crate::world::handover::Moved;
 use crate::world::junction::ManagerNode;
 use crate::world::network::Network;
-use crate::world::sensor::{sense, Seen, Sensed};
+use crate::world::sensor::{sense_each, Seen, Sensed};
 use crate::world::summary::{summarize, Outcome, Summary};
 use crate::world::vehicle::build_vehicle;
 use crate::world::vehicle::{Counters, PlannerSetup, StepCtx, Vehicle, VehicleTruth};
@@ -1058,8 +1058,7 @@ impl<'a, P: CanPort, const N: usize> Master<'a, P, N> {
             &present,
             &truths,
             h.spec.sensing.as_ref(),
-            h.seed,
-            k,
+            (h.seed, k),
         );
         for (g, s) in self.go.iter().zip(seen) {
             let _ = g.send(Go { sensed: s });
@@ -1215,28 +1214,12 @@ fn sense_all(
     present: &[VehicleTruth],
     truths: &[Option<VehicleTruth>],
     sensing: Option<&planner_core::Sensing<f64>>,
-    seed: u64,
-    k: u64,
+    (seed, k): (u64, u64),
 ) -> Vec<Sensed> {
     let all: Vec<Seen> = present.iter().map(VehicleTruth::seen).collect();
     let mut rng = crate::reference::instances::rng(seed ^ 0x5e15 ^ k.wrapping_mul(0x9E37_79B9));
-    truths
-        .iter()
-        .map(|t| match t {
-            Some(v) if v.planner && sensing.is_none() => Sensed::default(),
-            Some(v) => {
-                let me = v.seen();
-                sense(
-                    net,
-                    &me,
-                    &all,
-                    if v.planner { sensing } else { None },
-                    &mut rng,
-                )
-            }
-            None => Sensed::default(),
-        })
-        .collect()
+    let each = truths.iter().map(|t| t.map(|v| (v.seen(), v.planner)));
+    sense_each(net, &all, each, sensing, &mut rng)
 }
 
 /// What every task knows of the run.

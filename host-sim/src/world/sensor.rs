@@ -70,6 +70,26 @@ fn on_segment(net: &Network, seg: usize, c: &Seen) -> Option<(f64, f64, f64)> {
     }
 }
 
+/// Sensor returns for each vehicle of `each` — what it shows of itself and whether its
+/// own planners drive it, or `None` for one gone (no returns) — from what `all` show: a
+/// planner senses with `sensing` (nothing without it); a scripted or random driver sees
+/// what is in its lane ahead. The world's period and a fleet's harness both sense with
+/// this, each drawing the noise from its own random stream.
+pub fn sense_each(
+    net: &Network,
+    all: &[Seen],
+    each: impl Iterator<Item = Option<(Seen, bool)>>,
+    sensing: Option<&Sensing<f64>>,
+    rng: &mut ChaCha8Rng,
+) -> Vec<Sensed> {
+    each.map(|me| match me {
+        Some((_, true)) if sensing.is_none() => Sensed::default(),
+        Some((me, planner)) => sense(net, &me, all, sensing.filter(|_| planner), rng),
+        None => Sensed::default(),
+    })
+    .collect()
+}
+
 /// What the sensors of `me` (planner-driven: `sensing`; scripted: `None`) return.
 pub fn sense(
     net: &Network,

@@ -5,7 +5,7 @@
 //! runs them.
 
 use super::junction::{ManagerNode, LEFT_REPEAT_S};
-use super::sensor::{roadside, sense, Seen, Sensed};
+use super::sensor::{roadside, sense_each, Seen, Sensed};
 use super::vehicle::{StepCtx, Vehicle, VehicleTruth};
 use super::{TraceRow, World};
 use crate::bus::{Bus, BusError, Message, Received};
@@ -122,21 +122,12 @@ impl<const N: usize, B: Bus> World<N, B> {
             return Vec::new();
         }
         let all: Vec<Seen> = self.vehicles.iter().map(Vehicle::seen).collect();
-        self.vehicles
+        let each = all
             .iter()
-            .zip(&all)
-            .map(|(v, me)| {
-                let s = if v.is_planner() {
-                    self.spec.sensing.as_ref()
-                } else {
-                    None
-                };
-                if v.is_planner() && s.is_none() {
-                    return Sensed::default();
-                }
-                sense(&self.net, me, &all, s, &mut self.rng)
-            })
-            .collect()
+            .zip(&self.vehicles)
+            .map(|(me, v)| Some((*me, v.is_planner())));
+        let sensing = self.spec.sensing.as_ref();
+        sense_each(&self.net, &all, each, sensing, &mut self.rng)
     }
 
     /// Phase 6, liveness: the deadlock detector, and its report when it fires.
