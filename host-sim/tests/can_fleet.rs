@@ -25,14 +25,9 @@ fn safe_and_complete(s: &Summary) {
 }
 
 fn on_hub(name: &str) -> FleetSummary {
-    fleet::run(
-        scenario(name),
-        SolverChoice::Ours,
-        None,
-        &Medium::Hub,
-        &mut |_| {},
-    )
-    .unwrap_or_else(|e| panic!("{e}"))
+    fleet::Fleet::new()
+        .run(scenario(name), Medium::Hub, &mut |_| {})
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The multi-lane scenario as a fleet: a task per vehicle, every state through the codec;
@@ -80,14 +75,11 @@ fn can_bus_behind_the_bus_trait_equals_the_fleet() {
     let s = sim.summary(0.0);
     safe_and_complete(&s);
     let mut fleet_rows = Vec::new();
-    let f = fleet::run(
-        scenario("dead-end.toml"),
-        SolverChoice::Ours,
-        None,
-        &Medium::Hub,
-        &mut |r| fleet_rows.push(*r),
-    )
-    .expect("runs");
+    let f = fleet::Fleet::new()
+        .run(scenario("dead-end.toml"), Medium::Hub, &mut |r| {
+            fleet_rows.push(*r)
+        })
+        .expect("runs");
     assert_eq!(rows, fleet_rows);
     assert_eq!(s.min_gap_m, f.run.min_gap_m);
 }
@@ -131,21 +123,19 @@ impl CanPort for Noisy {
 fn duplicates_and_foreign_frames_change_nothing() {
     let clean = on_hub("multilane.toml");
     let hub = Hub::new();
-    let noisy = fleet::run_with_ports(
-        scenario("multilane.toml"),
-        SolverChoice::Ours,
-        None,
-        "noisy hub",
-        |_| {
-            Ok(Noisy {
-                inner: hub.port(),
-                n: 0,
-                extra: VecDeque::new(),
-            })
-        },
-        &mut |_| {},
-    )
-    .expect("runs");
+    let noisy = fleet::Fleet::new()
+        .run(
+            scenario("multilane.toml"),
+            fleet::Ports::custom("noisy hub", move |_| {
+                Ok(Noisy {
+                    inner: hub.port(),
+                    n: 0,
+                    extra: VecDeque::new(),
+                })
+            }),
+            &mut |_| {},
+        )
+        .expect("runs");
     let r = &noisy.can.rejected;
     assert!(r.get("NotOurs").copied().unwrap_or(0) > 0, "{r:?}");
     let dup = ["Duplicate", "OutOfSequence", "Stale"]
@@ -167,17 +157,14 @@ fn duplicates_and_foreign_frames_change_nothing() {
 fn a_failing_node_ends_the_run_with_its_error() {
     let hub = Hub::new();
     let t0 = std::time::Instant::now();
-    let r = fleet::run_with_ports(
+    let r = fleet::Fleet::new().run(
         scenario("multilane.toml"),
-        SolverChoice::Ours,
-        None,
-        "failing hub",
-        |n| {
+        fleet::Ports::custom("failing hub", move |n| {
             Ok(Failing {
                 inner: hub.port(),
                 left: if n == Node::Vehicle(4) { 30 } else { u32::MAX },
             })
-        },
+        }),
         &mut |_| {},
     );
     match r {
@@ -283,16 +270,11 @@ fn can_fd_carries_the_same_runs_in_one_frame_per_message() {
         let run = |fd: bool| {
             let mut rows = Vec::new();
             let k = keyed.then(|| keys.clone());
-            let f = fleet::run_keyed(
-                scenario(name),
-                SolverChoice::Ours,
-                None,
-                &Medium::Hub,
-                k,
-                fd,
-                &mut |r| rows.push(*r),
-            )
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let f = fleet::Fleet::new()
+                .keys(k)
+                .fd(fd)
+                .run(scenario(name), Medium::Hub, &mut |r| rows.push(*r))
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
             (f, rows)
         };
         let (classic, classic_rows) = run(false);

@@ -10,7 +10,7 @@ use common::{assert_all_crossed_safely, builtin, Failing};
 use host_sim::bus::Message;
 use host_sim::fleet::can::{CanPort, Hub, HubPort, WireMap};
 use host_sim::fleet::{self, FleetError, FleetSummary, Medium, Node, TIMEOUT};
-use host_sim::world::{SolverChoice, WorldSpec, LENGTH_M};
+use host_sim::world::{WorldSpec, LENGTH_M};
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::ROUTES;
 use std::io;
@@ -31,14 +31,9 @@ fn scenario(name: &str, algorithm: Option<&str>) -> WorldSpec {
 }
 
 fn on_hub(sc: &WorldSpec) -> FleetSummary {
-    fleet::run(
-        sc.clone(),
-        SolverChoice::Ours,
-        None,
-        &Medium::Hub,
-        &mut |_| {},
-    )
-    .unwrap_or_else(|e| panic!("{e}"))
+    fleet::Fleet::new()
+        .run(sc.clone(), Medium::Hub, &mut |_| {})
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Queues at every stop line, under every algorithm, as fleets: safe, everyone crosses,
@@ -230,25 +225,23 @@ impl CanPort for Forger {
 fn forgeries_change_nothing(sc: &WorldSpec, forge: fn(u8) -> wire::Message<f64>) {
     let clean = on_hub(sc);
     let hub = Hub::new();
-    let forged = fleet::run_with_ports(
-        sc.clone(),
-        SolverChoice::Ours,
-        None,
-        "forging hub",
-        |n| {
-            Ok(Forger {
-                inner: hub.port(),
-                sa: match n {
-                    Node::Vehicle(i) => Some(i as u8),
-                    _ => None,
-                },
-                forged: 0,
-                forge,
-            })
-        },
-        &mut |_| {},
-    )
-    .expect("runs");
+    let forged = fleet::Fleet::new()
+        .run(
+            sc.clone(),
+            fleet::Ports::custom("forging hub", move |n| {
+                Ok(Forger {
+                    inner: hub.port(),
+                    sa: match n {
+                        Node::Vehicle(i) => Some(i as u8),
+                        _ => None,
+                    },
+                    forged: 0,
+                    forge,
+                })
+            }),
+            &mut |_| {},
+        )
+        .expect("runs");
     let rejected = forged.can.rejected.get("SenderMismatch").copied();
     assert!(rejected.unwrap_or(0) > 0, "{:?}", forged.can.rejected);
     assert_eq!(forged.can.rejected.len(), 1, "{:?}", forged.can.rejected);
@@ -290,17 +283,14 @@ fn a_failing_manager_or_vehicle_ends_the_run_with_its_error() {
     for (who, after) in [(Node::Manager(0), 40), (Node::Vehicle(3), 60)] {
         let hub = Hub::new();
         let t0 = std::time::Instant::now();
-        let r = fleet::run_with_ports(
+        let r = fleet::Fleet::new().run(
             sc.clone(),
-            SolverChoice::Ours,
-            None,
-            "failing hub",
-            |n| {
+            fleet::Ports::custom("failing hub", move |n| {
                 Ok(Failing {
                     inner: hub.port(),
                     left: if n == who { after } else { u32::MAX },
                 })
-            },
+            }),
             &mut |_| {},
         );
         match (who, r) {
@@ -404,32 +394,27 @@ fn with_impostors(
     keys: Option<std::sync::Arc<host_sim::fleet::can::Keys>>,
 ) -> FleetSummary {
     let hub = Hub::new();
-    let own = |sa: u8| keys.as_ref().and_then(|k| k.get(sa).copied());
-    fleet::Fleet {
-        solver: SolverChoice::Ours,
-        seed: None,
-        medium: "impostors' hub",
-        keys: keys.clone(),
-        fd: false,
-        attack: None,
-    }
-    .run(
-        sc.clone(),
-        |n| {
-            let sa = match n {
-                Node::Vehicle(i) => Some(i as u8),
-                _ => None,
-            };
-            Ok(Impostor {
-                inner: hub.port(),
-                sa,
-                counter: 0,
-                key: sa.and_then(own),
-            })
-        },
-        &mut |_| {},
-    )
-    .unwrap_or_else(|e| panic!("{e}"))
+    let own_keys = keys.clone();
+    let own = move |sa: u8| own_keys.as_ref().and_then(|k| k.get(sa).copied());
+    fleet::Fleet::new()
+        .keys(keys)
+        .run(
+            sc.clone(),
+            fleet::Ports::custom("impostors' hub", move |n| {
+                let sa = match n {
+                    Node::Vehicle(i) => Some(i as u8),
+                    _ => None,
+                };
+                Ok(Impostor {
+                    inner: hub.port(),
+                    sa,
+                    counter: 0,
+                    key: sa.and_then(&own),
+                })
+            }),
+            &mut |_| {},
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Without authentication the grants a vehicle forges under the manager's
@@ -459,16 +444,11 @@ fn grants_forged_under_the_managers_address_pass_a_plain_fleet_not_an_authentica
     let keys = std::sync::Arc::new(host_sim::fleet::can::simulation_keys(
         &can_gateway::secoc::Key(*b"test master key!"),
     ));
-    let clean = fleet::run_keyed(
-        sc.clone(),
-        SolverChoice::Ours,
-        None,
-        &Medium::Hub,
-        Some(keys.clone()),
-        false,
-        &mut |_| {},
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let clean = fleet::Fleet::new()
+        .keys(Some(keys.clone()))
+        .fd(false)
+        .run(sc.clone(), Medium::Hub, &mut |_| {})
+        .unwrap_or_else(|e| panic!("{e}"));
     assert!(clean.authenticated);
     assert!(clean.can.rejected.is_empty(), "{:?}", clean.can.rejected);
     let attacked = with_impostors(&sc, Some(keys));

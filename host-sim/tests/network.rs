@@ -36,7 +36,8 @@ fn the_corridor_runs_to_its_end_changing_lanes_and_crossing() {
 fn the_corridor_runs_as_a_fleet_of_can_nodes() {
     let spec = load("corridor.toml");
     let n = spec.vehicles.len();
-    let f = fleet::run(spec, SolverChoice::Ours, None, &Medium::Hub, &mut |_| {})
+    let f = fleet::Fleet::new()
+        .run(spec, Medium::Hub, &mut |_| {})
         .expect("runs on the hub");
     assert_safe(&f.run);
     assert!(f.run.completed, "{:?}", f.run);

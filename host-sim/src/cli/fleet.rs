@@ -59,7 +59,12 @@ pub fn run(
     trace: &mut dyn FnMut(&TraceRow),
 ) -> Result<FleetSummary, FleetError> {
     let m = medium(bus).map_err(FleetError::Unsupported)?;
-    fleet::run_keyed(spec, solver, seed, &m, link.keys, link.fd, trace)
+    fleet::Fleet::new()
+        .solver(solver)
+        .seed(seed)
+        .keys(link.keys)
+        .fd(link.fd)
+        .run(spec, m, trace)
 }
 
 pub use host_sim::fleet::can::SIMULATION_MASTER;

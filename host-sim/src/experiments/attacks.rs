@@ -24,7 +24,7 @@ use crate::bus::{Faults, Liar, ManagerDown};
 use crate::fleet::can::{simulation_keys, Keys, SIMULATION_MASTER};
 use crate::fleet::intruder::Attack;
 use crate::fleet::{Fleet, FleetError, FleetSummary, Medium};
-use crate::world::{SolverChoice, WorldSpec};
+use crate::world::WorldSpec;
 use planner_core::crossing::Algorithm;
 use serde::Serialize;
 use std::path::Path;
@@ -223,15 +223,11 @@ fn run(
     spec: WorldSpec,
     attack: Option<Attack>,
 ) -> Result<FleetSummary, FleetError> {
-    Fleet {
-        solver: SolverChoice::Ours,
-        seed: None,
-        medium: "",
-        keys: keys.clone(),
-        fd: s.fd,
-        attack,
-    }
-    .on(spec, &s.medium, &mut |_| {})
+    Fleet::new()
+        .keys(keys.clone())
+        .fd(s.fd)
+        .attack(attack)
+        .run(spec, s.medium.clone(), &mut |_| {})
 }
 
 /// `spec` with vehicle 1 lying about its position.

@@ -356,121 +356,109 @@ struct Go {
 /// What a vehicle task hands back.
 type VehicleResult<const N: usize> = (Vehicle<N>, Counters, CanStats, Messages);
 
-/// Runs `spec` as a fleet on `medium`; `trace` sees a row per vehicle and period.
-pub fn run(
-    spec: WorldSpec,
-    solver: SolverChoice,
-    seed: Option<u64>,
-    medium: &Medium,
-    trace: &mut dyn FnMut(&TraceRow),
-) -> Result<FleetSummary, FleetError> {
-    run_keyed(spec, solver, seed, medium, None, false, trace)
+/// Where a fleet's nodes get their CAN ports.
+pub enum Ports {
+    /// Every node on a medium: a SocketCAN interface, or the in-process hub.
+    Medium(Medium),
+    /// Every node's port from `open` (a test's, e.g. one that drops or forges frames);
+    /// `name` names the medium in the summary.
+    Custom {
+        /// The medium's name in the summary.
+        name: String,
+        /// Opens one node's port.
+        open: Box<dyn FnMut(Node) -> io::Result<Box<dyn CanPort>>>,
+    },
 }
 
-/// [`run`], every node authenticating what it sends and verifying what it accepts with
-/// `keys` (`None` runs without), and sending each message as one CAN FD frame
-/// when `fd` (an interface must then carry CAN FD: MTU 72).
-pub fn run_keyed(
-    spec: WorldSpec,
-    solver: SolverChoice,
-    seed: Option<u64>,
-    medium: &Medium,
-    keys: Option<Arc<Keys>>,
-    fd: bool,
-    trace: &mut dyn FnMut(&TraceRow),
-) -> Result<FleetSummary, FleetError> {
-    let fleet = Fleet {
-        solver,
-        seed,
-        medium: "",
-        keys,
-        fd,
-        attack: None,
-    };
-    fleet.on(spec, medium, trace)
-}
-
-impl Fleet<'_> {
-    /// Runs `spec` on `medium` (its name is `medium`'s, whatever `self.medium` says).
-    pub fn on(
-        self,
-        spec: WorldSpec,
-        medium: &Medium,
-        trace: &mut dyn FnMut(&TraceRow),
-    ) -> Result<FleetSummary, FleetError> {
-        let name = medium.to_string();
-        let fd = self.fd;
-        let fleet = Fleet {
-            medium: &name,
-            ..self
-        };
-        match medium {
-            Medium::SocketCan(iface) => {
-                if let Some(w) = can::order_warning(iface) {
-                    eprintln!("warning: {w}");
-                }
-                let iface = iface.clone();
-                let open = move |n: Node| match n {
-                    Node::Clock => SocketCanPort::open_transmit_only(&iface, fd),
-                    _ if fd => SocketCanPort::open_fd(&iface),
-                    _ => SocketCanPort::open(&iface),
-                };
-                fleet.run(spec, open, trace)
-            }
-            Medium::Hub => {
-                let hub = Hub::new();
-                fleet.run(spec, move |_| Ok(hub.port()), trace)
-            }
+impl Ports {
+    /// Ports from `open`, named `name` in the summary.
+    pub fn custom<P: CanPort + 'static>(
+        name: &str,
+        mut open: impl FnMut(Node) -> io::Result<P> + 'static,
+    ) -> Self {
+        Self::Custom {
+            name: name.to_string(),
+            open: Box::new(move |n| open(n).map(|p| Box::new(p) as Box<dyn CanPort>)),
         }
     }
 }
 
-/// [`run`] on ports from `open` (one per node, the master's included); `medium` names
-/// them in the summary.
-pub fn run_with_ports<P: CanPort + 'static>(
-    spec: WorldSpec,
-    solver: SolverChoice,
-    seed: Option<u64>,
-    medium: &str,
-    open: impl FnMut(Node) -> io::Result<P>,
-    trace: &mut dyn FnMut(&TraceRow),
-) -> Result<FleetSummary, FleetError> {
-    let fleet = Fleet {
-        solver,
-        seed,
-        medium,
-        keys: None,
-        fd: false,
-        attack: None,
-    };
-    fleet.run(spec, open, trace)
+impl From<Medium> for Ports {
+    fn from(m: Medium) -> Self {
+        Self::Medium(m)
+    }
 }
 
-/// How a fleet runs: its planners' solver, seed, medium and keys.
-pub struct Fleet<'a> {
-    /// The planners' solver.
-    pub solver: SolverChoice,
-    /// Overrides the scenario's seed.
-    pub seed: Option<u64>,
-    /// Names the medium in the summary.
-    pub medium: &'a str,
-    /// With keys, every message is authenticated.
-    pub keys: Option<Arc<Keys>>,
-    /// Every message goes as one CAN FD frame.
-    pub fd: bool,
-    /// An intruder carries out this attack from [`ATTACK_FROM_S`] on.
-    pub attack: Option<Attack>,
+/// A fleet: built with [`Fleet::new`] and the settings that differ from the defaults,
+/// then [`Fleet::run`] on its ports. Every node is a task that talks to the others only
+/// in CAN frames.
+///
+/// ```no_run
+/// # use host_sim::fleet::{Fleet, Medium};
+/// # fn f(spec: host_sim::world::WorldSpec) -> Result<(), host_sim::fleet::FleetError> {
+/// let summary = Fleet::new().fd(true).run(spec, Medium::Hub, &mut |_| {})?;
+/// # Ok(()) }
+/// ```
+#[derive(Clone)]
+pub struct Fleet {
+    solver: SolverChoice,
+    seed: Option<u64>,
+    keys: Option<Arc<Keys>>,
+    fd: bool,
+    attack: Option<Attack>,
+}
+
+impl Default for Fleet {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 /// When the intruder starts (s): the fleet has settled into its traffic by then.
 pub const ATTACK_FROM_S: f64 = 1.0;
 
-impl Fleet<'_> {
-    /// Runs `spec` on ports from `open` (one per node, the master's included).
-    pub fn run<P: CanPort + 'static>(
+impl Fleet {
+    /// Our solver, the scenario's seed, no keys, classic frames, no intruder.
+    pub fn new() -> Self {
+        Self {
+            solver: SolverChoice::Ours,
+            seed: None,
+            keys: None,
+            fd: false,
+            attack: None,
+        }
+    }
+
+    /// The planners' solver.
+    pub fn solver(self, solver: SolverChoice) -> Self {
+        Self { solver, ..self }
+    }
+
+    /// Overrides the scenario's seed (`None`: the scenario's).
+    pub fn seed(self, seed: Option<u64>) -> Self {
+        Self { seed, ..self }
+    }
+
+    /// With keys, every node authenticates what it sends and verifies what it accepts.
+    pub fn keys(self, keys: Option<Arc<Keys>>) -> Self {
+        Self { keys, ..self }
+    }
+
+    /// Every message goes as one CAN FD frame (an interface must carry CAN FD: MTU 72).
+    pub fn fd(self, fd: bool) -> Self {
+        Self { fd, ..self }
+    }
+
+    /// An intruder carries out `attack` from [`ATTACK_FROM_S`] on.
+    pub fn attack(self, attack: Option<Attack>) -> Self {
+        Self { attack, ..self }
+    }
+
+    /// Runs `spec` on `ports`; `trace` sees a row per vehicle and period.
+    pub fn run(
         self,
         spec: WorldSpec,
-        open: impl FnMut(Node) -> io::Result<P>,
+        ports: impl Into<Ports>,
         trace: &mut dyn FnMut(&TraceRow),
     ) -> Result<FleetSummary, FleetError> {
         if let Some(why) = unsupported(&spec) {
@@ -486,7 +474,47 @@ impl Fleet<'_> {
                 "vehicle {INTRUDER_ADDRESS} holds the intruder's address"
             )));
         }
-        let medium = self.medium;
+        match ports.into() {
+            Ports::Medium(m) => self.on_medium(spec, &m, trace),
+            Ports::Custom { name, open } => self.start(spec, &name, open, trace),
+        }
+    }
+
+    fn on_medium(
+        self,
+        spec: WorldSpec,
+        medium: &Medium,
+        trace: &mut dyn FnMut(&TraceRow),
+    ) -> Result<FleetSummary, FleetError> {
+        let name = medium.to_string();
+        let fd = self.fd;
+        match medium {
+            Medium::SocketCan(iface) => {
+                if let Some(w) = can::order_warning(iface) {
+                    eprintln!("warning: {w}");
+                }
+                let iface = iface.clone();
+                let open = move |n: Node| match n {
+                    Node::Clock => SocketCanPort::open_transmit_only(&iface, fd),
+                    _ if fd => SocketCanPort::open_fd(&iface),
+                    _ => SocketCanPort::open(&iface),
+                };
+                self.start(spec, &name, open, trace)
+            }
+            Medium::Hub => {
+                let hub = Hub::new();
+                self.start(spec, &name, move |_| Ok(hub.port()), trace)
+            }
+        }
+    }
+
+    fn start<P: CanPort + 'static>(
+        self,
+        spec: WorldSpec,
+        medium: &str,
+        open: impl FnMut(Node) -> io::Result<P>,
+        trace: &mut dyn FnMut(&TraceRow),
+    ) -> Result<FleetSummary, FleetError> {
         match spec.horizon {
             50 => Harness::<50>::new(spec, self).run(medium, open, trace),
             _ => Harness::<20>::new(spec, self).run(medium, open, trace),
@@ -552,7 +580,7 @@ impl Tally {
 }
 
 impl<const N: usize> Harness<N> {
-    fn new(spec: WorldSpec, fleet: Fleet<'_>) -> Self {
+    fn new(spec: WorldSpec, fleet: Fleet) -> Self {
         Self {
             seed: fleet.seed.unwrap_or(spec.seed),
             spec,
