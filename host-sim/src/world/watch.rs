@@ -135,20 +135,7 @@ pub fn world_truth(v: &VehicleTruth, net: &Network) -> Truth {
             0,
         ),
     };
-    Truth {
-        x: p.x,
-        y: p.y,
-        theta: p.theta,
-        length: LENGTH_M,
-        width: WIDTH_M,
-        lane,
-        keeps_invariant: v.planner,
-        leader_aware: v.leader_aware,
-        brake: crate::monitor::Limits::table_i().brake,
-        v: v.v,
-        v_before: v.v_before,
-        mapped: false,
-    }
+    rectangle(v, p, lane, false)
 }
 
 /// A vehicle's rectangle in segment `k`'s frame, if it is on it (a junction vehicle on
@@ -178,10 +165,21 @@ pub fn segment_truth(v: &VehicleTruth, net: &Network, k: usize) -> Option<Truth>
         }
         At::Lane { .. } => return None,
     };
-    Some(Truth {
-        x,
-        y,
-        theta,
+    Some(rectangle(
+        v,
+        planner_core::Pose { x, y, theta },
+        lane,
+        mapped,
+    ))
+}
+
+/// `v`'s rectangle at `pose` in lane `lane` of some frame (the world's or a segment's):
+/// what it is and claims, wherever it is.
+fn rectangle(v: &VehicleTruth, pose: planner_core::Pose<f64>, lane: u8, mapped: bool) -> Truth {
+    Truth {
+        x: pose.x,
+        y: pose.y,
+        theta: pose.theta,
         length: LENGTH_M,
         width: WIDTH_M,
         lane,
@@ -191,5 +189,5 @@ pub fn segment_truth(v: &VehicleTruth, net: &Network, k: usize) -> Option<Truth>
         v: v.v,
         v_before: v.v_before,
         mapped,
-    })
+    }
 }
