@@ -267,7 +267,7 @@ fn in_process<const N: usize>(
     let every = (total / 200).max(1);
     while !w.finished() {
         w.step(&mut |r| sinks.row(r))?;
-        if w.steps_done() % every == 0 {
+        if w.steps_done().is_multiple_of(every) {
             if let Some(b) = &bar {
                 b.set_position(w.steps_done() * 1000 / total);
             }

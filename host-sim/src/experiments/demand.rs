@@ -222,7 +222,7 @@ fn arrivals(w: &World<20>, jn: Option<&Junction>) -> Vec<Arrival> {
     let mut out: Vec<Arrival> = w
         .all_vehicles()
         .map(|v| {
-            let route = match v.at {
+            let route = match v.at() {
                 crate::world::at::At::Crossing { route, .. } => Some(route),
                 _ => None,
             };

@@ -27,7 +27,7 @@ pub enum Moved {
 /// junction once it is on its outlet outside A_C, onto the next segment or out of the
 /// world; out of the world past an exit.
 pub(super) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now: f64) -> Moved {
-    match v.at {
+    match v.at() {
         At::Lane { seg, x, lane, .. } => {
             let Some(sg) = net.segments.get(seg) else {
                 return Moved::Stays;
@@ -60,8 +60,10 @@ pub(super) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now:
                         .layout
                         .route(usize::from(route))
                         .map_or(0.0, |r| r.path.entry());
-                    v.enter_junction(j, route, entry - (end - x));
-                    v.log.arrived_at = Some(now);
+                    // Only planners cross (`ready_to_cross`), so the hand-over is taken.
+                    if v.enter_junction(j, route, entry - (end - x)) {
+                        v.log.arrived_at = Some(now);
+                    }
                     Moved::Stays
                 }
                 _ => Moved::Stays,
@@ -115,17 +117,17 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// for [`LEFT_REPEAT_S`]); one that leaves the world is kept for the summary and, in a
     /// closed system, comes back later.
     pub(super) fn hand_over(&mut self, moves: &[Moved]) -> Result<(), BusError> {
-        let now = self.t;
+        let now = self.time.t;
         let mut leaving = Vec::new();
         for (i, (v, moved)) in self.vehicles.iter_mut().zip(moves).enumerate() {
             match *moved {
                 Moved::Stays => {}
                 Moved::LeftJunction(j) if v.log.left_at.is_none() => {
                     let id = v.id;
-                    let at = self.clock.at_step(self.steps_done);
+                    let at = self.time.clock.at_step(self.time.steps_done);
                     self.bus
                         .send(id, &Message::departure(id, at, Some(j)), now)?;
-                    self.departing.push((id, Some(j), now));
+                    self.insertion.departing.push((id, Some(j), now));
                 }
                 Moved::LeftJunction(j) => leaving.push((i, Some(j))),
                 Moved::LeftWorld => leaving.push((i, None)),
@@ -137,10 +139,10 @@ impl<const N: usize, B: Bus> World<N, B> {
             // It says it left (a junction, or the network at an exit) and repeats it for
             // LEFT_REPEAT_S; then it leaves the bus.
             let id = v.id;
-            let at = self.clock.at_step(self.steps_done);
+            let at = self.time.clock.at_step(self.time.steps_done);
             self.bus
                 .send(id, &Message::departure(id, at, junction), now)?;
-            self.departing.push((id, junction, now));
+            self.insertion.departing.push((id, junction, now));
             if let Some(j) = junction {
                 if self.spec.arrivals == Arrivals::Closed {
                     let routes = self
@@ -148,8 +150,8 @@ impl<const N: usize, B: Bus> World<N, B> {
                         .junctions
                         .get(j)
                         .map_or(1, |jn| jn.layout.routes.len());
-                    let route = self.rng.random_range(0..routes as u8);
-                    self.pending.push((id, route));
+                    let route = self.draws.rng.random_range(0..routes as u8);
+                    self.insertion.pending.push((id, route));
                 }
             }
             self.gone.push(v);

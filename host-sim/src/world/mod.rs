@@ -21,6 +21,7 @@
 
 pub mod at;
 pub mod cost;
+pub mod driver;
 pub mod handover;
 pub mod heard;
 pub mod junction;
@@ -315,7 +316,9 @@ pub struct VehicleSpec {
     pub at: at::At,
     /// Initial speed (m/s).
     pub v: f64,
-    /// How it is driven.
+    /// How it is driven: on a road, as this says; a vehicle that starts in a junction is
+    /// driven by its own planners whatever this says (only planners cross junctions,
+    /// [`driver::Role`]).
     pub driver: DriverKind,
     /// Its script, for a scripted driver.
     pub script: Vec<Phase>,
@@ -339,7 +342,9 @@ pub enum Arrivals {
     Poisson(Vec<(spawn::Entry, f64)>),
 }
 
-/// A running world with multi-lane horizon `N` over bus `B`.
+/// A running world with multi-lane horizon `N` over bus `B`, in SUMO's parts: the
+/// network, the vehicles, insertion, the junctions' managers, the bus, and the watch
+/// (monitor and deadlock detector); [`World::step`] runs the phases over them in order.
 pub struct World<const N: usize, B: Bus = InProcessBus> {
     spec: WorldSpec,
     net: Network,
@@ -350,30 +355,64 @@ pub struct World<const N: usize, B: Bus = InProcessBus> {
     bus: B,
     lim: Limits,
     setup: PlannerSetup,
+    solver: SolverChoice,
+    seed: u64,
+    time: Time,
+    insertion: Insertion,
+    watch: Watch,
+    tally: Tally,
+    draws: Draws,
+}
+
+/// Where a run is in time.
+struct Time {
     /// Every node's clock.
     clock: crate::bus::Clock,
+    /// Simulated time (s).
     t: f64,
+    /// Periods done.
     steps_done: u64,
+    /// Periods in the run's duration.
     total_steps: u64,
+}
+
+/// Vehicles coming and going: arrivals, a closed system's returns, departures still
+/// announcing, and the ids new vehicles take.
+struct Insertion {
     /// Vehicles that left a junction and repeat `Left`: (id, junction, when).
     departing: Vec<(u16, Option<usize>, f64)>,
     /// Closed system: (id, route) waiting to come back.
     pending: Vec<(u16, u8)>,
+    /// Open system: one arrival stream per entry.
     streams: Vec<Stream>,
+    /// Ids for new vehicles.
     ids: spawn::Ids,
-    rng: Box<ChaCha8Rng>,
-    /// The roadside sensors' noise (its own stream: the other draws stay as they were).
-    roadside_rng: Box<ChaCha8Rng>,
+}
+
+/// What watches the run from outside the vehicles: the independent monitor and the
+/// deadlock detector.
+struct Watch {
     monitor: watch::WorldMonitor,
     detector: DeadlockDetector,
     deadlock: Option<Deadlock>,
+}
+
+/// What the run counts.
+struct Tally {
     counters: Counters,
     /// Wall-clock time of each planner step, when asked for (`host-sim scale`): the
     /// other runs do not read the clock in their steps.
     costs: Option<Box<cost::StepCosts>>,
     messages_sent: u64,
-    solver: SolverChoice,
-    seed: u64,
+}
+
+/// The world's random streams, each its own so that one kind of draw does not move
+/// another's.
+struct Draws {
+    /// Sensor noise, arrivals, trips, a closed system's routes.
+    rng: Box<ChaCha8Rng>,
+    /// The roadside sensors' noise.
+    roadside: Box<ChaCha8Rng>,
 }
 
 impl<const N: usize> World<N, InProcessBus> {
@@ -448,9 +487,34 @@ impl<const N: usize, B: Bus> World<N, B> {
         );
         let clock = crate::bus::Clock::new(spec.clock_start, lim.h);
         Self {
-            total_steps: (spec.duration_s / lim.h).round() as u64,
-            detector: DeadlockDetector::new(spec.deadlock_window_s),
-            monitor: watch::WorldMonitor::new(&net),
+            time: Time {
+                clock,
+                t: 0.0,
+                steps_done: 0,
+                total_steps: (spec.duration_s / lim.h).round() as u64,
+            },
+            watch: Watch {
+                monitor: watch::WorldMonitor::new(&net),
+                detector: DeadlockDetector::new(spec.deadlock_window_s),
+                deadlock: None,
+            },
+            insertion: Insertion {
+                departing: Vec::new(),
+                pending: Vec::new(),
+                streams,
+                ids,
+            },
+            draws: Draws {
+                rng,
+                roadside: Box::new(crate::reference::instances::rng(
+                    seed ^ sensor::ROADSIDE_SEED,
+                )),
+            },
+            tally: Tally {
+                counters: Counters::default(),
+                costs: None,
+                messages_sent: 0,
+            },
             spec,
             net,
             vehicles,
@@ -459,21 +523,6 @@ impl<const N: usize, B: Bus> World<N, B> {
             bus,
             lim,
             setup,
-            clock,
-            t: 0.0,
-            steps_done: 0,
-            departing: Vec::new(),
-            pending: Vec::new(),
-            streams,
-            ids,
-            rng,
-            roadside_rng: Box::new(crate::reference::instances::rng(
-                seed ^ sensor::ROADSIDE_SEED,
-            )),
-            deadlock: None,
-            counters: Counters::default(),
-            costs: None,
-            messages_sent: 0,
             solver,
             seed,
         }
@@ -516,17 +565,17 @@ impl<const N: usize, B: Bus> World<N, B> {
 
     /// Current time (s).
     pub fn time(&self) -> f64 {
-        self.t
+        self.time.t
     }
 
     /// Steps in the whole run.
     pub fn total_steps(&self) -> u64 {
-        self.total_steps
+        self.time.total_steps
     }
 
     /// Steps done.
     pub fn steps_done(&self) -> u64 {
-        self.steps_done
+        self.time.steps_done
     }
 
     /// The vehicles in the world now.
@@ -537,8 +586,8 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// `true` once the run is over: its duration simulated, a deadlock found, or — when
     /// asked to stop then — every goal met.
     pub fn finished(&self) -> bool {
-        self.steps_done >= self.total_steps
-            || self.deadlock.is_some()
+        self.time.steps_done >= self.time.total_steps
+            || self.watch.deadlock.is_some()
             || (self.spec.finish == Finish::GoalsMetAndStill
                 && self.all_done()
                 && self
@@ -546,8 +595,8 @@ impl<const N: usize, B: Bus> World<N, B> {
                     .iter()
                     .all(|v| v.v <= crate::monitor::liveness::MOVING_MPS))
             || (self.vehicles.is_empty()
-                && self.pending.is_empty()
-                && self.streams.is_empty()
+                && self.insertion.pending.is_empty()
+                && self.insertion.streams.is_empty()
                 && !self.net.junctions.is_empty())
     }
 
@@ -558,14 +607,20 @@ impl<const N: usize, B: Bus> World<N, B> {
 
     /// The deadlock found, if any.
     pub fn deadlock(&self) -> Option<&Deadlock> {
-        self.deadlock.as_ref()
+        self.watch.deadlock.as_ref()
     }
 
     /// The longest queue waiting outside one entry so far, and the longest now.
     pub fn queues(&self) -> (usize, usize) {
         (
-            self.streams.iter().map(|s| s.max_queue).max().unwrap_or(0),
-            self.streams
+            self.insertion
+                .streams
+                .iter()
+                .map(|s| s.max_queue)
+                .max()
+                .unwrap_or(0),
+            self.insertion
+                .streams
                 .iter()
                 .map(|s| s.queue.len())
                 .max()
@@ -575,7 +630,8 @@ impl<const N: usize, B: Bus> World<N, B> {
 
     /// When each open arrival still waiting outside arrived (s).
     pub fn waiting_since(&self) -> Vec<f64> {
-        self.streams
+        self.insertion
+            .streams
             .iter()
             .flat_map(|s| s.queue.iter().map(|a| a.since))
             .collect()
@@ -584,7 +640,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// Every (non-scripted) vehicle has met its goals.
     pub fn all_done(&self) -> bool {
         self.vehicles.iter().all(|v| !v.unmet(&self.net))
-            && self.pending.is_empty()
-            && self.streams.iter().all(|s| s.queue.is_empty())
+            && self.insertion.pending.is_empty()
+            && self.insertion.streams.iter().all(|s| s.queue.is_empty())
     }
 }

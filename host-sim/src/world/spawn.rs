@@ -6,7 +6,7 @@
 
 use super::at::At;
 use super::network::Network;
-use super::vehicle::{Brain, Driver, Trip, Vehicle};
+use super::vehicle::{Brain, Role, Trip, Vehicle};
 use super::watch::segment_truth;
 use super::START_MARGIN_M;
 use super::{World, LENGTH_M};
@@ -216,25 +216,27 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// Vehicles entering: those of a closed system coming back, and open arrivals, each
     /// once it keeps the invariant toward the vehicle ahead where it enters.
     pub(super) fn arrive(&mut self) -> Result<(), BusError> {
-        let now = self.t;
+        let now = self.time.t;
         let mut still = Vec::new();
-        for (id, route) in std::mem::take(&mut self.pending) {
+        for (id, route) in std::mem::take(&mut self.insertion.pending) {
             let entry = self.stub_of(0, route);
             let v_max = self.entry_limit(&entry);
             // The paper's closed system spawns at vImax where the invariant allows it.
             match self.room(&entry) {
                 r if entry_speed(&self.lim, r, v_max).is_some_and(|s| s >= v_max) => {
-                    self.departing.retain(|&(d, _, _)| d != id);
+                    self.insertion.departing.retain(|&(d, _, _)| d != id);
                     self.enter(id, &entry, Some(route), Vec::new(), v_max, now)?;
                 }
                 _ => still.push((id, route)),
             }
         }
-        self.pending = still;
-        let mut streams = std::mem::take(&mut self.streams);
+        self.insertion.pending = still;
+        let mut streams = std::mem::take(&mut self.insertion.streams);
         for s in &mut streams {
             let net = &self.net;
-            s.arrive(now, &mut self.rng, &mut |e, rng| draw_trip(net, e, rng));
+            s.arrive(now, &mut self.draws.rng, &mut |e, rng| {
+                draw_trip(net, e, rng)
+            });
             let Some(head) = s.queue.front() else {
                 continue;
             };
@@ -249,7 +251,7 @@ impl<const N: usize, B: Bus> World<N, B> {
                 self.enter(id, &s.entry, route, movements, v, since)?;
             }
         }
-        self.streams = streams;
+        self.insertion.streams = streams;
         Ok(())
     }
 
@@ -259,10 +261,10 @@ impl<const N: usize, B: Bus> World<N, B> {
             .vehicles
             .iter()
             .map(|v| v.id)
-            .chain(self.departing.iter().map(|d| d.0))
-            .chain(self.pending.iter().map(|p| p.0))
+            .chain(self.insertion.departing.iter().map(|d| d.0))
+            .chain(self.insertion.pending.iter().map(|p| p.0))
             .collect();
-        self.ids.take(|id| used.contains(&id))
+        self.insertion.ids.take(|id| used.contains(&id))
     }
 
     /// The stub entry of junction `j`'s route `route`.
@@ -306,7 +308,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         let start = 0.5 * LENGTH_M;
         let mut room = f64::INFINITY;
         for v in &self.vehicles {
-            let ahead = match (*e, v.at) {
+            let ahead = match (*e, v.at()) {
                 (
                     Entry::Stub {
                         junction,
@@ -377,8 +379,8 @@ impl<const N: usize, B: Bus> World<N, B> {
             v_ref: None,
             movements,
         };
-        let driver = Driver::Planner(Box::new(Brain::new(id, self.setup)));
-        let mut car = Vehicle::new(id, at, v, driver, trip, since);
+        let role = Role::planner(at, Box::new(Brain::new(id, self.setup)));
+        let mut car = Vehicle::new(id, role, v, trip, since);
         car.note_free_flow(&self.net);
         car.retarget(&self.net);
         self.bus.attach(id)?;

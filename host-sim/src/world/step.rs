@@ -13,7 +13,7 @@ use crate::bus::{Bus, BusError, Message, Received};
 impl<const N: usize, B: Bus> World<N, B> {
     /// Simulates one period h; `trace` sees a row per vehicle.
     pub fn step(&mut self, trace: &mut dyn FnMut(&TraceRow)) -> Result<(), BusError> {
-        let t = self.t;
+        let t = self.time.t;
         let h = self.lim.h;
         self.broadcast(t)?;
         self.manage(t)?;
@@ -26,29 +26,29 @@ impl<const N: usize, B: Bus> World<N, B> {
             let empty = Sensed::default();
             let ctx = StepCtx {
                 t,
-                now: self.clock.at_step(self.steps_done),
-                clock: self.clock,
-                steps_done: self.steps_done,
+                now: self.time.clock.at_step(self.time.steps_done),
+                clock: self.time.clock,
+                steps_done: self.time.steps_done,
                 net: &self.net,
                 lim: self.lim,
                 silent: self.spec.faults.silent,
                 liar: self.spec.faults.liar,
                 returns: sensed.get(i).unwrap_or(&empty),
             };
-            let t0 = self.costs.is_some().then(std::time::Instant::now);
-            let (row, moved) = v.period(&ctx, &inbox, &mut self.counters);
-            if let (Some(c), Some(t0), true) = (&mut self.costs, t0, v.is_planner()) {
+            let t0 = self.tally.costs.is_some().then(std::time::Instant::now);
+            let (row, moved) = v.period(&ctx, &inbox, &mut self.tally.counters);
+            if let (Some(c), Some(t0), true) = (&mut self.tally.costs, t0, v.is_planner()) {
                 c.add(t0.elapsed().as_nanos() as u64);
             }
             moves.push(moved);
             trace(&row);
         }
-        self.steps_done += 1;
-        self.t = self.steps_done as f64 * h;
+        self.time.steps_done += 1;
+        self.time.t = self.time.steps_done as f64 * h;
         self.hand_over(&moves)?;
         self.arrive()?;
         let truths: Vec<VehicleTruth> = self.vehicles.iter().map(|v| v.truth(&self.net)).collect();
-        self.monitor.check(&self.lim, &self.net, &truths);
+        self.watch.monitor.check(&self.lim, &self.net, &truths);
         self.watch_liveness();
         Ok(())
     }
@@ -58,7 +58,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     fn broadcast(&mut self, t: f64) -> Result<(), BusError> {
         let bus = &mut self.bus;
         let live = &self.vehicles;
-        self.departing.retain(|&(id, _, at)| {
+        self.insertion.departing.retain(|&(id, _, at)| {
             let keep = t < at + LEFT_REPEAT_S;
             // Its last word said, a vehicle gone from the world leaves the bus too.
             if !keep && !live.iter().any(|v| v.id == id) {
@@ -66,11 +66,11 @@ impl<const N: usize, B: Bus> World<N, B> {
             }
             keep
         });
-        for &(id, from, at) in &self.departing {
-            let at = self.clock.at_secs(at);
+        for &(id, from, at) in &self.insertion.departing {
+            let at = self.time.clock.at_secs(at);
             self.bus.send(id, &Message::departure(id, at, from), t)?;
         }
-        let now = self.clock.at_step(self.steps_done);
+        let now = self.time.clock.at_step(self.time.steps_done);
         for v in &self.vehicles {
             let (x, y) = v.position(&self.net);
             self.bus.locate(v.id, x, y);
@@ -79,14 +79,14 @@ impl<const N: usize, B: Bus> World<N, B> {
             let msg = self.spec.faults.told(v.id, v.message(now), t);
             self.bus.send(v.id, &msg, t)?;
         }
-        self.messages_sent += self.vehicles.len() as u64;
+        self.tally.messages_sent += self.vehicles.len() as u64;
         Ok(())
     }
 
     /// Phase 2: every manager hears its junction's reports, decides, and grants leases.
     fn manage(&mut self, t: f64) -> Result<(), BusError> {
         let mut inbox = Vec::new();
-        let now = self.clock.at_step(self.steps_done);
+        let now = self.time.clock.at_step(self.time.steps_done);
         let seen: Vec<Seen> = if self.managers.iter().any(ManagerNode::has_roadside) {
             self.vehicles.iter().map(Vehicle::seen).collect()
         } else {
@@ -100,12 +100,18 @@ impl<const N: usize, B: Bus> World<N, B> {
                 continue;
             }
             let readings = if m.has_roadside() {
-                roadside(&self.net, m.junction, &seen, error, &mut self.roadside_rng)
+                roadside(
+                    &self.net,
+                    m.junction,
+                    &seen,
+                    error,
+                    &mut self.draws.roadside,
+                )
             } else {
                 Vec::new()
             };
             let granted = m.manage(&inbox, &readings, now);
-            self.monitor.granted(m.junction, &granted);
+            self.watch.monitor.granted(m.junction, &granted);
             for id in granted {
                 let g = m.grant(id, now);
                 self.bus.send(m.node(), &g, t)?;
@@ -127,24 +133,25 @@ impl<const N: usize, B: Bus> World<N, B> {
             .zip(&self.vehicles)
             .map(|(me, v)| Some((*me, v.is_planner())));
         let sensing = self.spec.sensing.as_ref();
-        sense_each(&self.net, &all, each, sensing, &mut self.rng)
+        sense_each(&self.net, &all, each, sensing, &mut self.draws.rng)
     }
 
     /// Phase 6, liveness: the deadlock detector, and its report when it fires.
     fn watch_liveness(&mut self) {
         let truths: Vec<VehicleTruth> = self.vehicles.iter().map(|v| v.truth(&self.net)).collect();
-        let waiting = self.streams.iter().any(|s| !s.queue.is_empty()) || !self.pending.is_empty();
+        let waiting = self.insertion.streams.iter().any(|s| !s.queue.is_empty())
+            || !self.insertion.pending.is_empty();
         let holders = |j: usize| super::wait::holders(&self.managers, j);
         if let Some(d) = super::wait::watch(
-            &mut self.detector,
-            self.t,
+            &mut self.watch.detector,
+            self.time.t,
             &truths,
             waiting,
             &self.net,
             &holders,
             &self.lim,
         ) {
-            self.deadlock = Some(d);
+            self.watch.deadlock = Some(d);
         }
     }
 }

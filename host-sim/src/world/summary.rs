@@ -317,22 +317,22 @@ impl<const N: usize, B: Bus> World<N, B> {
 
     /// The findings so far.
     pub fn findings(&self) -> &Findings {
-        &self.monitor.findings
+        &self.watch.monitor.findings
     }
 
     /// The counters so far.
     pub fn counters(&self) -> &Counters {
-        &self.counters
+        &self.tally.counters
     }
 
     /// Measures what each planner step costs in wall-clock time from now on.
     pub fn measure_step_costs(&mut self) {
-        self.costs.get_or_insert_with(Box::default);
+        self.tally.costs.get_or_insert_with(Box::default);
     }
 
     /// What its planner steps cost in wall-clock time, if measured.
     pub fn step_costs(&self) -> Option<&super::cost::StepCosts> {
-        self.costs.as_deref()
+        self.tally.costs.as_deref()
     }
 
     /// `true` if vehicle `v` should have met its goals by now: always in a world whose
@@ -341,7 +341,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// has not failed).
     fn due<const M: usize>(&self, v: &crate::world::vehicle::Vehicle<M>) -> bool {
         !matches!(self.spec.arrivals, crate::world::Arrivals::Poisson(_))
-            || v.log.entered_at + v.log.free_flow_s.unwrap_or(0.0) + OPEN_GRACE_S <= self.t
+            || v.log.entered_at + v.log.free_flow_s.unwrap_or(0.0) + OPEN_GRACE_S <= self.time.t
     }
 
     /// The summary so far.
@@ -361,11 +361,11 @@ impl<const N: usize, B: Bus> World<N, B> {
                     .iter()
                     .filter(|v| v.unmet(&self.net) && !self.due(v))
                     .count(),
-                findings: &self.monitor.findings,
-                counters: &self.counters,
-                deadlock: self.deadlock.as_ref(),
-                t: self.t,
-                messages_sent: self.messages_sent,
+                findings: &self.watch.monitor.findings,
+                counters: &self.tally.counters,
+                deadlock: self.watch.deadlock.as_ref(),
+                t: self.time.t,
+                messages_sent: self.tally.messages_sent,
                 bus_faults: self.bus.fault_stats(),
                 solver: self.solver,
                 seed: self.seed,

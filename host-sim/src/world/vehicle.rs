@@ -11,23 +11,20 @@
 //! outlet it hands back to the multi-lane planner on the next segment, or leaves.
 
 use super::at::At;
-use super::heard::{Reject, View, VIEW_CAP};
+pub use super::driver::{params, Brain, Driver, PlannerSetup, Role};
+use super::heard::Reject;
 use super::network::{End, Network, Place};
-use super::precision::{params32, sensing32, CrossingF32, LaneF32, Precision, CROSS_HORIZON};
 use super::sensor::Sensed;
-use super::{AnySolver, Mode, SolverChoice, TraceRow, LANE_WIDTH_M, LENGTH_M};
-use super::{DriverKind, Phase, VehicleSpec};
+use super::{DriverKind, VehicleSpec};
+use super::{Mode, TraceRow, LANE_WIDTH_M, LENGTH_M};
 use crate::bus::{Clock, Message, Received};
 use crate::monitor::Limits;
-use crate::reference::ClarabelSolver;
-use planner_core::crossing::{CrossingPlanner, CrossingReport};
-use planner_core::intersection::Layout;
+use planner_core::crossing::CrossingReport;
 use planner_core::intersection::Movement;
 use planner_core::lane_change::LaneEvent;
 use planner_core::{
-    Command, CostWeights, FallbackReason, InputError, Instant, IpmSolver, LaneCommand,
-    LaneInputError, LaneObservation, LanePlanner, Method, Other, Params, ParamsSpec, Planner, Pose,
-    ReusePolicy, Road, Sensing, Settings, StepStatus, VehicleState,
+    CostWeights, FallbackReason, Instant, LaneObservation, Method, Params, Pose, Road, StepStatus,
+    VehicleState,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -39,157 +36,6 @@ use rand_chacha::ChaCha8Rng;
 pub const HANDOVER_Y_M: f64 = 0.1;
 /// See [`HANDOVER_Y_M`].
 pub const HANDOVER_THETA_RAD: f64 = 0.02;
-
-/// Table I with vmax replaced by `v_max` (a segment's or a junction's speed limit).
-pub fn params(v_max: f64) -> Params<f64> {
-    let spec = ParamsSpec {
-        v_max,
-        ..ParamsSpec::table_i()
-    };
-    // Limits at or below Table I's keep every Table I relation; loaders check the range.
-    Params::new(spec).unwrap_or_else(|_| Params::table_i())
-}
-
-/// Cost of the crossing planners: the default, plus a small pull toward the target of
-/// Sec. VII-B (x^f), so that the target switching is part of J.
-pub fn crossing_weights() -> CostWeights<f64> {
-    CostWeights {
-        target_position: 1e-3,
-        ..CostWeights::default()
-    }
-}
-
-/// How every planner of a run is set up.
-#[derive(Debug, Clone, Copy)]
-pub struct PlannerSetup {
-    /// The speed solver of the multi-lane planners.
-    pub solver: SolverChoice,
-    /// The bus's notification bound (s).
-    pub notify: f64,
-    /// Steps to which the bus rounds positions and speeds (0: exact).
-    pub resolution: (f64, f64),
-    /// Onboard sensors, if any.
-    pub sensing: Option<Sensing<f64>>,
-    /// Certified plan reuse in the multi-lane planners, if any (`None`: solve every step).
-    pub reuse: Option<ReusePolicy<f64>>,
-    /// The planners' precision (`f32` as on the MCU: ours alone, no reuse).
-    pub precision: Precision,
-    /// Beyond this distance (m) no vehicle can matter to a plan
-    /// ([`super::heard::relevance_radius`]).
-    pub relevant_m: f64,
-    /// The invariant kept toward the vehicle ahead.
-    pub invariant: planner_core::Invariant,
-}
-
-/// A vehicle's multi-lane planner, in the setup's precision.
-pub enum LaneBrain<const N: usize> {
-    /// In `f64`, with the chosen solver.
-    F64(Box<LanePlanner<f64, N, AnySolver<N>>>),
-    /// In `f32`, with planner-core's solver, as on the MCU.
-    F32(Box<LaneF32<N>>),
-}
-
-impl<const N: usize> LaneBrain<N> {
-    fn step(&mut self, obs: &LaneObservation<'_, f64>) -> Result<LaneCommand<f64>, LaneInputError> {
-        match self {
-            Self::F64(p) => p.step(obs),
-            Self::F32(p) => p.step(obs),
-        }
-    }
-
-    fn braking_command(&self, theta: f64, v_prev: f64) -> (f64, f64) {
-        match self {
-            Self::F64(p) => p.braking_command(theta, v_prev),
-            Self::F32(p) => p.braking_command(theta, v_prev),
-        }
-    }
-}
-
-/// A vehicle's crossing planner, in the setup's precision.
-pub enum CrossingBrain {
-    /// In `f64`.
-    F64(Box<CrossingPlanner<f64, CROSS_HORIZON, VIEW_CAP>>),
-    /// In `f32`, on its junction's layout in `f32`.
-    F32(Box<CrossingF32>),
-}
-
-impl CrossingBrain {
-    fn clear_reports(&mut self) {
-        match self {
-            Self::F64(c) => c.clear_reports(),
-            Self::F32(c) => c.clear_reports(),
-        }
-    }
-
-    fn hear_report(&mut self, r: &CrossingReport<f64>, stamp: Instant) {
-        // An overflow makes the planner take its path as blocked.
-        let _ = match self {
-            Self::F64(c) => c.hear_report(r, stamp),
-            Self::F32(c) => c.hear_report(r, stamp),
-        };
-    }
-
-    fn hear_paths(&mut self, sensed: &[f64], mapped: &[f64]) {
-        // Past the view's capacity the planner takes its path as blocked.
-        let _ = match self {
-            Self::F64(c) => c.hear_sensed(sensed).and(c.hear_mapped(mapped)),
-            Self::F32(c) => c.hear_sensed(sensed).and(c.hear_mapped(mapped)),
-        };
-    }
-
-    fn hear_grant(&mut self, id: u16, until: Instant) {
-        match self {
-            Self::F64(c) => c.hear_grant(id, until),
-            Self::F32(c) => c.hear_grant(id, until),
-        }
-    }
-
-    fn permitted(&self, layout: &Layout<f64>, s: f64, now: Instant) -> bool {
-        match self {
-            Self::F64(c) => c.permitted(layout, s, now),
-            Self::F32(c) => c.permitted(s, now),
-        }
-    }
-
-    fn step(
-        &mut self,
-        layout: &Layout<f64>,
-        (s, v_prev): (f64, f64),
-        now: Instant,
-    ) -> Result<Command<f64>, InputError> {
-        match self {
-            Self::F64(c) => c.step(layout, s, v_prev, now),
-            Self::F32(c) => c.step(s, v_prev, now),
-        }
-    }
-}
-
-/// The planners of a planner-driven vehicle and what it heard.
-pub struct Brain<const N: usize> {
-    lane: Option<LaneBrain<N>>,
-    crossing: Option<CrossingBrain>,
-    view: View,
-    others: Box<heapless::Vec<Other<f64>, VIEW_CAP>>,
-    setup: PlannerSetup,
-}
-
-/// How a vehicle is driven.
-pub enum Driver<const N: usize> {
-    /// Its own planners.
-    Planner(Box<Brain<N>>),
-    /// A fixed acceleration script (an adversarial but admissible driver that ignores
-    /// intentions, and brakes for what is physically in its lane ahead).
-    Script(Vec<Phase>),
-    /// Random admissible accelerations (same physical response).
-    Random {
-        /// Its own random numbers.
-        rng: Box<ChaCha8Rng>,
-        /// Current acceleration.
-        accel: f64,
-        /// Until when.
-        until: f64,
-    },
-}
 
 /// What a vehicle is to do besides staying safe.
 #[derive(Debug, Clone, PartialEq)]
@@ -235,16 +81,14 @@ pub struct Log {
 pub struct Vehicle<const N: usize> {
     /// Id.
     pub id: u16,
-    /// Where it is.
-    pub at: At,
+    /// Where it is and who drives it.
+    role: Role<N>,
     /// v_{t−h}: the speed applied over the last period (m/s).
     pub v: f64,
     /// The speed applied over the period before (m/s).
     pub v_before: f64,
     /// ω_{t−h} (rad/s).
     pub omega: f64,
-    /// How it is driven.
-    pub driver: Driver<N>,
     /// Its trip.
     pub trip: Trip,
     /// What it did this step.
@@ -442,109 +286,19 @@ impl Counters {
     }
 }
 
-impl<const N: usize> Brain<N> {
-    /// A brain for vehicle `id` with `setup`.
-    pub fn new(id: u16, setup: PlannerSetup) -> Self {
-        Self {
-            lane: None,
-            crossing: None,
-            view: View::new(id, setup.relevant_m),
-            others: Box::new(heapless::Vec::new()),
-            setup,
-        }
-    }
-
-    /// A new setup for the planners built from now on.
-    pub fn set_setup(&mut self, setup: PlannerSetup) {
-        self.setup = setup;
-    }
-
-    /// A multi-lane planner in `lane` of a segment with speed limit `v_max`.
-    fn lane_planner(&self, lane: u8, v_max: f64) -> LaneBrain<N> {
-        if self.setup.precision == Precision::F32 {
-            return LaneBrain::F32(Box::new(self.lane_planner32(lane, v_max)));
-        }
-        let s = match self.setup.solver {
-            SolverChoice::Ours => AnySolver::Ours(IpmSolver::default()),
-            SolverChoice::OursInteriorPoint => {
-                AnySolver::Ours(IpmSolver::new(Settings::interior_point_only()))
-            }
-            SolverChoice::Clarabel => AnySolver::Clarabel(ClarabelSolver {
-                accept_almost_solved: true,
-                ..ClarabelSolver::default()
-            }),
-        };
-        let mut p = LanePlanner::with_solver(params(v_max), CostWeights::default(), s, lane)
-            .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
-        // The setup was validated where it was made (finite bound, resolution, sensing).
-        let _ = p.set_notify_latency(self.setup.notify);
-        let (pos, speed) = self.setup.resolution;
-        let _ = p.set_bus_resolution(pos, speed);
-        let _ = p.set_sensing(self.setup.sensing);
-        let _ = p.set_reuse(self.setup.reuse);
-        p.set_invariant(self.setup.invariant);
-        LaneBrain::F64(Box::new(p))
-    }
-
-    /// The multi-lane planner in `f32`: planner-core's solver, the setup rounded.
-    fn lane_planner32(&self, lane: u8, v_max: f64) -> LaneF32<N> {
-        let mut p = LanePlanner::new(params32(v_max), CostWeights::default(), lane)
-            .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
-        let _ = p.set_notify_latency(self.setup.notify as f32);
-        let (pos, speed) = self.setup.resolution;
-        let _ = p.set_bus_resolution(pos as f32, speed as f32);
-        let _ = p.set_sensing(self.setup.sensing.map(sensing32));
-        p.set_invariant(self.setup.invariant);
-        LaneF32::new(p)
-    }
-
-    /// A crossing planner for vehicle `id` on `route` of `layout`.
-    /// Its speed limit is `v_limit` ([`Network::route_limit`]).
-    fn crossing_planner(
-        &self,
-        (id, route): (u16, u8),
-        layout: &Layout<f64>,
-        v_limit: f64,
-    ) -> CrossingBrain {
-        if self.setup.precision == Precision::F32 {
-            let w = CostWeights {
-                target_position: 1e-3,
-                ..CostWeights::default()
-            };
-            let planner = Planner::new(params32(v_limit), w)
-                .unwrap_or_else(|_| unreachable!("the weights are valid"));
-            let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M as f32);
-            let _ = c.set_notify_latency(self.setup.notify as f32);
-            let (pos, speed) = self.setup.resolution;
-            let _ = c.set_bus_resolution(pos as f32, speed as f32);
-            let _ = c.set_sensing(self.setup.sensing.map(sensing32));
-            c.set_invariant(self.setup.invariant);
-            return CrossingBrain::F32(Box::new(CrossingF32::new(c, layout)));
-        }
-        let planner = Planner::new(params(v_limit), crossing_weights())
-            .unwrap_or_else(|_| unreachable!("the weights are valid"));
-        let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M);
-        let _ = c.set_notify_latency(self.setup.notify);
-        let (pos, speed) = self.setup.resolution;
-        let _ = c.set_bus_resolution(pos, speed);
-        let _ = c.set_sensing(self.setup.sensing);
-        c.set_invariant(self.setup.invariant);
-        CrossingBrain::F64(Box::new(c))
-    }
-}
-
 impl<const N: usize> Vehicle<N> {
-    /// A vehicle at `at` driven by `driver`, at speed `v`, entering the network at `t`.
-    pub fn new(id: u16, at: At, v: f64, driver: Driver<N>, trip: Trip, t: f64) -> Self {
+    /// A vehicle where `role` says and driven as it says, at speed `v`, entering the
+    /// network at `t`.
+    pub fn new(id: u16, role: Role<N>, v: f64, trip: Trip, t: f64) -> Self {
+        let at = role.at();
         Self {
-            cooperative: matches!(driver, Driver::Planner(_)),
+            cooperative: role.brain().is_some(),
             granted: None,
             id,
-            at,
+            role,
             v,
             v_before: v,
             omega: 0.0,
-            driver,
             trip,
             mode: Mode::Cruise,
             log: Log {
@@ -559,21 +313,26 @@ impl<const N: usize> Vehicle<N> {
 
     /// Notes its trip's free-flow time from where it is now (at its entry).
     pub fn note_free_flow(&mut self, net: &Network) {
-        if let At::Lane { seg, x, .. } = self.at {
+        if let At::Lane { seg, x, .. } = self.at() {
             self.log.free_flow_s = net.free_flow_s(seg, x, &self.trip.movements);
         }
     }
 
+    /// Where it is.
+    pub fn at(&self) -> At {
+        self.role.at()
+    }
+
     /// `true` if its own planners drive it.
     pub fn is_planner(&self) -> bool {
-        matches!(self.driver, Driver::Planner(_))
+        self.role.brain().is_some()
     }
 
     /// What sensors see of it now.
     pub fn seen(&self) -> super::sensor::Seen {
         super::sensor::Seen {
             id: self.id,
-            at: self.at,
+            at: self.at(),
             v: self.v,
         }
     }
@@ -582,14 +341,16 @@ impl<const N: usize> Vehicle<N> {
     pub fn truth(&self, net: &Network) -> VehicleTruth {
         VehicleTruth {
             id: self.id,
-            at: self.at,
+            at: self.at(),
             v: self.v,
             v_before: self.v_before,
             planner: self.is_planner(),
             unmet: self.unmet(net),
             target_lane: self.trip.target_lane,
-            leader_aware: matches!(&self.driver,
-                Driver::Planner(b) if b.setup.invariant == planner_core::Invariant::LeaderAware),
+            leader_aware: self
+                .role
+                .brain()
+                .is_some_and(|b| b.setup.invariant == planner_core::Invariant::LeaderAware),
         }
     }
 
@@ -599,7 +360,7 @@ impl<const N: usize> Vehicle<N> {
         // Scripted and random drivers neither hear intentions nor yield.
         announce(
             self.id,
-            self.at,
+            self.at(),
             (self.v, self.omega),
             self.cooperative,
             now,
@@ -614,7 +375,8 @@ impl<const N: usize> Vehicle<N> {
             at: self.position(net),
             v: self.v,
         };
-        let Driver::Planner(b) = &mut self.driver else {
+        let at = self.at();
+        let Some(b) = self.role.brain_mut() else {
             return true;
         };
         b.view.forget_silent(ctx.now, (b.setup.notify, ctx.lim.h));
@@ -640,7 +402,7 @@ impl<const N: usize> Vehicle<N> {
                 Err(Reject::Distrusted) => counters.rejected += 1,
                 Err(Reject::Own) | Ok(()) => {}
             }
-            if let (Some(c), At::Crossing { junction, .. }) = (&mut b.crossing, self.at) {
+            if let (Some(c), At::Crossing { junction, .. }) = (&mut b.crossing, at) {
                 if let Message::Grant {
                     junction: j,
                     id,
@@ -658,7 +420,7 @@ impl<const N: usize> Vehicle<N> {
 
     /// Its centre in the world.
     pub fn position(&self, net: &Network) -> (f64, f64) {
-        let p = match self.at {
+        let p = match self.at() {
             At::Lane { seg, x, y, .. } => net
                 .segments
                 .get(seg)
@@ -683,7 +445,7 @@ impl<const N: usize> Vehicle<N> {
         // changes it has not started: the others could not hear its intention.
         if let At::Lane {
             alpha: None, lane, ..
-        } = self.at
+        } = self.at()
         {
             if ctx
                 .silent
@@ -694,7 +456,7 @@ impl<const N: usize> Vehicle<N> {
         }
         let whole = self.hear(ctx, inbox, counters);
         // Where it is and who drives it, matched once: each decider gets its place.
-        let cmd = match self.at {
+        let cmd = match self.at() {
             _ if !whole => self.blind(ctx, counters),
             At::Lane { .. } if !self.is_planner() => self.decide_script(ctx),
             At::Lane {
@@ -733,7 +495,7 @@ impl<const N: usize> Vehicle<N> {
         self.mode = Mode::Fallback;
         let p = params(self.speed_limit(ctx.net));
         let v = planner_core::safety::max_braking_command(&p, self.v);
-        let w = match self.at {
+        let w = match self.at() {
             At::Lane { theta, .. } => planner_core::lane_change::straighten(&p, theta, v),
             At::Crossing { .. } => 0.0,
         };
@@ -742,7 +504,7 @@ impl<const N: usize> Vehicle<N> {
 
     /// The speed limit where it is.
     fn speed_limit(&self, net: &Network) -> f64 {
-        match self.at {
+        match self.at() {
             At::Lane { seg, .. } => net.segments.get(seg).map_or(27.8, |s| s.v_max),
             At::Crossing {
                 junction, route, ..
@@ -798,7 +560,7 @@ impl<const N: usize> Vehicle<N> {
             alpha,
             beta,
             ..
-        } = self.at
+        } = self.at()
         else {
             return false;
         };
@@ -816,7 +578,7 @@ impl<const N: usize> Vehicle<N> {
         if !self.is_planner() {
             return false;
         }
-        match self.at {
+        match self.at() {
             At::Crossing { .. } => true,
             At::Lane {
                 seg, lane, alpha, ..
@@ -844,11 +606,12 @@ impl<const N: usize> Vehicle<N> {
             theta,
             lane,
             ..
-        } = self.at
+        } = self.at()
         else {
             return false;
         };
-        self.in_serving_lane(net)
+        self.is_planner()
+            && self.in_serving_lane(net)
             && net.segments.get(seg).is_some_and(|sg| {
                 (y - sg.lane_centre(lane)).abs() <= HANDOVER_Y_M
                     && theta.abs() <= HANDOVER_THETA_RAD
@@ -866,7 +629,7 @@ impl<const N: usize> Vehicle<N> {
         let Pose { x, y, theta } = pose;
         let road = self.road(ctx.net, seg);
         let v_max = ctx.net.segments.get(seg).map_or(ctx.lim.v_max, |s| s.v_max);
-        let Driver::Planner(b) = &mut self.driver else {
+        let Some(b) = self.role.brain_mut() else {
             return self.fallback(ctx, counters);
         };
         if b.lane.is_none() {
@@ -877,6 +640,7 @@ impl<const N: usize> Vehicle<N> {
         for r in &ctx.returns.others {
             let _ = b.others.push(*r);
         }
+        let (v_prev, v_ref) = (self.v, self.trip.v_ref.unwrap_or(v_max));
         let obs = LaneObservation {
             pose: Pose { x, y, theta },
             v_prev: self.v,
@@ -893,15 +657,7 @@ impl<const N: usize> Vehicle<N> {
         counters.planner_steps += 1;
         match planner.step(&obs) {
             Ok(c) => {
-                self.at = At::Lane {
-                    seg,
-                    x,
-                    y,
-                    theta,
-                    lane: c.lane,
-                    alpha: c.alpha,
-                    beta: c.beta,
-                };
+                self.role.set_lane_state(c.lane, c.alpha, c.beta);
                 match c.event {
                     Some(LaneEvent::Declared(_)) => {
                         self.log.declared_x.get_or_insert(x);
@@ -917,8 +673,7 @@ impl<const N: usize> Vehicle<N> {
                     self.log.in_target_at.get_or_insert(ctx.t);
                 }
                 counters.lateral_iterations += u64::from(c.lateral_iterations);
-                counters.tracking_cost +=
-                    CostWeights::default().stage_cost(c.v, obs.v_prev, obs.v_ref);
+                counters.tracking_cost += CostWeights::default().stage_cost(c.v, v_prev, v_ref);
                 self.mode = mode_of(c.status, c.alpha.is_some(), counters, ctx.t, self.id);
                 self.last_status = Some(c.status);
                 (c.v, c.omega)
@@ -938,19 +693,25 @@ impl<const N: usize> Vehicle<N> {
     fn decide_script(&mut self, ctx: &StepCtx<'_>) -> (f64, f64) {
         let t = ctx.t;
         let lim = &ctx.lim;
-        let accel = match &mut self.driver {
-            Driver::Script(phases) => phases
+        let accel = match &mut self.role {
+            Role::Road {
+                driver: Driver::Script(phases),
+                ..
+            } => phases
                 .iter()
                 .find(|p| t < p.until_s)
                 .map_or(0.0, |p| p.accel),
-            Driver::Random { rng, accel, until } => {
+            Role::Road {
+                driver: Driver::Random { rng, accel, until },
+                ..
+            } => {
                 if t >= *until {
                     *accel = rng.random_range(-lim.brake..lim.a_max);
                     *until = t + rng.random_range(0.2..2.0);
                 }
                 *accel
             }
-            Driver::Planner(_) => 0.0,
+            Role::Road { .. } | Role::Junction { .. } => 0.0,
         };
         self.mode = Mode::Cruise;
         let v = admissible(lim, self.v, accel);
@@ -978,7 +739,7 @@ impl<const N: usize> Vehicle<N> {
             .net
             .route_limit(junction, route)
             .unwrap_or(layout.spec.v_limit);
-        let Driver::Planner(b) = &mut self.driver else {
+        let Some(b) = self.role.brain_mut() else {
             return self.fallback(ctx, counters);
         };
         if b.crossing.is_none() {
@@ -1044,7 +805,7 @@ impl<const N: usize> Vehicle<N> {
 
     /// The trace row of this step's decision.
     fn row(&self, ctx: &StepCtx<'_>, (v, omega): (f64, f64)) -> TraceRow {
-        let (pose, lane, place) = match self.at {
+        let (pose, lane, place) = match self.at() {
             At::Lane {
                 seg,
                 x,
@@ -1078,23 +839,20 @@ impl<const N: usize> Vehicle<N> {
             v,
             omega,
             lane,
-            target_lane: match self.at {
+            target_lane: match self.at() {
                 At::Lane { .. } => self.trip.target_lane,
                 At::Crossing { .. } => lane,
             },
             mode: self.mode,
             place,
-            granted: match self.at {
+            granted: match self.at() {
                 At::Crossing { .. } => self.granted,
                 At::Lane { .. } => None,
             },
             length: LENGTH_M,
             width: super::WIDTH_M,
             brake: ctx.lim.brake,
-            invariant: match &self.driver {
-                Driver::Planner(b) => Some(b.setup.invariant),
-                _ => None,
-            },
+            invariant: self.role.brain().map(|b| b.setup.invariant),
         }
     }
 
@@ -1104,8 +862,8 @@ impl<const N: usize> Vehicle<N> {
         self.v_before = self.v;
         self.v = v;
         self.omega = w;
-        match &mut self.at {
-            At::Lane { x, y, theta, .. } => {
+        match &mut self.role {
+            Role::Road { x, y, theta, .. } => {
                 if w.abs() > 1e-12 {
                     let th1 = *theta + w * h;
                     *x += v / w * (th1.sin() - theta.sin());
@@ -1116,26 +874,36 @@ impl<const N: usize> Vehicle<N> {
                     *y += v * h * theta.sin();
                 }
             }
-            At::Crossing { s, .. } => *s += v * h,
+            Role::Junction { s, .. } => *s += v * h,
         }
     }
 
     /// Records reaching the goal x by `t`.
     pub fn check_goal(&mut self, t: f64) {
-        if let At::Lane { x, .. } = self.at {
+        if let At::Lane { x, .. } = self.at() {
             if self.log.reached_at.is_none() && self.trip.goal_x.is_some_and(|g| x >= g) {
                 self.log.reached_at = Some(t);
             }
         }
     }
 
-    /// Moves into junction `junction` on `route` at path position `s` (hand-over).
-    pub fn enter_junction(&mut self, junction: usize, route: u8, s: f64) {
-        self.at = At::Crossing { junction, route, s };
+    /// Moves into junction `junction` on `route` at path position `s` (hand-over); `false`,
+    /// and nothing changed, for a driver other than its own planners (only planners cross:
+    /// [`Vehicle::ready_to_cross`] is never true for the others).
+    pub fn enter_junction(&mut self, junction: usize, route: u8, s: f64) -> bool {
+        if !self.role.enter_junction(junction, route, s) {
+            return false;
+        }
         self.omega = 0.0;
         self.log.arrived_at = None;
         self.log.left_as_at = None;
-        if let Driver::Planner(b) = &mut self.driver {
+        self.forget_planners();
+        true
+    }
+
+    /// Its planners are built afresh for the place it has just entered.
+    fn forget_planners(&mut self) {
+        if let Some(b) = self.role.brain_mut() {
             b.lane = None;
             b.crossing = None;
         }
@@ -1144,30 +912,20 @@ impl<const N: usize> Vehicle<N> {
     /// Moves onto segment `seg` at `x` in `lane`, centred and straight, with target lane
     /// `target` (hand-back after a junction).
     pub fn enter_segment(&mut self, net: &Network, seg: usize, x: f64, lane: u8) {
-        self.at = At::Lane {
-            seg,
-            x,
-            y: (f64::from(lane) + 0.5) * LANE_WIDTH_M,
-            theta: 0.0,
-            lane,
-            alpha: None,
-            beta: None,
-        };
+        let y = (f64::from(lane) + 0.5) * LANE_WIDTH_M;
+        self.role.enter_segment(seg, (x, y), lane);
         self.omega = 0.0;
         if !self.trip.movements.is_empty() {
             self.trip.movements.remove(0);
         }
         self.retarget(net);
-        if let Driver::Planner(b) = &mut self.driver {
-            b.lane = None;
-            b.crossing = None;
-        }
+        self.forget_planners();
     }
 
     /// Sets the target lane on the current segment: the nearest lane serving the next
     /// movement (SPEC §10).
     pub fn retarget(&mut self, net: &Network) {
-        if let At::Lane { seg, lane, .. } = self.at {
+        if let At::Lane { seg, lane, .. } = self.at() {
             if let Some(sg) = net.segments.get(seg) {
                 let next = self.trip.movements.first().copied();
                 self.trip.target_lane = sg.nearest_serving(net, lane, next);
@@ -1237,18 +995,24 @@ pub(crate) fn build_vehicle<const N: usize>(
     seed: u64,
     net: &Network,
 ) -> Vehicle<N> {
-    let driver = match spec.driver {
-        DriverKind::Planner => Driver::Planner(Box::new(Brain::new(spec.id, setup))),
-        DriverKind::Script => Driver::Script(spec.script.clone()),
-        DriverKind::Random => Driver::Random {
-            rng: Box::new(ChaCha8Rng::seed_from_u64(
-                seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(spec.id),
-            )),
-            accel: 0.0,
-            until: 0.0,
-        },
-    };
-    let mut v = Vehicle::new(spec.id, spec.at, spec.v, driver, spec.trip.clone(), 0.0);
+    let role = match spec.driver {
+        DriverKind::Planner => None,
+        DriverKind::Script => Role::new(spec.at, Driver::Script(spec.script.clone())),
+        DriverKind::Random => Role::new(
+            spec.at,
+            Driver::Random {
+                rng: Box::new(ChaCha8Rng::seed_from_u64(
+                    seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(spec.id),
+                )),
+                accel: 0.0,
+                until: 0.0,
+            },
+        ),
+    }
+    // Only planners cross junctions: one that starts in a junction is its planners' (no
+    // loader writes another driver there; see `VehicleSpec::driver`).
+    .unwrap_or_else(|| Role::planner(spec.at, Box::new(Brain::new(spec.id, setup))));
+    let mut v = Vehicle::new(spec.id, role, spec.v, spec.trip.clone(), 0.0);
     v.cooperative = spec.cooperative;
     v.note_free_flow(net);
     if let At::Lane { x, lane, .. } = spec.at {
@@ -1264,7 +1028,7 @@ pub(crate) fn build_vehicle<const N: usize>(
 
 /// Gives a vehicle's brain a new setup (its planners are built with it from now on).
 pub(crate) fn set_setup<const N: usize>(v: &mut Vehicle<N>, setup: PlannerSetup) {
-    if let Driver::Planner(b) = &mut v.driver {
+    if let Some(b) = v.role.brain_mut() {
         b.set_setup(setup);
     }
 }
