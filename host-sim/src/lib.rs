@@ -31,4 +31,5 @@ pub mod monitor;
 pub mod output;
 pub mod reference;
 pub mod scenario;
+pub mod verdict;
 pub mod world;

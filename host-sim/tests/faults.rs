@@ -144,16 +144,17 @@ fn multilane_experiment_with_loss_and_delay_is_safe_and_completes() {
         delay_s: 0.05,
         ..Faults::NONE
     };
-    let r = host_sim::experiments::multilane::experiment(
+    let r = host_sim::experiments::experiment::run_whole(
         &host_sim::experiments::multilane::MultilaneSettings {
             seeds: 12,
             seed: 1,
             solver: SolverChoice::Ours,
-            faults: f,
+            faults: f.into(),
             invariant: planner_core::Invariant::Paper,
         },
         0,
-    );
+    )
+    .expect("one part reports");
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
         (0, 0, 0),

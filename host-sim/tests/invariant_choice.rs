@@ -32,7 +32,7 @@ fn leader_aware_followers_close_up_on_followers_and_stay_safe() {
         );
     }
     assert_eq!(
-        (paper.invariant, aware.invariant),
+        (paper.invariant.as_str(), aware.invariant.as_str()),
         ("paper", "leader-aware")
     );
     // Under the paper's invariant a follower closer than the wall would be a violation;
@@ -172,7 +172,7 @@ fn the_throughput_world_keeps_the_invariant_asked_for() {
             seeds: 1,
             seed: 1,
             duration: 10.0,
-            faults: host_sim::bus::Faults::NONE,
+            faults: host_sim::experiments::flags::FaultFlags::NONE,
             invariant,
         };
         let w = closed_world(planner_core::crossing::Algorithm::Fifo, 1, &s);

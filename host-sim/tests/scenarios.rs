@@ -1,7 +1,6 @@
 //! host-sim as a tool: built-in scenarios, determinism, the bus as the only channel,
 //! scenario validation with file:line errors.
 
-use host_sim::bus::Faults;
 use host_sim::bus::{Bus, BusError, InProcessBus, Message, Received};
 use host_sim::scenario::{load, parse};
 use host_sim::world::summary::Summary;
@@ -288,32 +287,34 @@ fn dead_end_all_vehicles_reach_their_lanes_and_stop_before_the_end() {
 /// lane change completes, nothing collides.
 #[test]
 fn multilane_experiment_completes_with_either_solver() {
-    let r = host_sim::experiments::multilane::experiment(
+    let r = host_sim::experiments::experiment::run_whole(
         &host_sim::experiments::multilane::MultilaneSettings {
             seeds: 8,
             seed: 1,
             solver: SolverChoice::Ours,
-            faults: Faults::NONE,
+            faults: host_sim::experiments::flags::FaultFlags::NONE,
             invariant: planner_core::Invariant::Paper,
         },
         0,
-    );
+    )
+    .expect("one part reports");
     assert_eq!(
         (r.collisions, r.invariant_violations, r.limit_violations),
         (0, 0, 0)
     );
     assert_eq!(r.completed, r.runs, "{r:?}");
     assert!(r.max_lane_change_distance_m < r.bound_m, "{r:?}");
-    let c = host_sim::experiments::multilane::experiment(
+    let c = host_sim::experiments::experiment::run_whole(
         &host_sim::experiments::multilane::MultilaneSettings {
             seeds: 1,
             seed: 1,
             solver: SolverChoice::Clarabel,
-            faults: Faults::NONE,
+            faults: host_sim::experiments::flags::FaultFlags::NONE,
             invariant: planner_core::Invariant::Paper,
         },
         0,
-    );
+    )
+    .expect("one part reports");
     assert_eq!(
         (c.collisions, c.invariant_violations, c.completed),
         (0, 0, 1),
@@ -370,16 +371,17 @@ fn bad_intersection_scenarios_are_rejected_with_file_line() {
 /// seed; all safe; the pipelined algorithm crosses the most.
 #[test]
 fn throughput_all_algorithms_safe_and_pipelined_fastest() {
-    let r = host_sim::experiments::throughput::throughput(
+    let r = host_sim::experiments::experiment::run_whole(
         &host_sim::experiments::throughput::ThroughputSettings {
             seeds: 1,
             seed: 1,
             duration: 120.0,
-            faults: Faults::NONE,
+            faults: host_sim::experiments::flags::FaultFlags::NONE,
             invariant: planner_core::Invariant::Paper,
         },
         0,
-    );
+    )
+    .expect("one part reports");
     for row in &r.results {
         assert_eq!(
             (

@@ -2,7 +2,8 @@
 # Proof that a restructuring moved nothing: builds two revisions of this repository and
 # compares what they print — every shipped scenario's trace and JSON summary (under both
 # invariants, and two of them on the CAN hub), small runs of every sweep and of the
-# paper's experiments — with wall-clock figures left out of the JSON.
+# paper's experiments, and shards of sweeps and experiments merged (with the merge's exit
+# code) — with wall-clock figures left out of the JSON.
 #
 # Usage: host-sim/tools/same_outputs.sh OLD NEW [WORKDIR]
 #   OLD, NEW  any git revisions (e.g. HEAD~1 HEAD)
@@ -67,6 +68,23 @@ capture() {
     done
     for e in multilane throughput faults; do
       "$hs" experiment "$e" --json 2>/dev/null | strip_json > "$out/exp-$e.json" || true
+    done
+    # Shards and their merge, with each exit code: what `host-sim merge` makes of them.
+    local run
+    for run in "deadends --cases 6" "crossings --cases 3" "platoons --cases 8" \
+      "traffic --cases 4 --duration 10" "traffic --cases 4 --duration 10 --compare" \
+      "liars --cases 3" "layouts --cases 8" "grids --cases 2 --duration 30" \
+      "experiment multilane --seeds 4" "experiment throughput --seeds 1 --duration 30" \
+      "experiment faults --seeds 2 --throughput-seeds 1 --duration 30" \
+      "experiment faults --grid --losses 0,0.5 --delays 0 --runs 1"; do
+      local name=${run// /_}
+      set -- $run
+      "$hs" "$@" --shard 0/2 > "$out/.a" 2>/dev/null || true
+      "$hs" "$@" --shard 1/2 > "$out/.b" 2>/dev/null || true
+      local code=0
+      "$hs" merge "$out/.a" "$out/.b" --json > "$out/.m" 2>/dev/null || code=$?
+      { strip_json < "$out/.m"; echo "exit $code"; } > "$out/merge-$name.json"
+      rm -f "$out/.a" "$out/.b" "$out/.m"
     done
   )
 }

@@ -196,10 +196,7 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
     };
     if a.compare {
         let r = compare(&settings);
-        let safe = [&r.baseline, &r.current]
-            .iter()
-            .all(|x| x.collisions + x.invariant_violations + x.limit_violations == 0);
-        return finish(&r, a.json, safe, true);
+        return finish(&r, a.json);
     }
     if a.sweep {
         let vehicles: Vec<usize> = a.sweep_vehicles.iter().map(|&v| v as usize).collect();
@@ -211,19 +208,10 @@ pub fn scale(a: ScaleArgs) -> ExitCode {
                 return code;
             }
         }
-        let safe = r
-            .runs
-            .iter()
-            .all(|x| x.collisions + x.invariant_violations + x.limit_violations == 0);
-        return finish(&r, a.json, safe, true);
+        return finish(&r, a.json);
     }
     let r = run(&settings);
-    finish(
-        &r,
-        a.json,
-        r.collisions + r.invariant_violations + r.limit_violations == 0,
-        true,
-    )
+    finish(&r, a.json)
 }
 
 /// `bench-planner`.

@@ -1,6 +1,7 @@
 //! The command line: one file per subcommand.
 
 pub mod bench;
+pub mod conduct;
 pub mod experiment;
 pub mod export;
 pub mod fleet;
@@ -9,6 +10,8 @@ pub mod run;
 pub mod sweep;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use conduct::{conduct, SweepCmd};
+use host_sim::experiments as x;
 use host_sim::world::SolverChoice;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -156,40 +159,42 @@ enum Command {
         invariant: Option<InvariantArg>,
     },
     /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
-    Platoons(sweep::PlatoonsArgs),
+    Platoons(SweepCmd<x::platoon::Platoons>),
     /// Theorem 2 sweep: random multi-lane traffic (3–4 lanes, up to 30 vehicles, random
     /// target lanes), every vehicle its own planner.
-    Traffic(sweep::TrafficArgs),
+    Traffic(SweepCmd<x::traffic::Traffic>),
     /// Theorem 3 sweep: random dead-end roads (2–5 lanes, 4–40 vehicles, random targets),
     /// every vehicle to reach its target lane and stop before the end.
-    Deadends(sweep::LivenessArgs),
+    Deadends(SweepCmd<x::deadends::Deadends>),
     /// Theorems 4–5 sweep: random queues at the intersection under every algorithm, every
     /// vehicle to cross.
-    Crossings(sweep::LivenessArgs),
+    Crossings(SweepCmd<x::crossings::Crossings>),
     /// Red team: random queues at the intersection with its manager down from a random
     /// moment for one period to 10 s, under every algorithm: no collision, every vehicle
     /// across.
-    Outages(sweep::LivenessArgs),
+    Outages(SweepCmd<x::redteam::Outages>),
     /// Red team: random queues with one vehicle lying about its position (±0.2 to ±40 m,
     /// from its first report or from a random moment), under every algorithm: no
     /// collision; what it costs in liveness is reported.
-    Liars(sweep::LivenessArgs),
+    Liars(SweepCmd<x::redteam::Liars>),
     /// Red team: open arrivals whose ids run through the junction managers' bus nodes:
     /// no vehicle ever gets a node's id, no collision.
-    Ids(sweep::LivenessArgs),
+    Ids(SweepCmd<x::redteam::Ids>),
     /// Red team: random network files, degenerate ones among them: each refused with its
     /// file and line, or run to its end with no collision, violation or deadlock.
-    Layouts(sweep::LivenessArgs),
+    Layouts(SweepCmd<x::layouts::Layouts>),
     /// Random grids (2×2 to 4×4, 1 to 4 lanes, blocks from the commitment bound up,
     /// demand to saturation and past): no collision, no deadlock (each one reported with
     /// whom every vehicle waits on).
-    Grids(sweep::GridsArgs),
+    Grids(SweepCmd<x::network::Grids>),
     /// One world of each size (vehicles placed on the smallest grid that holds them): the
     /// realtime factor, fallbacks and blind steps (a view that overflowed); with
     /// `--delay`, each again on a slow bus, its cost as a ratio to the clean bus's.
     Worlds(sweep::WorldsArgs),
-    /// Combines the shards of one sweep (each run with `--shard I/N`) into exactly the
-    /// unsharded result: counts add, maxima take the max, means are weighted by cases.
+    /// Combines the shards of one sweep or experiment (each run with `--shard I/N`) into
+    /// exactly the unsharded result, judged as the unsharded run is: a sweep's counts
+    /// add, maxima take the max, means are weighted by cases; an experiment's runs are
+    /// aggregated once.
     Merge {
         /// The shards' JSON outputs, one per shard.
         #[arg(required = true)]
@@ -286,17 +291,17 @@ fn dispatch(command: Command) -> ExitCode {
             clock_start,
             invariant: invariant.map(InvariantArg::invariant),
         }),
-        Command::Platoons(a) => sweep::platoons(a),
-        Command::Traffic(a) => sweep::traffic(a),
-        Command::Deadends(a) => sweep::deadends(a),
-        Command::Crossings(a) => sweep::crossings(a),
-        Command::Outages(a) => sweep::red_team(a, "outages"),
-        Command::Liars(a) => sweep::red_team(a, "liars"),
-        Command::Ids(a) => sweep::red_team(a, "ids"),
-        Command::Layouts(a) => sweep::red_team(a, "layouts"),
-        Command::Grids(a) => sweep::grids(a),
+        Command::Platoons(c) => conduct(&c.settings, c.answer, None),
+        Command::Traffic(c) => conduct(&c.settings, c.answer, None),
+        Command::Deadends(c) => conduct(&c.settings, c.answer, None),
+        Command::Crossings(c) => conduct(&c.settings, c.answer, None),
+        Command::Outages(c) => conduct(&c.settings, c.answer, None),
+        Command::Liars(c) => conduct(&c.settings, c.answer, None),
+        Command::Ids(c) => conduct(&c.settings, c.answer, None),
+        Command::Layouts(c) => conduct(&c.settings, c.answer, None),
+        Command::Grids(c) => conduct(&c.settings, c.answer, None),
         Command::Worlds(a) => sweep::worlds(a),
-        Command::Merge { files, json } => sweep::merge(&files, json),
+        Command::Merge { files, json } => conduct::merge(&files, json),
         Command::Experiment(e) => experiment::run(e),
         Command::Export(e) => export::run(e),
         Command::Scale(a) => bench::scale(a),

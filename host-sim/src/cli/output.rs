@@ -3,6 +3,7 @@
 //! missed (or a deadlock), 4 a CAN bus failure.
 
 use host_sim::output::staged::Staged;
+use host_sim::verdict::{Judged, Verdict};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
@@ -102,31 +103,26 @@ pub fn bad_input(msg: impl std::fmt::Display) -> ExitCode {
     ExitCode::from(EXIT_BAD_INPUT)
 }
 
-/// The exit code of a run that was `safe` and `live`.
-pub fn code(safe: bool, live: bool) -> ExitCode {
-    if !safe {
+/// The exit code of a verdict: unsafe before not live before fine.
+pub fn exit(v: Verdict) -> ExitCode {
+    if !v.is_safe() {
         ExitCode::from(EXIT_UNSAFE)
-    } else if !live {
+    } else if !v.live {
         ExitCode::from(EXIT_NOT_LIVE)
     } else {
         ExitCode::SUCCESS
     }
 }
 
-/// Prints a result (one JSON object, or its human summary) and picks the exit code.
-pub fn finish<T: serde::Serialize + std::fmt::Display>(
-    r: &T,
-    json: bool,
-    safe: bool,
-    live: bool,
-) -> ExitCode {
+/// Prints a result (one JSON object, or its human summary) and exits by its verdict.
+pub fn finish<T: serde::Serialize + std::fmt::Display + Judged>(r: &T, json: bool) -> ExitCode {
     let printed = if json {
         print_json(r)
     } else {
         say(&r.to_string())
     };
     match printed {
-        Ok(()) => code(safe, live),
+        Ok(()) => exit(r.verdict()),
         Err(code) => code,
     }
 }

@@ -2,12 +2,13 @@
 //! its own planner, talking only over the bus; its trace, plot and viewer page.
 
 use super::output::{
-    bad_input, check_plot, code, commit, print_json, staged, EXIT_BUS, EXIT_INTERNAL,
+    bad_input, check_plot, commit, exit, print_json, staged, EXIT_BUS, EXIT_INTERNAL,
 };
 use host_sim::output::plot::PlotData;
 use host_sim::output::staged::Staged;
 use host_sim::output::trace::TraceWriter;
 use host_sim::output::viewer::Viewer;
+use host_sim::verdict::Judged;
 use host_sim::world::summary::Summary;
 use host_sim::world::{SolverChoice, TraceRow, World, WorldSpec};
 use std::io::{BufWriter, IsTerminal};
@@ -224,7 +225,7 @@ fn execute(
             return code;
         }
     }
-    code(summary.unsafe_events() == 0, summary.completed)
+    exit(summary.verdict())
 }
 
 /// Finishes every output of a complete run and puts each in place; the paths written.

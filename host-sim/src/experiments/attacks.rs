@@ -24,6 +24,7 @@ use crate::bus::{Faults, Liar, ManagerDown};
 use crate::fleet::can::{simulation_keys, Keys, SIMULATION_MASTER};
 use crate::fleet::intruder::Attack;
 use crate::fleet::{Fleet, FleetError, FleetSummary, Medium};
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::WorldSpec;
 use planner_core::crossing::Algorithm;
 use serde::Serialize;
@@ -116,7 +117,18 @@ pub struct AttackRow {
 impl AttackRow {
     /// Collisions, invariant violations and unpermitted entries.
     pub fn unsafe_events(&self) -> u64 {
-        self.collisions + self.invariant_violations + self.unpermitted_entries
+        self.safety().events()
+    }
+
+    /// Its findings (a forgery or replay that got through counts as a breach where the
+    /// nodes authenticate: [`AttackReport`]'s verdict).
+    pub fn safety(&self) -> Safety {
+        Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            0,
+            self.unpermitted_entries,
+        )
     }
 }
 
@@ -294,5 +306,31 @@ fn done(r: &crate::world::summary::Summary) -> (u64, Option<f64>) {
             r.lane_changes.in_target_lane as u64,
             r.lane_changes.all_done_at_s,
         ),
+    }
+}
+
+impl Judged for AttackReport {
+    /// Every row's findings, and where the nodes authenticate, every forgery, replay,
+    /// spoof or flood frame that got through as a breach (without authentication they are
+    /// expected to get through: that run shows what it keeps out). Live when every row
+    /// but the liar's left every vehicle done: a liar's cost in liveness is reported,
+    /// not required away (the others stop taking its word and plan around it).
+    fn verdict(&self) -> Verdict {
+        let intruder = |name: &str| Attack::ALL.iter().any(|a| a.name() == name);
+        let breaches: u64 = self
+            .results
+            .iter()
+            .filter(|r| self.authenticated && intruder(&r.attack))
+            .map(|r| r.accepted)
+            .sum();
+        let safety = Safety {
+            breaches,
+            ..self.results.iter().map(AttackRow::safety).sum()
+        };
+        let done = self
+            .results
+            .iter()
+            .all(|r| r.completed || r.attack == "lying-vehicle");
+        Verdict::new(safety, done)
     }
 }

@@ -9,16 +9,64 @@
 //! (SPEC §7: it admits a later vehicle ahead of an earlier waiting one it conflicts with,
 //! and a follower ahead of its own leader) and is left out of the totals.
 
-use super::sweep::{self, case_seed, Case, Failing, Totals};
+use super::experiment::{Experiment, SettingsError};
+use super::shard::{combine_all, MergeError};
+use super::sweep::{self, case_seed, Case, CasesUnder, Failing, Totals};
 use crate::monitor::Limits;
 use crate::reference::instances::rng;
 use crate::scenario::junction::{JunctionScenario, LayoutToml, Placement};
+use crate::verdict::{Judged, Verdict};
 use crate::world::{LENGTH_M, START_MARGIN_M};
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{lane_movements, Layout};
 use planner_core::Invariant;
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+
+/// `host-sim crossings`: its cases, seed and invariant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Crossings {
+    /// Cases, seed, invariant.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sweep: CasesUnder,
+}
+
+impl Experiment for Crossings {
+    const NAME: &'static str = "crossings";
+    type Part = CrossingsReport;
+    type Report = CrossingsReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        Ok(())
+    }
+
+    fn cases(&self) -> u64 {
+        self.sweep.sweep.cases
+    }
+
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> CrossingsReport {
+        let s = &self.sweep;
+        sweep_with(end - first, first, s.sweep.seed, threads, s.invariant)
+    }
+
+    fn report(&self, parts: Vec<CrossingsReport>) -> Result<CrossingsReport, MergeError> {
+        combine_all(parts)
+    }
+}
+
+impl Judged for CrossingsReport {
+    /// Over the live algorithms (the paper's Concurrent Crossing is reported apart).
+    fn verdict(&self) -> Verdict {
+        self.totals.verdict()
+    }
+}
+
+impl core::fmt::Display for CrossingsReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(&sweep::liveness_text(&self.totals, &self.failing))
+    }
+}
 
 /// The live algorithms (the targets), then the paper's as written.
 pub const ALGORITHMS: [Algorithm; 6] = [
@@ -31,10 +79,10 @@ pub const ALGORITHMS: [Algorithm; 6] = [
 ];
 
 /// One algorithm's row.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AlgorithmRow {
     /// The algorithm.
-    pub algorithm: &'static str,
+    pub algorithm: String,
     /// `false` for the paper's Concurrent Crossing as written (not live; not in the
     /// totals).
     pub live: bool,
@@ -44,7 +92,7 @@ pub struct AlgorithmRow {
 }
 
 /// The `crossings` result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CrossingsReport {
     /// Over every case and every live algorithm.
     #[serde(flatten)]
@@ -192,7 +240,7 @@ pub fn sweep_with(
     let algorithms = ALGORITHMS
         .iter()
         .map(|&a| AlgorithmRow {
-            algorithm: a.name(),
+            algorithm: a.name().into(),
             live: a != Algorithm::Concurrent,
             totals: Totals::of(results.iter().filter(|c| c.label == a.name())),
         })

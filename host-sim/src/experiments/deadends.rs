@@ -6,20 +6,67 @@
 //! A case ends once every vehicle is in its target lane and stopped; it fails on any
 //! collision or violation, a vehicle not in its lane, or a deadlock.
 
+use super::experiment::{Experiment, SettingsError};
 use super::multilane::safe_spacing;
-use super::sweep::{self, case_seed, Case, Failing, Totals};
+use super::shard::{combine_all, MergeError};
+use super::sweep::{self, case_seed, Case, CasesUnder, Failing, Totals};
 use crate::monitor::Limits;
 use crate::reference::instances::rng;
 use crate::scenario::road::commitment_bound;
 use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
+use crate::verdict::{Judged, Verdict};
 use crate::world::{Finish, LENGTH_M, START_MARGIN_M};
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// `host-sim deadends`: its cases, seed and invariant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Deadends {
+    /// Cases, seed, invariant.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sweep: CasesUnder,
+}
+
+impl Experiment for Deadends {
+    const NAME: &'static str = "deadends";
+    type Part = DeadendsReport;
+    type Report = DeadendsReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        Ok(())
+    }
+
+    fn cases(&self) -> u64 {
+        self.sweep.sweep.cases
+    }
+
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> DeadendsReport {
+        let s = &self.sweep;
+        sweep_with(end - first, first, s.sweep.seed, threads, s.invariant)
+    }
+
+    fn report(&self, parts: Vec<DeadendsReport>) -> Result<DeadendsReport, MergeError> {
+        combine_all(parts)
+    }
+}
+
+impl Judged for DeadendsReport {
+    fn verdict(&self) -> Verdict {
+        self.totals.verdict()
+    }
+}
+
+impl core::fmt::Display for DeadendsReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(&sweep::liveness_text(&self.totals, &self.failing))
+    }
+}
+
 /// The `deadends` result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct DeadendsReport {
     /// Collisions, violations, unfinished vehicles, deadlocks, finish times.
     #[serde(flatten)]

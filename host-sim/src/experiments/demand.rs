@@ -14,9 +14,12 @@
 //! lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have not crossed
 //! [`GRACE_S`] after they arrived.
 
+use super::experiment::{duration_within, Experiment, SettingsError};
+use super::shard::{MergeError, Runs};
 use super::sweep::case_seed;
 use crate::monitor::Limits;
 use crate::scenario::junction::{build_layout, LayoutToml};
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::network::{Junction, Network};
 use crate::world::{Finish, SolverChoice, World, WorldSpec, LENGTH_M};
 use planner_core::crossing::Algorithm;
@@ -54,6 +57,8 @@ pub struct DemandRow {
     pub collisions: u64,
     /// Invariant violations (pairs × steps).
     pub invariant_violations: u64,
+    /// Limit violations (speed, acceleration, turn rate) and departures from the road.
+    pub limit_violations: u64,
     /// Entries into A_S without a permission.
     pub unpermitted_entries: u64,
     /// Vehicles that arrived at least [`GRACE_S`] before the end and had not crossed.
@@ -90,6 +95,107 @@ pub struct DemandReport {
     pub invariant: &'static str,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
+}
+
+/// `experiment demand`'s settings (its flags; a shard's header carries them for
+/// `host-sim merge`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct DemandSettings {
+    /// Algorithms to run (comma-separated, of STOP, STOP-1, FIFO, CON, CON-fair, PIPE, PLATOON).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "STOP,FIFO,CON-fair,PIPE,PLATOON",
+        value_parser = super::flags::algorithm
+    )]
+    #[serde(with = "super::flags::algorithm_names")]
+    pub algorithms: Vec<Algorithm>,
+    /// Arrivals per inlet lane, vehicles per hour (comma-separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "50,100,150,200,250,300,350,400"
+    )]
+    pub rates: Vec<f64>,
+    /// Simulated seconds per run.
+    #[arg(long, default_value_t = 600.0)]
+    pub duration: f64,
+    /// Runs per algorithm and rate.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
+    pub seeds: u64,
+    /// The invariant every vehicle keeps toward the vehicle ahead.
+    // A shard header of an older version has none: the paper's.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[serde(default, with = "crate::world::invariant_serde")]
+    pub invariant: Invariant,
+}
+
+impl DemandSettings {
+    /// What it runs: the rates in order.
+    pub fn plan(&self) -> Plan {
+        let mut plan = Plan::new(&self.algorithms, &self.rates, self.duration, self.seeds);
+        plan.invariant = self.invariant;
+        plan
+    }
+}
+
+impl Experiment for DemandSettings {
+    const NAME: &'static str = "demand";
+    type Part = Runs<RunOutcome>;
+    type Report = DemandReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        if self.rates.is_empty() || !self.rates.iter().all(|r| *r > 0.0 && *r <= 3600.0) {
+            return Err(SettingsError::new(
+                "--rates",
+                "vehicles per hour per lane, each in (0, 3600]",
+            ));
+        }
+        if self.algorithms.is_empty() {
+            return Err(SettingsError::new("--algorithms", "at least one"));
+        }
+        for (i, a) in self.algorithms.iter().enumerate() {
+            if self.algorithms[..i].contains(a) {
+                let twice = format!("{} given twice", a.name());
+                return Err(SettingsError::new("--algorithms", twice));
+            }
+        }
+        duration_within(self.duration, 7200.0)
+    }
+
+    fn cases(&self) -> u64 {
+        self.plan().run_count()
+    }
+
+    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
+        let plan = self.plan();
+        Runs::timed(|| demand_runs(&plan, range, threads))
+    }
+
+    fn report(&self, parts: Vec<Self::Part>) -> Result<DemandReport, MergeError> {
+        let all = Runs::concat(parts);
+        Ok(demand_report(&self.plan(), &all.runs, all.wall_seconds))
+    }
+}
+
+impl Judged for DemandReport {
+    /// Every row's findings; live when no run deadlocked (saturation is reported as the
+    /// capacity, not judged).
+    fn verdict(&self) -> Verdict {
+        let safety = self
+            .results
+            .iter()
+            .map(|x| {
+                Safety::of(
+                    x.collisions,
+                    x.invariant_violations,
+                    x.limit_violations,
+                    x.unpermitted_entries,
+                )
+            })
+            .sum();
+        Verdict::new(safety, self.results.iter().all(|x| x.deadlocks == 0))
+    }
 }
 
 /// What `experiment demand` runs.
@@ -187,15 +293,11 @@ pub struct RunOutcome {
     growing: bool,
     collisions: u64,
     invariant_violations: u64,
+    /// Absent in shards of older versions, which did not count them.
+    #[serde(default)]
+    limit_violations: u64,
     unpermitted: u64,
     deadlock: bool,
-}
-
-impl RunOutcome {
-    /// Collisions, invariant violations and unpermitted entries.
-    pub fn unsafe_events(&self) -> u64 {
-        self.collisions + self.invariant_violations + self.unpermitted
-    }
 }
 
 /// One arrival: when (s), its delay or, if it has not crossed, the least it will be (s).
@@ -295,6 +397,7 @@ fn one(algorithm: Algorithm, rate: f64, plan: &Plan, seed: u64) -> RunOutcome {
         growing: growing(&all, end),
         collisions: s.collisions,
         invariant_violations: s.invariant_violations,
+        limit_violations: s.limit_violations + s.road_end_overruns + s.off_road,
         unpermitted: s.unpermitted_entries(),
         deadlock: s.deadlock.is_some(),
     }
@@ -365,14 +468,6 @@ pub fn demand_report(plan: &Plan, outs: &[RunOutcome], wall_seconds: f64) -> Dem
     }
 }
 
-/// The experiment: each of the plan's algorithms at every rate (vehicles per hour per
-/// lane), its seeds' runs each, on `threads` threads.
-pub fn run(plan: &Plan, threads: usize) -> DemandReport {
-    let t0 = std::time::Instant::now();
-    let outs = demand_runs(plan, (0, plan.run_count()), threads);
-    demand_report(plan, &outs, t0.elapsed().as_secs_f64())
-}
-
 fn row(a: Algorithm, rate: f64, duration: f64, runs: &[&RunOutcome]) -> DemandRow {
     let mut delays: Vec<f64> = runs.iter().flat_map(|o| o.delays.iter().copied()).collect();
     delays.sort_by(f64::total_cmp);
@@ -398,6 +493,7 @@ fn row(a: Algorithm, rate: f64, duration: f64, runs: &[&RunOutcome]) -> DemandRo
         max_queue: runs.iter().map(|o| o.max_queue).max().unwrap_or(0),
         collisions: runs.iter().map(|o| o.collisions).sum(),
         invariant_violations: runs.iter().map(|o| o.invariant_violations).sum(),
+        limit_violations: runs.iter().map(|o| o.limit_violations).sum(),
         unpermitted_entries: runs.iter().map(|o| o.unpermitted).sum(),
         unfinished: runs.iter().map(|o| o.unfinished).sum(),
         deadlocks: runs.iter().map(|o| u64::from(o.deadlock)).sum(),

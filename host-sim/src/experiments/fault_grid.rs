@@ -14,7 +14,9 @@
 //! vehicles that met their goals and the mean time by which a run had met them.
 
 use super::crossings::queue_placements;
+use super::experiment::{Experiment, SettingsError};
 use super::multilane::{paper_scenario, safe_spacing};
+use super::shard::{MergeError, Runs};
 use super::sweep::{self, case_seed, Case, Totals};
 use crate::bus::{Faults, Silent};
 use crate::monitor::Limits;
@@ -22,6 +24,7 @@ use crate::reference::instances::rng;
 use crate::scenario::junction::{JunctionScenario, LayoutToml};
 use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
 use crate::scenario::{DriverKind, Phase};
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::{Finish, WorldSpec};
 use planner_core::crossing::Algorithm;
 use planner_core::sensing::Sensing;
@@ -168,10 +171,9 @@ pub struct CellResult {
 }
 
 impl CellResult {
-    /// Collisions, invariant and limit violations and unpermitted entries.
-    pub fn unsafe_events(&self) -> u64 {
-        let t = &self.totals;
-        t.collisions + t.invariant_violations + t.limit_violations + t.unpermitted_entries
+    /// Its findings.
+    pub fn safety(&self) -> Safety {
+        self.totals.safety()
     }
 }
 
@@ -194,6 +196,110 @@ pub struct GridReport {
     pub invariant: &'static str,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
+}
+
+/// The grid's own flags (`experiment faults --grid`): its rows, columns and runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct GridCells {
+    /// With --grid: its losses (rows), comma-separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.2,0.5,0.9,0.99",
+        requires = "grid"
+    )]
+    pub losses: Vec<f64>,
+    /// With --grid: its delays in s (columns), comma-separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.01,0.1,0.5,1",
+        requires = "grid"
+    )]
+    pub delays: Vec<f64>,
+    /// Runs per workload and cell, with --grid.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..), requires = "grid")]
+    pub runs: u64,
+}
+
+/// `experiment faults --grid`'s settings (a shard's header carries them for `host-sim
+/// merge`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GridSettings {
+    /// Rows, columns and runs.
+    #[serde(flatten)]
+    pub cells: GridCells,
+    /// Seed.
+    pub seed: u64,
+    /// The invariant every planner keeps ("paper" in shards of older versions).
+    #[serde(default, with = "crate::world::invariant_serde")]
+    pub invariant: planner_core::Invariant,
+}
+
+impl GridSettings {
+    /// The grid of `cells` under `invariant`, seed 1.
+    pub fn new(cells: GridCells, invariant: planner_core::Invariant) -> Self {
+        Self {
+            cells,
+            seed: 1,
+            invariant,
+        }
+    }
+
+    /// Its cells, in report order.
+    pub fn cell_list(&self) -> Vec<Cell> {
+        Cell::grid(&self.cells.losses, &self.cells.delays)
+    }
+
+    /// Its plan over `cells` ([`GridSettings::cell_list`]).
+    pub fn plan<'a>(&self, cells: &'a [Cell]) -> GridPlan<'a> {
+        GridPlan {
+            cells,
+            runs: self.cells.runs,
+            seed: self.seed,
+            invariant: self.invariant,
+        }
+    }
+}
+
+impl Experiment for GridSettings {
+    const NAME: &'static str = "faults-grid";
+    type Part = Runs<GridRun>;
+    type Report = GridReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        for c in self.cell_list() {
+            c.faults(1).validate().map_err(|e| {
+                let e = e.replace("faults.loss", "--losses");
+                let e = e.replace("faults.delay_s", "--delays");
+                SettingsError::raw("--losses", e)
+            })?;
+        }
+        Ok(())
+    }
+
+    fn cases(&self) -> u64 {
+        run_count(&self.cell_list(), self.cells.runs)
+    }
+
+    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
+        let cells = self.cell_list();
+        Runs::timed(|| grid_runs(&self.plan(&cells), range, threads))
+    }
+
+    fn report(&self, parts: Vec<Self::Part>) -> Result<GridReport, MergeError> {
+        let all = Runs::concat(parts);
+        let cells = self.cell_list();
+        Ok(grid_report(&self.plan(&cells), &all.runs, all.wall_seconds))
+    }
+}
+
+impl Judged for GridReport {
+    /// Every cell's findings; liveness is reported per cell, not judged (it may degrade
+    /// off the ideal bus).
+    fn verdict(&self) -> Verdict {
+        Verdict::new(self.cells.iter().map(CellResult::safety).sum(), true)
+    }
 }
 
 /// What the grid runs: its cells, the runs of each workload per cell, the seed and the
@@ -322,20 +428,13 @@ pub fn grid_report(plan: &GridPlan, outs: &[GridRun], wall_seconds: f64) -> Grid
     GridReport {
         losses: axis(|c| c.loss),
         delays: axis(|c| c.delay_s),
-        unsafe_cells: results.iter().filter(|r| r.unsafe_events() > 0).count() as u64,
+        unsafe_cells: results.iter().filter(|r| !r.safety().is_safe()).count() as u64,
         cells: results,
         runs,
         seed,
         invariant: crate::world::invariant_name(plan.invariant),
         wall_seconds,
     }
-}
-
-/// Runs every workload of `plan` in every cell, on `threads` threads.
-pub fn grid(plan: &GridPlan, threads: usize) -> GridReport {
-    let t0 = std::time::Instant::now();
-    let outs = grid_runs(plan, (0, run_count(plan.cells, plan.runs)), threads);
-    grid_report(plan, &outs, t0.elapsed().as_secs_f64())
 }
 
 /// A short name of a cell (for scenario names).
@@ -480,7 +579,7 @@ impl core::fmt::Display for GridReport {
                 cell_name(&r.cell),
                 r.workload,
                 r.totals.cases,
-                r.unsafe_events(),
+                r.safety().events(),
                 100.0 * r.completion,
                 r.totals.mean_finish_time_s,
                 r.totals.deadlocks

@@ -2,13 +2,17 @@
 //! complete on a faulty bus? Both are run on the same seeds over a perfect bus and over
 //! one injecting the given faults, in one command, and compared.
 
+use super::experiment::{duration_within, Experiment, SettingsError};
+use super::flags::{flag_error, FaultFlags};
 use super::multilane::{
     multilane_cases, multilane_report, MultilaneCase, MultilaneReport, MultilaneSettings,
 };
+use super::shard::{MergeError, Runs};
 use super::throughput::{
     throughput_cases, throughput_report, ThroughputCase, ThroughputReport, ThroughputSettings,
 };
 use crate::bus::Faults;
+use crate::verdict::{Judged, Verdict};
 use crate::world::SolverChoice;
 use planner_core::crossing::Algorithm;
 use serde::{Deserialize, Serialize};
@@ -69,33 +73,115 @@ pub enum FaultCase {
     },
 }
 
+/// The faulty bus of `experiment faults` (20 % loss and 50 ms delay unless told);
+/// written in a shard's header as the [`Faults`] it makes.
+#[derive(clap::Args, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(from = "Faults", into = "Faults")]
+pub struct FaultyBus {
+    /// Probability that a receiver loses a message.
+    #[arg(long, default_value_t = 0.2)]
+    pub loss: f64,
+    /// Delivery delay (s).
+    #[arg(long, default_value_t = 0.05)]
+    pub delay: f64,
+    /// Extra delay drawn uniformly from [0, jitter] (s).
+    #[arg(long, default_value_t = 0.0)]
+    pub jitter: f64,
+}
+
+impl FaultyBus {
+    /// The bus's faults.
+    pub fn faults(&self) -> Faults {
+        Faults {
+            loss: self.loss,
+            delay_s: self.delay,
+            jitter_s: self.jitter,
+            ..Faults::NONE
+        }
+    }
+}
+
+impl From<FaultyBus> for Faults {
+    fn from(f: FaultyBus) -> Self {
+        f.faults()
+    }
+}
+
+impl From<Faults> for FaultyBus {
+    fn from(f: Faults) -> Self {
+        Self {
+            loss: f.loss,
+            delay: f.delay_s,
+            jitter: f.jitter_s,
+        }
+    }
+}
+
 /// What the comparison runs: `seeds` multi-lane runs and `throughput_seeds` throughput
-/// runs of `duration` s per algorithm, each on both buses.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// runs of `duration` s per algorithm, each on both buses (its flags; a shard's header
+/// carries them for `host-sim merge`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
 pub struct FaultSettings {
     /// The faulty bus's faults.
-    pub faults: Faults,
+    #[command(flatten)]
+    pub faults: FaultyBus,
     /// Multi-lane runs (seeds 1..=K).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: u64,
     /// Throughput runs per algorithm (seeds 1..=K).
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..))]
     pub throughput_seeds: u64,
     /// Simulated seconds per throughput run.
+    #[arg(long, default_value_t = 300.0)]
     pub duration: f64,
-    /// The invariant every planner keeps toward the vehicle ahead (the paper's in shards
-    /// of older versions).
+    /// The invariant every planner keeps toward the vehicle ahead (in both experiments,
+    /// or in the grid).
+    // A shard header of an older version has none: the paper's.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: planner_core::Invariant,
 }
 
-impl FaultSettings {
+impl Experiment for FaultSettings {
+    const NAME: &'static str = "faults";
+    type Part = Runs<FaultCase>;
+    type Report = FaultComparison;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        self.faults.faults().validate().map_err(flag_error)?;
+        duration_within(self.duration, 3600.0)
+    }
+
     /// Runs in all: the multi-lane runs, then the throughput runs, each block on the
     /// perfect bus first.
-    pub fn cases(&self) -> u64 {
+    fn cases(&self) -> u64 {
         2 * self.seeds + 2 * self.throughput_seeds * Algorithm::ALL.len() as u64
     }
 
-    /// Runs `first..end` of [`Self::cases`]: run i is the same run whatever the range.
-    pub fn run(&self, (first, end): (u64, u64), threads: usize) -> Vec<FaultCase> {
+    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
+        Runs::timed(|| self.runs(range, threads))
+    }
+
+    fn report(&self, parts: Vec<Self::Part>) -> Result<FaultComparison, MergeError> {
+        let all = Runs::concat(parts);
+        Ok(self.comparison(&all.runs, all.wall_seconds))
+    }
+}
+
+impl Judged for FaultComparison {
+    /// The faulty bus's findings, both experiments; live when every multi-lane run on
+    /// the faulty bus completed its lane changes.
+    fn verdict(&self) -> Verdict {
+        self.multilane_faulty
+            .verdict()
+            .and(self.throughput_faulty.verdict())
+    }
+}
+
+impl FaultSettings {
+    /// Runs `first..end` of [`Experiment::cases`]: run i is the same run whatever the
+    /// range.
+    fn runs(&self, (first, end): (u64, u64), threads: usize) -> Vec<FaultCase> {
         let m = self.seeds;
         let t = self.throughput_seeds * Algorithm::ALL.len() as u64;
         // Each block is the part of [first, end) that falls in it, shifted to its start.
@@ -121,8 +207,8 @@ impl FaultSettings {
         out
     }
 
-    /// The comparison over `cases` (in [`Self::run`] order).
-    pub fn report(&self, cases: &[FaultCase], wall_seconds: f64) -> FaultComparison {
+    /// The comparison over `cases` (in [`Experiment::run`] order).
+    fn comparison(&self, cases: &[FaultCase], wall_seconds: f64) -> FaultComparison {
         // [perfect, faulty] bus, each in run order.
         let mut multilane: [Vec<MultilaneCase>; 2] = Default::default();
         let mut throughput: [Vec<ThroughputCase>; 2] = Default::default();
@@ -139,7 +225,7 @@ impl FaultSettings {
         // The four parts ran interleaved on one pool: each reports the whole comparison's time.
         let w = wall_seconds;
         comparison(
-            self.faults,
+            self.faults.faults(),
             multilane_report(&multilane[0], &self.multilane(false), w),
             multilane_report(&multilane[1], &self.multilane(true), w),
             throughput_report(&throughput[0], &self.throughput(false), w),
@@ -153,7 +239,11 @@ impl FaultSettings {
             seeds: self.seeds,
             seed: 1,
             solver: SolverChoice::Ours,
-            faults: if faulty { self.faults } else { Faults::NONE },
+            faults: if faulty {
+                self.faults.faults().into()
+            } else {
+                FaultFlags::NONE
+            },
             invariant: self.invariant,
         }
     }
@@ -164,18 +254,14 @@ impl FaultSettings {
             seeds: self.throughput_seeds,
             seed: 1,
             duration: self.duration,
-            faults: if faulty { self.faults } else { Faults::NONE },
+            faults: if faulty {
+                self.faults.faults().into()
+            } else {
+                FaultFlags::NONE
+            },
             invariant: self.invariant,
         }
     }
-}
-
-/// Runs both experiments on both buses: `s.seeds` multi-lane runs and
-/// `s.throughput_seeds` throughput runs of `s.duration` s per algorithm.
-pub fn compare(s: &FaultSettings, threads: usize) -> FaultComparison {
-    let t0 = std::time::Instant::now();
-    let cases = s.run((0, s.cases()), threads);
-    s.report(&cases, t0.elapsed().as_secs_f64())
 }
 
 /// The comparison of the four reports.
@@ -198,16 +284,11 @@ fn comparison(
             crossing_time_ratio: ratio(f.crossing_time_mean_s, c.crossing_time_mean_s),
         })
         .collect();
-    let faulty_unsafe_events = multilane_faulty.collisions
-        + multilane_faulty.invariant_violations
-        + multilane_faulty.limit_violations
-        + throughput_faulty
-            .results
-            .iter()
-            .map(|r| {
-                r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries
-            })
-            .sum::<u64>();
+    let faulty_unsafe_events = multilane_faulty
+        .verdict()
+        .and(throughput_faulty.verdict())
+        .safety
+        .events();
     FaultComparison {
         faults,
         multilane_completion_ratio: ratio(

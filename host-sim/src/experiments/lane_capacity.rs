@@ -16,6 +16,7 @@
 //! collisions and invariant violations.
 
 use crate::monitor::Limits;
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::invariant_name;
 use crate::world::summary::Summary;
 use crate::world::{SolverChoice, World, LENGTH_M, START_MARGIN_M};
@@ -238,4 +239,16 @@ pub fn lane_capacity(
         results,
         wall_seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+impl Judged for CapacityReport {
+    /// Every run's collisions and violations; capacity is measured, not judged.
+    fn verdict(&self) -> Verdict {
+        let s = self
+            .results
+            .iter()
+            .map(|r| Safety::of(r.collisions, r.invariant_violations, r.limit_violations, 0))
+            .sum();
+        Verdict::new(s, true)
+    }
 }

@@ -15,18 +15,74 @@
 //! unpermitted entry, no deadlock and no internal error. The report counts refusals by
 //! reason, so that a sweep shows what the loader guards against.
 
-use super::sweep::{case_seed, keep_failing, Failing};
+use super::experiment::{Experiment, SettingsError};
+use super::shard::{combine_all, MergeError};
+use super::sweep::{case_seed, keep_failing, Cases, Failing};
 use crate::reference::instances::rng;
 use crate::scenario::network::NetworkScenario;
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::{SolverChoice, World};
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// `host-sim layouts`: cases and seed (each case is a network file of its own).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Layouts {
+    /// Cases and seed.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sweep: Cases,
+}
+
+impl Experiment for Layouts {
+    const NAME: &'static str = "layouts";
+    type Part = LayoutsReport;
+    type Report = LayoutsReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        Ok(())
+    }
+
+    fn cases(&self) -> u64 {
+        self.sweep.cases
+    }
+
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> LayoutsReport {
+        sweep(end - first, first, self.sweep.seed, threads)
+    }
+
+    fn report(&self, parts: Vec<LayoutsReport>) -> Result<LayoutsReport, MergeError> {
+        combine_all(parts)
+    }
+}
+
+impl Judged for LayoutsReport {
+    /// The runs' findings; live when every refusal named its line and no run deadlocked
+    /// or failed inside ([`LayoutsReport::clean`]).
+    fn verdict(&self) -> Verdict {
+        let safety = Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.unpermitted_entries,
+        );
+        let live = self.refused_without_line + self.deadlocks + self.internal_errors == 0;
+        Verdict::new(safety, live)
+    }
+}
+
+impl core::fmt::Display for LayoutsReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let text = super::sweep::text("layouts", self.cases, self, "", &self.failing);
+        f.write_str(&text)
+    }
+}
+
 /// The `layouts` result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LayoutsReport {
     /// Cases drawn.
     pub cases: u64,
@@ -339,7 +395,7 @@ pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> LayoutsReport
         if let Some(reason) = why {
             keep_failing(&mut r.failing, || Failing {
                 case: index,
-                label: "layout",
+                label: "layout".into(),
                 reason,
                 scenario: text,
             });

@@ -2,32 +2,78 @@
 //! traffic for Theorem 2 (its sweep: [`super::traffic`]), and the dead-end layout of
 //! Theorem 3.
 
+use super::experiment::{Experiment, SettingsError};
+use super::flags::{self, FaultFlags};
+use super::shard::{MergeError, Runs};
 use crate::bus::Faults;
 use crate::monitor::Limits;
 use crate::scenario::road::{commitment_bound, Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::summary::Summary;
 use crate::world::{SolverChoice, TraceRow, World, LENGTH_M, START_MARGIN_M};
 use planner_core::Invariant;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-/// `experiment multilane`'s settings: what every run shares (a shard's header carries
-/// them for `host-sim merge`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// `experiment multilane`'s settings: what every run shares (its flags; a shard's header
+/// carries them for `host-sim merge`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
 pub struct MultilaneSettings {
-    /// Runs.
+    /// Number of runs (seeds from --seed).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: u64,
     /// First seed.
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Solver.
+    /// The planners' solver.
+    #[arg(long, default_value = "ours", value_parser = flags::solver())]
     pub solver: SolverChoice,
-    /// Faults.
-    pub faults: Faults,
-    /// The invariant every planner keeps toward the vehicle ahead (the paper's in shards
-    /// of older versions).
+    /// Faults of the bus.
+    #[command(flatten)]
+    pub faults: FaultFlags,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    // A shard header of an older version has none: the paper's.
+    #[arg(long, default_value = "paper", value_parser = flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: Invariant,
+}
+
+impl Experiment for MultilaneSettings {
+    const NAME: &'static str = "multilane";
+    type Part = Runs<MultilaneCase>;
+    type Report = MultilaneReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        self.faults.validate()
+    }
+
+    fn cases(&self) -> u64 {
+        self.seeds
+    }
+
+    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
+        Runs::timed(|| multilane_cases(self, range, threads))
+    }
+
+    fn report(&self, parts: Vec<Self::Part>) -> Result<MultilaneReport, MergeError> {
+        let all = Runs::concat(parts);
+        Ok(multilane_report(&all.runs, self, all.wall_seconds))
+    }
+}
+
+impl Judged for MultilaneReport {
+    /// Collisions, invariant and limit violations; live when every run completed its
+    /// lane changes.
+    fn verdict(&self) -> Verdict {
+        let safety = Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            0,
+        );
+        Verdict::new(safety, self.completed == self.runs)
+    }
 }
 
 /// The paper's speed v0 in the multi-lane experiment (m/s).
@@ -208,13 +254,6 @@ pub struct MultilaneCase {
     pub planner_steps: u64,
 }
 
-impl MultilaneCase {
-    /// Collisions, invariant and limit violations (and road departures) of the run.
-    pub fn unsafe_events(&self) -> u64 {
-        self.collisions + self.invariant_violations + self.limit_violations
-    }
-}
-
 /// Runs the paper's experiment for the runs `first..end` (seed `s.seed + i` for run i:
 /// a run depends on its index alone).
 pub fn multilane_cases(
@@ -222,7 +261,7 @@ pub fn multilane_cases(
     (first, end): (u64, u64),
     threads: usize,
 ) -> Vec<MultilaneCase> {
-    let (solver, faults) = (s.solver, s.faults);
+    let (solver, faults) = (s.solver, s.faults.faults());
     super::par::map_indexed(end.saturating_sub(first) as usize, threads, |i| {
         let seed = s.seed + first + i as u64;
         let sc = paper_scenario(seed);
@@ -274,17 +313,10 @@ pub fn multilane_report(
         yield_steps: sum(|c| c.yield_steps),
         planner_steps: sum(|c| c.planner_steps),
         solver: s.solver,
-        faults: s.faults,
+        faults: s.faults.faults(),
         invariant: s.invariant,
         wall_seconds,
     }
-}
-
-/// `host-sim experiment multilane`: the paper's experiment on `s.seeds` seeds.
-pub fn experiment(s: &MultilaneSettings, threads: usize) -> MultilaneReport {
-    let t0 = std::time::Instant::now();
-    let cases = multilane_cases(s, (0, s.seeds), threads);
-    multilane_report(&cases, s, t0.elapsed().as_secs_f64())
 }
 
 impl core::fmt::Display for MultilaneReport {

@@ -11,9 +11,12 @@
 //! deadlock, and at least 95 % of the trips that arrived at least free flow + [`GRACE_S`]
 //! before the end completed.
 
+use super::experiment::{duration_within, Experiment, SettingsError};
+use super::shard::{combine_all, MergeError};
 use crate::scenario::network::NetworkScenario;
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::{SolverChoice, World, WorldSpec};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Trips that arrived less than their free-flow time plus this before the end (s) are
@@ -297,12 +300,12 @@ impl core::fmt::Display for NetworkReport {
 /// 100 to 1,500 vehicles per hour per boundary inlet, past saturation — each run for
 /// `duration_s`. A case fails on any collision or violation, or a deadlock (with the
 /// wait-for relation as its reason); trips that cannot finish in time are reported.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct GridsReport {
     /// Cases run.
     pub cases: u64,
     /// The invariant every planner kept (`paper`, `leader-aware`).
-    pub invariant: &'static str,
+    pub invariant: String,
     /// Vehicles that entered, over all cases.
     pub vehicles: u64,
     /// Trips completed.
@@ -340,7 +343,7 @@ pub struct GridsReport {
 /// network: every vehicle's wait ends in one that moves, but demand outran what the grid
 /// carried in the time, and the vehicles that arrived were still queued in the network
 /// or at its entries when the run ended.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Unfinished {
     /// Case index.
     pub case: u64,
@@ -393,6 +396,83 @@ impl Unfinished {
     }
 }
 
+/// `host-sim grids`: its cases, seed, duration and invariant (a shard's header leaves out
+/// the paper's invariant, as shards always had it).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Grids {
+    /// Number of random grids.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub cases: u64,
+    /// Seed of the sweep.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Simulated seconds per grid.
+    #[arg(long, default_value_t = 180.0)]
+    pub duration: f64,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[serde(
+        default,
+        skip_serializing_if = "super::flags::is_paper",
+        with = "crate::world::invariant_serde"
+    )]
+    pub invariant: planner_core::Invariant,
+}
+
+impl Experiment for Grids {
+    const NAME: &'static str = "grids";
+    type Part = GridsReport;
+    type Report = GridsReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        duration_within(self.duration, 3600.0)
+    }
+
+    fn cases(&self) -> u64 {
+        self.cases
+    }
+
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> GridsReport {
+        let cases = (end - first, first);
+        grids(cases, self.seed, self.duration, self.invariant, threads)
+    }
+
+    fn report(&self, parts: Vec<GridsReport>) -> Result<GridsReport, MergeError> {
+        combine_all(parts)
+    }
+}
+
+impl Judged for GridsReport {
+    /// Collisions, violations, unpermitted entries; live when no grid deadlocked
+    /// (trips demand outran are reported, not judged).
+    fn verdict(&self) -> Verdict {
+        let safety = Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.unpermitted_entries,
+        );
+        Verdict::new(safety, self.deadlocks == 0)
+    }
+}
+
+impl core::fmt::Display for GridsReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let notes: String = self
+            .unfinished
+            .iter()
+            .map(|u| {
+                format!(
+                    "\n  case {} ({}, {} lanes): {} of {} due trips done; {}",
+                    u.case, u.grid, u.lanes, u.due_completed, u.due, u.reason
+                )
+            })
+            .collect();
+        let text = super::sweep::text("grids", self.cases, self, &notes, &self.failing);
+        f.write_str(&text)
+    }
+}
+
 /// Case `index` of the grids sweep seeded `seed`, `duration_s` long (the paper's
 /// invariant).
 pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
@@ -434,7 +514,7 @@ pub fn grids(
     });
     let mut g = GridsReport {
         cases,
-        invariant: crate::world::invariant_name(invariant),
+        invariant: crate::world::invariant_name(invariant).into(),
         vehicles: 0,
         trips_completed: 0,
         trips_due: 0,
@@ -483,7 +563,7 @@ pub fn grids(
         if let Some(reason) = reason {
             super::sweep::keep_failing(&mut g.failing, || super::sweep::Failing {
                 case: index,
-                label: "grid",
+                label: "grid".into(),
                 reason,
                 scenario: s.to_toml(),
             });
@@ -491,4 +571,21 @@ pub fn grids(
     }
     g.wall_seconds = t0.elapsed().as_secs_f64();
     g
+}
+
+impl Judged for NetworkReport {
+    /// Collisions, violations, unpermitted entries; live when nothing deadlocked and at
+    /// least 95 % of the trips due finished.
+    fn verdict(&self) -> Verdict {
+        let safety = Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.unpermitted_entries,
+        );
+        Verdict::new(
+            safety,
+            self.deadlocks == 0 && self.due_completed_share >= 0.95,
+        )
+    }
 }

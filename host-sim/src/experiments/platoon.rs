@@ -1,7 +1,10 @@
 //! Single-lane platoons (Theorem 1): a leader driving an adversarial admissible profile,
 //! followers each running their own planner-core instance, an independent monitor.
 
+use super::experiment::{Experiment, SettingsError};
+use super::shard::{combine_all, MergeError};
 use crate::monitor::{Findings, Limits, Truth};
+use crate::verdict::{Judged, Safety, Verdict};
 use planner_core::planner::Vehicle;
 use planner_core::{
     BrakeLimit, CostWeights, FallbackReason, Invariant, Observation, Params, Planner, Real,
@@ -328,13 +331,77 @@ fn follower_command<F: Real>(
     c.v.to_f64()
 }
 
+/// `host-sim platoons`: its cases, seed, and how the followers plan (a shard's header
+/// leaves the invariant out when it is the paper's, as shards always had it).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize, clap::Args)]
+pub struct Platoons {
+    /// Number of random platoons.
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
+    pub cases: u64,
+    /// Seed of the sweep.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The followers reuse their certified previous plan instead of solving every step
+    /// (planner-core's `ReusePolicy::default()`).
+    #[arg(long)]
+    pub reuse: bool,
+    /// The invariant every follower keeps toward the vehicle ahead (the adversarial
+    /// leader, scripted, is a wall under either).
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[serde(
+        default,
+        skip_serializing_if = "super::flags::is_paper",
+        with = "crate::world::invariant_serde"
+    )]
+    pub invariant: Invariant,
+}
+
+impl Experiment for Platoons {
+    const NAME: &'static str = "platoons";
+    type Part = SweepSummary;
+    type Report = SweepSummary;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        Ok(())
+    }
+
+    fn cases(&self) -> u64 {
+        self.cases
+    }
+
+    fn run(&self, (first, end): (u64, u64), _threads: usize) -> SweepSummary {
+        let following = Following {
+            reuse: self.reuse,
+            invariant: self.invariant,
+        };
+        sweep_range(first, end, self.seed, following)
+    }
+
+    fn report(&self, parts: Vec<SweepSummary>) -> Result<SweepSummary, MergeError> {
+        combine_all(parts)
+    }
+}
+
+impl Judged for SweepSummary {
+    /// Collisions, invariant and limit violations; a platoon has no goal but safety.
+    fn verdict(&self) -> Verdict {
+        let safety = Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            0,
+        );
+        Verdict::new(safety, true)
+    }
+}
+
 /// Summary of a Theorem 1 sweep.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct SweepSummary {
     /// Platoons run.
     pub cases: u64,
     /// The invariant the followers kept (`paper`, `leader-aware`).
-    pub invariant: &'static str,
+    pub invariant: String,
     /// Vehicles in all platoons.
     pub vehicles: u64,
     /// Planner steps.
@@ -355,10 +422,17 @@ pub struct SweepSummary {
     pub invariant_violations: u64,
     /// Speed/acceleration limit violations.
     pub limit_violations: u64,
-    /// Smallest bumper gap (m).
+    /// Smallest bumper gap (m; none over no case, written `null`).
+    #[serde(deserialize_with = "null_as_infinity")]
     pub min_gap_m: f64,
     /// Wall time (s).
     pub wall_seconds: f64,
+}
+
+/// A gap written `null` (JSON has no infinity): no gap seen.
+fn null_as_infinity<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
 }
 
 /// How a sweep's followers plan: whether they reuse certified plans, and the
@@ -408,7 +482,7 @@ pub fn sweep(cases: u64, seed: u64, following: Following) -> SweepSummary {
 pub fn sweep_range(first: u64, end: u64, seed: u64, following: Following) -> SweepSummary {
     let t0 = std::time::Instant::now();
     let mut total = SweepSummary {
-        invariant: crate::world::invariant_name(following.invariant),
+        invariant: crate::world::invariant_name(following.invariant).into(),
         min_gap_m: f64::INFINITY,
         ..Default::default()
     };

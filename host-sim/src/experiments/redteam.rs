@@ -25,15 +25,18 @@
 //! (SPEC §7), so its unfinished vehicles are left out of the totals, as in `crossings`.
 
 use super::crossings::{queue_placements, ALGORITHMS};
-use super::sweep::{self, case_seed, Case, Failing, Totals};
+use super::experiment::{Experiment, SettingsError};
+use super::shard::{combine_all, MergeError};
+use super::sweep::{self, case_seed, Case, Cases, CasesUnder, Failing, Totals};
 use crate::bus::{is_vehicle_id, Faults, Liar, ManagerDown};
 use crate::reference::instances::rng;
 use crate::scenario::junction::{build_layout, JunctionScenario, LayoutToml};
 use crate::scenario::network::NetworkScenario;
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::{SolverChoice, World};
 use planner_core::crossing::Algorithm;
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Which red-team sweep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,7 +49,7 @@ pub enum Kind {
 
 impl Kind {
     /// Its name.
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Kind::Outages => "outages",
             Kind::Liars => "liars",
@@ -54,11 +57,128 @@ impl Kind {
     }
 }
 
+/// `host-sim outages`: cases, seed and invariant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Outages {
+    /// Cases, seed, invariant.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sweep: CasesUnder,
+}
+
+/// `host-sim liars`: cases, seed and invariant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Liars {
+    /// Cases, seed, invariant.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sweep: CasesUnder,
+}
+
+/// `host-sim ids`: cases and seed (each case is a network file, whose invariant is the
+/// paper's).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Ids {
+    /// Cases and seed.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sweep: Cases,
+}
+
+/// The outages and liars sweeps, as one experiment of their kind.
+macro_rules! junction_sweep {
+    ($t:ty, $kind:expr) => {
+        impl Experiment for $t {
+            const NAME: &'static str = $kind.name();
+            type Part = JunctionFaultsReport;
+            type Report = JunctionFaultsReport;
+
+            fn validate(&self) -> Result<(), SettingsError> {
+                Ok(())
+            }
+
+            fn cases(&self) -> u64 {
+                self.sweep.sweep.cases
+            }
+
+            fn run(&self, (first, end): (u64, u64), threads: usize) -> JunctionFaultsReport {
+                let s = &self.sweep;
+                let range = (end - first, first);
+                junction_faults($kind, range, (s.sweep.seed, s.invariant), threads)
+            }
+
+            fn report(
+                &self,
+                parts: Vec<JunctionFaultsReport>,
+            ) -> Result<JunctionFaultsReport, MergeError> {
+                combine_all(parts)
+            }
+        }
+    };
+}
+
+junction_sweep!(Outages, Kind::Outages);
+junction_sweep!(Liars, Kind::Liars);
+
+impl Judged for JunctionFaultsReport {
+    /// Over every run; live ([`JunctionFaultsReport::live`]) judged for outages only.
+    fn verdict(&self) -> Verdict {
+        Verdict::new(self.totals.safety(), self.live())
+    }
+}
+
+impl core::fmt::Display for JunctionFaultsReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let text = sweep::text(&self.sweep, self.totals.cases, self, "", &self.failing);
+        f.write_str(&text)
+    }
+}
+
+impl Experiment for Ids {
+    const NAME: &'static str = "ids";
+    type Part = IdsReport;
+    type Report = IdsReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        Ok(())
+    }
+
+    fn cases(&self) -> u64 {
+        self.sweep.cases
+    }
+
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> IdsReport {
+        ids(end - first, first, self.sweep.seed, threads)
+    }
+
+    fn report(&self, parts: Vec<IdsReport>) -> Result<IdsReport, MergeError> {
+        combine_all(parts)
+    }
+}
+
+impl Judged for IdsReport {
+    /// Collisions, violations and node ids given to vehicles (a breach); live when every
+    /// case's ids wrapped past the managers' nodes.
+    fn verdict(&self) -> Verdict {
+        let safety = Safety {
+            breaches: self.node_ids,
+            ..Safety::of(self.collisions, self.invariant_violations, 0, 0)
+        };
+        Verdict::new(safety, self.wrapped == self.cases)
+    }
+}
+
+impl core::fmt::Display for IdsReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(&sweep::text("ids", self.cases, self, "", &self.failing))
+    }
+}
+
 /// One algorithm's row.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AlgorithmRow {
     /// The algorithm.
-    pub algorithm: &'static str,
+    pub algorithm: String,
     /// `false` for the paper's Concurrent Crossing as written (not live).
     pub live: bool,
     /// Its totals.
@@ -67,10 +187,10 @@ pub struct AlgorithmRow {
 }
 
 /// An `outages` or `liars` result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct JunctionFaultsReport {
     /// The sweep.
-    pub sweep: &'static str,
+    pub sweep: String,
     /// Over every run (safety) — and, for outages, liveness of the live algorithms.
     #[serde(flatten)]
     pub totals: Totals,
@@ -180,12 +300,11 @@ pub fn case(kind: Kind, seed: u64, index: u64, algorithm: Algorithm) -> Junction
 }
 
 /// Runs `cases` cases of `kind` from index `first` of the sweep seeded `seed`, each under
-/// every algorithm, on `threads` threads.
+/// every algorithm with every vehicle keeping `invariant`, on `threads` threads.
 pub fn junction_faults(
     kind: Kind,
-    cases: u64,
-    first: u64,
-    seed: u64,
+    (cases, first): (u64, u64),
+    (seed, invariant): (u64, planner_core::Invariant),
     threads: usize,
 ) -> JunctionFaultsReport {
     let t0 = std::time::Instant::now();
@@ -194,7 +313,8 @@ pub fn junction_faults(
         .collect();
     let results: Vec<Case> = super::par::map_indexed(jobs.len(), threads, |j| {
         let (index, algorithm) = jobs[j];
-        let sc = case(kind, seed, index, algorithm);
+        let mut sc = case(kind, seed, index, algorithm);
+        sc.header.invariant = invariant;
         Case {
             index,
             seed: case_seed(seed, index),
@@ -204,7 +324,7 @@ pub fn junction_faults(
         }
     });
     let row = |a: Algorithm| AlgorithmRow {
-        algorithm: a.name(),
+        algorithm: a.name().into(),
         live: a != Algorithm::Concurrent,
         totals: Totals::of(results.iter().filter(|c| c.label == a.name())),
     };
@@ -228,7 +348,7 @@ pub fn junction_faults(
     };
     let failing: Vec<&Case> = results.iter().filter(failed).collect();
     JunctionFaultsReport {
-        sweep: kind.name(),
+        sweep: kind.name().into(),
         totals,
         runs: results.len() as u64,
         algorithms: ALGORITHMS.iter().map(|&a| row(a)).collect(),
@@ -239,7 +359,7 @@ pub fn junction_faults(
 }
 
 /// The `ids` result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct IdsReport {
     /// Cases run.
     pub cases: u64,
@@ -360,7 +480,7 @@ pub fn ids(cases: u64, first: u64, seed: u64, threads: usize) -> IdsReport {
         if !reason.is_empty() {
             sweep::keep_failing(&mut r.failing, || Failing {
                 case: index,
-                label: "ids",
+                label: "ids".into(),
                 reason,
                 scenario: text,
             });

@@ -14,6 +14,7 @@
 use crate::monitor::Limits;
 use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::cost::{StepCosts, StepPercentiles};
 use crate::world::summary::Summary;
 use crate::world::vehicle::Counters;
@@ -462,5 +463,35 @@ impl core::fmt::Display for ScaleSweep {
             )?;
         }
         Ok(())
+    }
+}
+
+impl Judged for ScaleReport {
+    /// Collisions, invariant and limit violations; a scale run has no goal but safety.
+    fn verdict(&self) -> Verdict {
+        let s = Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            0,
+        );
+        Verdict::new(s, true)
+    }
+}
+
+impl Judged for ScaleComparison {
+    /// Both runs'.
+    fn verdict(&self) -> Verdict {
+        self.baseline.verdict().and(self.current.verdict())
+    }
+}
+
+impl Judged for ScaleSweep {
+    /// Every run's.
+    fn verdict(&self) -> Verdict {
+        self.runs
+            .iter()
+            .map(Judged::verdict)
+            .fold(Verdict::new(Safety::default(), true), Verdict::and)
     }
 }

@@ -4,12 +4,15 @@
 //! or `seed + i` for `traffic`), so shard I of N runs the cases
 //! [⌊I·K/N⌋, ⌊(I+1)·K/N⌋) of a K-case sweep and nothing else depends on N. A shard writes
 //! its result inside an envelope that names the sweep, its settings and its range;
-//! [`merge`] checks that the shards belong together (one sweep, the same settings, every
-//! index once) and combines the results by what each field is: counts add, maxima take
+//! [`check`] makes sure the shards belong together (one sweep, the same settings, every
+//! index once); an experiment's runs are then aggregated once over all shards
+//! ([`Runs`]), and a sweep's reports combined by what each field is
+//! ([`combine_all`]): counts add, maxima take
 //! the max, minima the min, means are weighted by cases, failing cases are concatenated in
 //! case order (at most [`super::sweep::KEEP_FAILING`]), the seed must agree and wall-clock
 //! times add. The merged result is the unsharded one (floats up to rounding).
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use std::fmt;
@@ -133,8 +136,9 @@ impl fmt::Display for MergeError {
 
 impl std::error::Error for MergeError {}
 
-/// Merges the shards of one sweep into its unsharded result.
-pub fn merge(mut parts: Vec<Output>) -> Result<Value, MergeError> {
+/// Checks that `parts` are the shards of one sweep (one sweep, the same settings and shard
+/// count, every shard once) and gives its header and their results in shard order.
+pub fn check(mut parts: Vec<Output>) -> Result<(Header, Vec<Value>), MergeError> {
     let first = parts.first().ok_or(MergeError::Empty)?.header.clone();
     for p in &parts {
         let h = &p.header;
@@ -161,20 +165,22 @@ pub fn merge(mut parts: Vec<Output>) -> Result<Value, MergeError> {
     if (parts.len() as u64) < first.shard.count {
         return Err(MergeError::Missing(parts.len() as u64));
     }
-    let mut it = parts.into_iter().map(|p| p.result);
-    let mut acc = it.next().ok_or(MergeError::Empty)?;
-    for next in it {
-        acc = combine("", &acc, &next)?;
+    Ok((first, parts.into_iter().map(|p| p.result).collect()))
+}
+
+/// A sweep's reports over consecutive ranges of its cases → its report over all of them,
+/// field by field as the module's doc says (one report is returned as it is).
+pub fn combine_all<T: Serialize + DeserializeOwned>(mut parts: Vec<T>) -> Result<T, MergeError> {
+    if parts.len() <= 1 {
+        return parts.pop().ok_or(MergeError::Empty);
     }
-    match first.sweep.as_str() {
-        "multilane" | "throughput" | "faults" | "faults-grid" | "demand" => {
-            report_of_runs(&first, &acc)
-        }
-        "traffic" if first.settings.get("compare") == Some(&Value::Bool(true)) => {
-            comparison_of_sums(&acc)
-        }
-        _ => Ok(acc),
+    let shape = |e: serde_json::Error| MergeError::Shape(e.to_string());
+    let mut values = parts.iter().map(serde_json::to_value);
+    let mut acc = values.next().ok_or(MergeError::Empty)?.map_err(shape)?;
+    for next in values {
+        acc = combine("", &acc, &next.map_err(shape)?)?;
     }
+    serde_json::from_value(acc).map_err(shape)
 }
 
 /// What a shard of an experiment prints: its runs, each as the experiment's aggregation
@@ -188,126 +194,29 @@ pub struct Runs<T> {
     pub wall_seconds: f64,
 }
 
-/// `experiment faults --grid`'s settings.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct GridSettings {
-    /// Losses (rows).
-    pub losses: Vec<f64>,
-    /// Delays (columns, s).
-    pub delays: Vec<f64>,
-    /// Runs per workload and cell.
-    pub runs: u64,
-    /// Seed.
-    pub seed: u64,
-    /// The invariant ("paper" or "leader-aware"; "paper" in shards of older versions).
-    #[serde(default = "paper")]
-    pub invariant: String,
-}
-
-/// `experiment demand`'s settings.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct DemandSettings {
-    /// Algorithms by name, in report order.
-    pub algorithms: Vec<String>,
-    /// Rates (vehicles per hour per lane), ascending.
-    pub rates: Vec<f64>,
-    /// Simulated seconds per run.
-    pub duration: f64,
-    /// Runs per algorithm and rate.
-    pub seeds: u64,
-    /// The invariant ("paper" or "leader-aware"; "paper" in shards of older versions).
-    #[serde(default = "paper")]
-    pub invariant: String,
-}
-
-/// The paper's invariant's name.
-fn paper() -> String {
-    crate::world::invariant_name(planner_core::Invariant::Paper).to_string()
-}
-
-impl DemandSettings {
-    /// The plan these settings describe, or the first name that is no algorithm or
-    /// invariant.
-    pub fn plan(&self) -> Result<super::demand::Plan, String> {
-        let mut plan =
-            super::demand::Plan::new(&self.algorithms()?, &self.rates, self.duration, self.seeds);
-        plan.invariant = crate::scenario::common::parse_invariant(&self.invariant)?;
-        Ok(plan)
+impl<T> Runs<T> {
+    /// The runs `f` makes, and how long it took.
+    pub fn timed(f: impl FnOnce() -> Vec<T>) -> Self {
+        let t0 = std::time::Instant::now();
+        let runs = f();
+        Self {
+            runs,
+            wall_seconds: t0.elapsed().as_secs_f64(),
+        }
     }
 
-    /// The algorithms named, or the first name that is none.
-    pub fn algorithms(&self) -> Result<Vec<planner_core::crossing::Algorithm>, String> {
-        use planner_core::crossing::Algorithm;
-        self.algorithms
-            .iter()
-            .map(|n| {
-                Algorithm::ALL
-                    .iter()
-                    .copied()
-                    .find(|a| a.name() == n)
-                    .ok_or_else(|| n.clone())
-            })
-            .collect()
+    /// Consecutive parts as one: their runs in order, their wall-clock times added.
+    pub fn concat(parts: Vec<Self>) -> Self {
+        let mut all = Self {
+            runs: Vec::new(),
+            wall_seconds: 0.0,
+        };
+        for p in parts {
+            all.runs.extend(p.runs);
+            all.wall_seconds += p.wall_seconds;
+        }
+        all
     }
-}
-
-/// An experiment's merged runs → its report, as the unsharded experiment prints it.
-fn report_of_runs(h: &Header, merged: &Value) -> Result<Value, MergeError> {
-    use super::{faults, multilane, throughput};
-    fn parse<T: serde::de::DeserializeOwned>(what: &str, v: &Value) -> Result<T, MergeError> {
-        serde_json::from_value(v.clone()).map_err(|e| MergeError::Shape(format!("{what}: {e}")))
-    }
-    let report = match h.sweep.as_str() {
-        "multilane" => {
-            let s: multilane::MultilaneSettings = parse("settings", &h.settings)?;
-            let r: Runs<multilane::MultilaneCase> = parse("runs", merged)?;
-            serde_json::to_value(multilane::multilane_report(&r.runs, &s, r.wall_seconds))
-        }
-        "throughput" => {
-            let s: throughput::ThroughputSettings = parse("settings", &h.settings)?;
-            let r: Runs<throughput::ThroughputCase> = parse("runs", merged)?;
-            serde_json::to_value(throughput::throughput_report(&r.runs, &s, r.wall_seconds))
-        }
-        "faults-grid" => {
-            use super::fault_grid::{grid_report, Cell, GridPlan, GridRun};
-            let s: GridSettings = parse("settings", &h.settings)?;
-            let r: Runs<GridRun> = parse("runs", merged)?;
-            let cells = Cell::grid(&s.losses, &s.delays);
-            let invariant = crate::scenario::common::parse_invariant(&s.invariant)
-                .map_err(MergeError::Shape)?;
-            let plan = GridPlan {
-                cells: &cells,
-                runs: s.runs,
-                seed: s.seed,
-                invariant,
-            };
-            serde_json::to_value(grid_report(&plan, &r.runs, r.wall_seconds))
-        }
-        "demand" => {
-            let s: DemandSettings = parse("settings", &h.settings)?;
-            let r: Runs<super::demand::RunOutcome> = parse("runs", merged)?;
-            let plan = s.plan().map_err(MergeError::Shape)?;
-            serde_json::to_value(super::demand::demand_report(&plan, &r.runs, r.wall_seconds))
-        }
-        _ => {
-            let s: faults::FaultSettings = parse("settings", &h.settings)?;
-            let r: Runs<faults::FaultCase> = parse("runs", merged)?;
-            serde_json::to_value(s.report(&r.runs, r.wall_seconds))
-        }
-    };
-    report.map_err(|e| MergeError::Shape(e.to_string()))
-}
-
-/// `traffic --compare`'s merged sums → its ratios, computed once from the sums as the
-/// unsharded run does (a sum of the shards' ratios would mean nothing).
-fn comparison_of_sums(merged: &Value) -> Result<Value, MergeError> {
-    use super::traffic::{TrafficComparison, TrafficReport};
-    let part = |key: &str| -> Result<TrafficReport, MergeError> {
-        let v = merged.get(key).cloned().unwrap_or(Value::Null);
-        serde_json::from_value(v).map_err(|e| MergeError::Shape(format!("{key}: {e}")))
-    };
-    let r = TrafficComparison::of(part("current")?, part("every_step")?);
-    serde_json::to_value(r).map_err(|e| MergeError::Shape(e.to_string()))
 }
 
 /// Combines two results of the same shape, field by field (see the module's doc).
@@ -412,6 +321,11 @@ fn combine_objects(
 mod tests {
     use super::*;
     use serde_json::json;
+
+    /// Shards checked and combined field by field.
+    fn merge(parts: Vec<Output>) -> Result<Value, MergeError> {
+        combine_all(check(parts)?.1)
+    }
 
     #[test]
     fn shards_cover_every_case_once() {

@@ -3,9 +3,98 @@
 //! case), running a case's world to its end, and the report — with every failing case
 //! kept as a scenario file that `host-sim run` reproduces.
 
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::summary::Summary;
 use crate::world::{SolverChoice, World, WorldSpec};
 use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+/// A randomized sweep's cases and seed (its flags; a shard's header carries them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::Args)]
+pub struct Cases {
+    /// Number of random cases.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+    pub cases: u64,
+    /// Seed of the sweep (a case's own seed depends on this and its index alone).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// A randomized sweep's cases and seed, and the invariant every planner keeps (left out
+/// of a shard's header when it is the paper's, as shards always had it).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct CasesUnder {
+    /// Cases and seed.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sweep: Cases,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[serde(
+        default,
+        skip_serializing_if = "super::flags::is_paper",
+        with = "crate::world::invariant_serde"
+    )]
+    pub invariant: planner_core::Invariant,
+}
+
+/// A sweep's text: its name and cases, its top-level numbers, `notes`, and every failing
+/// case's reason and scenario file.
+pub fn text<T: Serialize>(
+    name: &str,
+    cases: u64,
+    r: &T,
+    notes: &str,
+    failing: &[Failing],
+) -> String {
+    let value = serde_json::to_value(r).unwrap_or_default();
+    let mut text = format!("{name}, {cases} cases:\n{}{notes}", human(&value));
+    for f in failing {
+        text += &format!(
+            "\n\n# failing case {} ({}): {}\n{}",
+            f.case, f.label, f.reason, f.scenario
+        );
+    }
+    text
+}
+
+/// The top-level numbers of a result, one per line (a sweep's text summary).
+pub fn human(v: &Value) -> String {
+    let Some(m) = v.as_object() else {
+        return v.to_string();
+    };
+    m.iter()
+        .filter(|(_, x)| x.is_number())
+        .map(|(k, x)| format!("  {k}: {x}"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// A liveness sweep's text: its totals in a sentence, then every failing case's reason
+/// and scenario file.
+pub fn liveness_text(t: &Totals, failing: &[Failing]) -> String {
+    let mut text = format!(
+        "{} cases, {} vehicles: {} collisions, {} invariant violations, {} limit violations, \
+         {} unpermitted entries, {} unfinished vehicles, {} deadlocks; every goal met by \
+         {:.1} s at the latest",
+        t.cases,
+        t.vehicles,
+        t.collisions,
+        t.invariant_violations,
+        t.limit_violations,
+        t.unpermitted_entries,
+        t.unfinished,
+        t.deadlocks,
+        t.max_finish_time_s
+    );
+    for f in failing {
+        text += &format!(
+            "\n\n# failing case {} ({}): {}\n{}",
+            f.case, f.label, f.reason, f.scenario
+        );
+    }
+    text
+}
 
 /// The seed of case `index` of a sweep seeded `seed`.
 pub fn case_seed(seed: u64, index: u64) -> u64 {
@@ -72,12 +161,12 @@ impl Case {
 }
 
 /// A failing case, reproducible.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Failing {
     /// Its index.
     pub case: u64,
     /// What ran.
-    pub label: &'static str,
+    pub label: String,
     /// Why it failed.
     pub reason: String,
     /// The scenario file: `host-sim run` on it reproduces the failure.
@@ -111,7 +200,25 @@ pub struct Totals {
     pub fallback_steps: u64,
 }
 
+impl Judged for Totals {
+    /// Collisions, invariant and limit violations, unpermitted entries; live when no
+    /// vehicle was left with a goal and no case deadlocked.
+    fn verdict(&self) -> Verdict {
+        Verdict::new(self.safety(), self.unfinished + self.deadlocks == 0)
+    }
+}
+
 impl Totals {
+    /// Their findings.
+    pub fn safety(&self) -> Safety {
+        Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            self.unpermitted_entries,
+        )
+    }
+
     /// The totals of `cases`.
     pub fn of<'a>(cases: impl Iterator<Item = &'a Case>) -> Self {
         let mut t = Totals::default();
@@ -215,7 +322,7 @@ pub fn failing<'a>(cases: impl Iterator<Item = &'a Case>, keep: usize) -> Vec<Fa
         .take(keep)
         .map(|c| Failing {
             case: c.index,
-            label: c.label,
+            label: c.label.into(),
             reason: reason(c),
             scenario: c.scenario.clone(),
         })

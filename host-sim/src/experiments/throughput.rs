@@ -3,8 +3,12 @@
 //! random route — for 300 s under every algorithm, on the same seeds: vehicles crossed
 //! and the mean time from entering A_C to leaving it.
 
+use super::experiment::{duration_within, Experiment, SettingsError};
+use super::flags::FaultFlags;
+use super::shard::{MergeError, Runs};
 use crate::bus::Faults;
 use crate::scenario::junction::{placed, Placement};
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::network::{Junction, Network};
 use crate::world::summary::Summary;
 use crate::world::{Arrivals, Finish, SolverChoice, World, WorldSpec, LENGTH_M};
@@ -15,22 +19,70 @@ use planner_core::Params;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-/// `experiment throughput`'s settings: what every run shares (a shard's header carries
-/// them for `host-sim merge`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// `experiment throughput`'s settings: what every run shares (its flags; a shard's
+/// header carries them for `host-sim merge`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
 pub struct ThroughputSettings {
-    /// Runs per algorithm.
+    /// Runs per algorithm (seeds from --seed).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: u64,
     /// First seed.
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Simulated seconds per run.
+    #[arg(long, default_value_t = 300.0)]
     pub duration: f64,
-    /// Faults.
-    pub faults: Faults,
-    /// The invariant every planner keeps toward the vehicle ahead (the paper's in shards
-    /// of older versions).
+    /// Faults of the bus.
+    #[command(flatten)]
+    pub faults: FaultFlags,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    // A shard header of an older version has none: the paper's.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: Invariant,
+}
+
+impl Experiment for ThroughputSettings {
+    const NAME: &'static str = "throughput";
+    type Part = Runs<ThroughputCase>;
+    type Report = ThroughputReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        duration_within(self.duration, 3600.0)?;
+        self.faults.validate()
+    }
+
+    fn cases(&self) -> u64 {
+        self.seeds * Algorithm::ALL.len() as u64
+    }
+
+    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
+        Runs::timed(|| throughput_cases(self, range, threads))
+    }
+
+    fn report(&self, parts: Vec<Self::Part>) -> Result<ThroughputReport, MergeError> {
+        let all = Runs::concat(parts);
+        Ok(throughput_report(&all.runs, self, all.wall_seconds))
+    }
+}
+
+impl Judged for ThroughputReport {
+    /// Every algorithm's findings; a closed system has no liveness goal of its own.
+    fn verdict(&self) -> Verdict {
+        let safety = self
+            .results
+            .iter()
+            .map(|x| {
+                Safety::of(
+                    x.collisions,
+                    x.invariant_violations,
+                    x.limit_violations,
+                    x.unpermitted_entries,
+                )
+            })
+            .sum();
+        Verdict::new(safety, true)
+    }
 }
 
 /// The Fig. 8 start: one vehicle on each of the 8 inlets, random routes, at vImax,
@@ -70,7 +122,7 @@ pub fn spec8_layout() -> Layout<f64> {
 /// The world of a Fig. 9 run: the SPEC §8 junction under `algorithm`, the Fig. 8 start
 /// of `seed`, a closed system, run for `s.duration` with `s.faults` and `s.invariant`.
 pub fn closed_world(algorithm: Algorithm, seed: u64, s: &ThroughputSettings) -> WorldSpec {
-    let (duration, faults) = (s.duration, s.faults);
+    let (duration, faults) = (s.duration, s.faults.faults());
     let layout = spec8_layout();
     let placements = fig8_placements(&layout, seed);
     WorldSpec {
@@ -188,16 +240,6 @@ pub struct ThroughputCase {
     pub fallback_steps: u64,
 }
 
-impl ThroughputCase {
-    /// Collisions, invariant and limit violations and unpermitted entries of the run.
-    pub fn unsafe_events(&self) -> u64 {
-        self.collisions
-            + self.invariant_violations
-            + self.limit_violations
-            + self.unpermitted_entries
-    }
-}
-
 /// The runs of the throughput experiment, algorithm by algorithm, seeds
 /// `first_seed..first_seed + seeds` each: run i is `(ALL[i / seeds], first_seed + i % seeds)`.
 pub fn throughput_jobs(seeds: u64, first_seed: u64) -> Vec<(Algorithm, u64)> {
@@ -282,18 +324,10 @@ pub fn throughput_report(
         results,
         seeds: s.seeds,
         duration_s: s.duration,
-        faults: s.faults,
+        faults: s.faults.faults(),
         invariant: s.invariant,
         wall_seconds,
     }
-}
-
-/// Fig. 9: every algorithm on the same seeds.
-pub fn throughput(s: &ThroughputSettings, threads: usize) -> ThroughputReport {
-    let t0 = std::time::Instant::now();
-    let all = (0, s.seeds * Algorithm::ALL.len() as u64);
-    let cases = throughput_cases(s, all, threads);
-    throughput_report(&cases, s, t0.elapsed().as_secs_f64())
 }
 
 impl core::fmt::Display for ThroughputReport {

@@ -13,11 +13,144 @@
 //! stop at the same tolerance, so the change is rounding; with reuse it is bounded per
 //! reused step by the Lagrangian-dual certificate ([`planner_core::reuse`]).
 
+use super::experiment::{duration_within, Experiment, SettingsError};
 use super::multilane::{random_traffic, run_world};
+use super::shard::{combine_all, MergeError};
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::summary::Summary;
 use crate::world::vehicle::Counters;
 use crate::world::{SolverChoice, World};
 use serde::{Deserialize, Serialize};
+
+/// `host-sim traffic`: its cases, seed and duration, and how the planners solve (a
+/// shard's header leaves out the paper's invariant and a plain run's `compare`, as
+/// shards always had them).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct Traffic {
+    /// Number of random cases.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..))]
+    pub cases: u64,
+    /// Seed of the first case.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Simulated seconds per case.
+    #[arg(long, default_value_t = 20.0)]
+    pub duration: f64,
+    /// The planners reuse their certified previous plan instead of solving every step
+    /// (planner-core's `ReusePolicy::default()`).
+    #[arg(long)]
+    pub reuse: bool,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[serde(
+        default,
+        skip_serializing_if = "super::flags::is_paper",
+        with = "crate::world::invariant_serde"
+    )]
+    pub invariant: planner_core::Invariant,
+    /// Also run every case with the interior-point method alone, solving every step (the
+    /// planner before the active-set step), and report the closed-loop cost given up against it.
+    #[arg(long)]
+    #[serde(default, skip_serializing_if = "core::ops::Not::not")]
+    pub compare: bool,
+}
+
+/// What `traffic` reports: the sweep, or with `--compare` the comparison (each written
+/// as itself).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum TrafficOutcome {
+    /// With `--compare`.
+    Compared(TrafficComparison),
+    /// The sweep.
+    Plain(TrafficReport),
+}
+
+impl Experiment for Traffic {
+    const NAME: &'static str = "traffic";
+    type Part = TrafficOutcome;
+    type Report = TrafficOutcome;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        duration_within(self.duration, 3600.0)
+    }
+
+    fn cases(&self) -> u64 {
+        self.cases
+    }
+
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> TrafficOutcome {
+        let planning = Planning {
+            reuse: self.reuse,
+            leader_aware: self.invariant == planner_core::Invariant::LeaderAware,
+            ..Planning::DEFAULT
+        };
+        // Case i's seed is seed + i: it depends on the index alone.
+        let (cases, seed) = (end - first, self.seed + first);
+        if self.compare {
+            let c = traffic_compare(cases, seed, self.duration, threads, planning);
+            TrafficOutcome::Compared(c)
+        } else {
+            let r = traffic_sweep_with(cases, seed, self.duration, threads, planning);
+            TrafficOutcome::Plain(r)
+        }
+    }
+
+    /// Sums field by field; a comparison's ratios are computed once, from the sums (a sum
+    /// of the parts' ratios would mean nothing).
+    fn report(&self, parts: Vec<TrafficOutcome>) -> Result<TrafficOutcome, MergeError> {
+        let mut plain = Vec::new();
+        let (mut current, mut every_step) = (Vec::new(), Vec::new());
+        for p in parts {
+            match p {
+                TrafficOutcome::Plain(r) => plain.push(r),
+                TrafficOutcome::Compared(c) => {
+                    current.push(c.current);
+                    every_step.push(c.every_step);
+                }
+            }
+        }
+        match (self.compare, plain.is_empty(), current.is_empty()) {
+            (false, _, true) => combine_all(plain).map(TrafficOutcome::Plain),
+            (true, true, _) => Ok(TrafficOutcome::Compared(TrafficComparison::of(
+                combine_all(current)?,
+                combine_all(every_step)?,
+            ))),
+            _ => Err(MergeError::Shape(
+                "traffic parts with and without --compare".into(),
+            )),
+        }
+    }
+}
+
+impl Judged for TrafficOutcome {
+    /// Collisions, invariant and limit violations (of both sweeps, compared); the sweep
+    /// has no goal but safety.
+    fn verdict(&self) -> Verdict {
+        let of = |r: &TrafficReport| {
+            Safety::of(r.collisions, r.invariant_violations, r.limit_violations, 0)
+        };
+        let safety = match self {
+            TrafficOutcome::Plain(r) => of(r),
+            TrafficOutcome::Compared(c) => of(&c.current) + of(&c.every_step),
+        };
+        Verdict::new(safety, true)
+    }
+}
+
+impl core::fmt::Display for TrafficOutcome {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            TrafficOutcome::Plain(r) => r.fmt(f),
+            TrafficOutcome::Compared(c) => c.fmt(f),
+        }
+    }
+}
+
+/// A ratio written `null` (JSON has no NaN): undefined.
+fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
 
 /// How a sweep's planners solve.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -181,15 +314,17 @@ pub fn traffic_sweep_with(
 
 /// `traffic --compare`: the same cases with the planner as configured and with the
 /// every-step baseline, and what the first gives up against the second.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TrafficComparison {
     /// The planner as configured.
     pub current: TrafficReport,
     /// The interior-point method alone, every step solved, no reuse.
     pub every_step: TrafficReport,
     /// (current's closed-loop cost per step − every_step's) / every_step's.
+    #[serde(deserialize_with = "null_as_nan")]
     pub cost_given_up: f64,
     /// current's solver iterations per planner step over every_step's.
+    #[serde(deserialize_with = "null_as_nan")]
     pub iterations_ratio: f64,
 }
 

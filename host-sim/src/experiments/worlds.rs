@@ -14,6 +14,7 @@
 
 use crate::bus::Faults;
 use crate::scenario;
+use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::network::{End, Network};
 use crate::world::{SolverChoice, World};
 use planner_core::intersection::Movement;
@@ -246,4 +247,12 @@ fn run(
         collisions: s.collisions,
         invariant_violations: s.invariant_violations,
     })
+}
+
+impl Judged for WorldsReport {
+    /// Collisions and invariant violations; live when no planner ever stepped blind.
+    fn verdict(&self) -> Verdict {
+        let s = Safety::of(self.collisions, self.invariant_violations, 0, 0);
+        Verdict::new(s, self.blind_steps == 0)
+    }
 }

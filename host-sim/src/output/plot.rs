@@ -837,7 +837,7 @@ where
     let fill = RGBColor((230.0 * (1.0 - p)) as u8 + 25, (200.0 * p) as u8 + 40, 60);
     let cell = Rectangle::new([(x + 0.03, y + 0.03), (x + 0.97, y + 0.97)], fill.filled());
     chart.draw_series(std::iter::once(cell)).map_err(e)?;
-    let bad = c.unsafe_events();
+    let bad = c.safety().events();
     let label = match c.cell.variant {
         "grid" => format!("{:.0}%", 100.0 * p),
         v => format!("{v} {:.0}%", 100.0 * p),

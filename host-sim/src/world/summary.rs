@@ -5,6 +5,7 @@ use super::{Arrivals, SolverChoice, World, WorldSpec};
 use crate::bus::{Bus, FaultStats};
 use crate::monitor::liveness::Deadlock;
 use crate::monitor::Findings;
+use crate::verdict::{Judged, Safety, Verdict};
 use serde::Serialize;
 
 /// A liar's states and reports, as planners took them.
@@ -164,11 +165,20 @@ impl Summary {
     /// Collisions, invariant and limit violations, road-end overruns and unpermitted
     /// entries: every safety finding.
     pub fn unsafe_events(&self) -> u64 {
-        self.collisions
-            + self.invariant_violations
-            + self.limit_violations
-            + self.road_end_overruns
-            + self.unpermitted_entries()
+        self.safety().events()
+    }
+
+    /// Its findings, by kind.
+    pub fn safety(&self) -> Safety {
+        Safety {
+            road_end_overruns: self.road_end_overruns,
+            ..Safety::of(
+                self.collisions,
+                self.invariant_violations,
+                self.limit_violations,
+                self.unpermitted_entries(),
+            )
+        }
     }
 }
 
@@ -372,5 +382,12 @@ impl<const N: usize, B: Bus> World<N, B> {
                 wall_seconds,
             },
         )
+    }
+}
+
+impl Judged for Summary {
+    /// Its findings; live when every vehicle met its goals.
+    fn verdict(&self) -> Verdict {
+        Verdict::new(self.safety(), self.completed)
     }
 }
