@@ -209,8 +209,7 @@ pub struct JunctionFaultsReport {
 impl JunctionFaultsReport {
     /// No collision, violation or unpermitted entry.
     pub fn safe(&self) -> bool {
-        let t = &self.totals;
-        t.collisions + t.invariant_violations + t.limit_violations + t.unpermitted_entries == 0
+        self.totals.safety().is_safe()
     }
 
     /// Every vehicle crossed and nothing deadlocked (judged for outages only: a liar

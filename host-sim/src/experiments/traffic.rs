@@ -127,12 +127,9 @@ impl Judged for TrafficOutcome {
     /// Collisions, invariant and limit violations (of both sweeps, compared); the sweep
     /// has no goal but safety.
     fn verdict(&self) -> Verdict {
-        let of = |r: &TrafficReport| {
-            Safety::of(r.collisions, r.invariant_violations, r.limit_violations, 0)
-        };
         let safety = match self {
-            TrafficOutcome::Plain(r) => of(r),
-            TrafficOutcome::Compared(c) => of(&c.current) + of(&c.every_step),
+            TrafficOutcome::Plain(r) => r.safety(),
+            TrafficOutcome::Compared(c) => c.current.safety() + c.every_step.safety(),
         };
         Verdict::new(safety, true)
     }
@@ -221,9 +218,19 @@ pub struct TrafficReport {
 }
 
 impl TrafficReport {
+    /// Its findings: collisions, invariant and limit (or road) violations.
+    pub fn safety(&self) -> Safety {
+        Safety::of(
+            self.collisions,
+            self.invariant_violations,
+            self.limit_violations,
+            0,
+        )
+    }
+
     /// No collision, no invariant, limit or road violation.
     pub fn safe(&self) -> bool {
-        self.collisions + self.invariant_violations + self.limit_violations == 0
+        self.safety().is_safe()
     }
 
     /// The closed-loop cost per planner step.

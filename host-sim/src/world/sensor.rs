@@ -54,20 +54,7 @@ fn lanes_overlapped(y: f64, theta: f64, lanes: u8) -> (u8, u8) {
 
 /// Where `c` is in segment `seg`'s frame, if it is physically on it: (x, y, θ).
 fn on_segment(net: &Network, seg: usize, c: &Seen) -> Option<(f64, f64, f64)> {
-    match c.at {
-        At::Lane {
-            seg: s,
-            x,
-            y,
-            theta,
-            ..
-        } if s == seg => Some((x, y, theta)),
-        At::Crossing { junction, route, s } => {
-            let (sg, x, lane) = net.on_segment(junction, route, s)?;
-            (sg == seg).then(|| (x, (f64::from(lane) + 0.5) * LANE_WIDTH_M, 0.0))
-        }
-        At::Lane { .. } => None,
-    }
+    c.at.on_segment(net, seg).map(|p| (p.x, p.y, p.theta))
 }
 
 /// Sensor returns for each vehicle of `each` — what it shows of itself and whether its

@@ -49,7 +49,7 @@ impl<const N: usize, B: Bus> World<N, B> {
         self.arrive()?;
         let truths: Vec<VehicleTruth> = self.vehicles.iter().map(|v| v.truth(&self.net)).collect();
         self.watch.monitor.check(&self.lim, &self.net, &truths);
-        self.watch_liveness();
+        self.watch_liveness(&truths);
         Ok(())
     }
 
@@ -136,16 +136,16 @@ impl<const N: usize, B: Bus> World<N, B> {
         sense_each(&self.net, &all, each, sensing, &mut self.draws.rng)
     }
 
-    /// Phase 6, liveness: the deadlock detector, and its report when it fires.
-    fn watch_liveness(&mut self) {
-        let truths: Vec<VehicleTruth> = self.vehicles.iter().map(|v| v.truth(&self.net)).collect();
+    /// Phase 6, liveness: the deadlock detector on the period's `truths` (the monitors'
+    /// own), and its report when it fires.
+    fn watch_liveness(&mut self, truths: &[VehicleTruth]) {
         let waiting = self.insertion.streams.iter().any(|s| !s.queue.is_empty())
             || !self.insertion.pending.is_empty();
         let holders = |j: usize| super::wait::holders(&self.managers, j);
         if let Some(d) = super::wait::watch(
             &mut self.watch.detector,
             self.time.t,
-            &truths,
+            truths,
             waiting,
             &self.net,
             &holders,

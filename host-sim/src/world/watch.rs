@@ -141,36 +141,13 @@ pub fn world_truth(v: &VehicleTruth, net: &Network) -> Truth {
 /// A vehicle's rectangle in segment `k`'s frame, if it is on it (a junction vehicle on
 /// an inlet or outlet track lying on it is `mapped`).
 pub fn segment_truth(v: &VehicleTruth, net: &Network, k: usize) -> Option<Truth> {
-    let (x, y, theta, lane, mapped) = match v.at {
-        At::Lane {
-            seg,
-            x,
-            y,
-            theta,
-            lane,
-            ..
-        } if seg == k => (x, y, theta, lane, false),
-        At::Crossing { junction, route, s } => {
-            let (sg, x, lane) = net.on_segment(junction, route, s)?;
-            if sg != k {
-                return None;
-            }
-            (
-                x,
-                (f64::from(lane) + 0.5) * super::LANE_WIDTH_M,
-                0.0,
-                lane,
-                true,
-            )
-        }
-        At::Lane { .. } => return None,
+    let p = v.at.on_segment(net, k)?;
+    let pose = planner_core::Pose {
+        x: p.x,
+        y: p.y,
+        theta: p.theta,
     };
-    Some(rectangle(
-        v,
-        planner_core::Pose { x, y, theta },
-        lane,
-        mapped,
-    ))
+    Some(rectangle(v, pose, p.lane, p.mapped))
 }
 
 /// `v`'s rectangle at `pose` in lane `lane` of some frame (the world's or a segment's):
