@@ -11,13 +11,15 @@
 //! - [`fleet`]: CAN media (SocketCAN, an in-process frame hub) and a world run as a fleet
 //!   of tasks on them, one per vehicle and per junction manager;
 //! - [`monitor`]: ground-truth safety checks, liveness and the deadlock detector;
-//! - [`experiments`]: the paper's figures and the sweeps, each settings → result struct;
+//! - [`experiments`]: the paper's figures and the sweeps, each one type implementing
+//!   [`experiments::experiment::Experiment`] (settings, run a range, report from parts);
+//! - [`verdict`]: the one verdict every command and `host-sim merge` reach;
 //! - [`output`]: traces, plots and the viewer;
-//! - [`reference`]: the Clarabel reference, random instances, the planner benchmark.
+//! - [`reference`](mod@reference): the Clarabel reference, random instances, the planner benchmark.
 //!
 //! Modules depend on each other one way, folders and the files inside them alike (the
-//! workspace's `tests/tests/layout.rs` checks it): `monitor`, `reference` and `bus` on
-//! nothing; `world` on those three; `scenario` (the
+//! workspace's `tests/tests/layout.rs` checks it): `monitor`, `reference`, `bus` and
+//! `verdict` on nothing; `world` on those; `scenario` (the
 //! file formats, which build a world) on `world`; `fleet` and `experiments` on all of
 //! these; `output` on `experiments`; the binary's `cli` on everything.
 #![deny(missing_docs)]

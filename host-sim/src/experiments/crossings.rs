@@ -213,7 +213,7 @@ pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> CrossingsRepo
     sweep_with(cases, first, seed, threads, Invariant::Paper)
 }
 
-/// [`sweep`] with every vehicle keeping `invariant`.
+/// [`sweep()`] with every vehicle keeping `invariant`.
 pub fn sweep_with(
     cases: u64,
     first: u64,

@@ -160,7 +160,7 @@ pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> DeadendsRepor
     sweep_with(cases, first, seed, threads, planner_core::Invariant::Paper)
 }
 
-/// [`sweep`], every planner keeping `invariant` (a failing case's scenario names it).
+/// [`sweep()`], every planner keeping `invariant` (a failing case's scenario names it).
 pub fn sweep_with(
     cases: u64,
     first: u64,

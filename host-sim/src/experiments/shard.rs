@@ -73,7 +73,7 @@ impl Shard {
     }
 }
 
-/// What a shard ran: enough for [`merge`] to check that shards belong together.
+/// What a shard ran: enough for [`check`] to make sure that shards belong together.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Header {
     /// The sweep (`platoons`, `traffic`, `deadends`, `crossings`).
