@@ -3,10 +3,11 @@
 //! verdict; and `host-sim merge`, which judges merged shards as the whole run would be.
 
 use super::output::{bad_input, draw_plot, exit, finish, plot_output, print_json, say};
-use super::output::{EXIT_BAD_INPUT, EXIT_INTERNAL};
-use host_sim::experiments::experiment::{run_shard, run_whole, Experiment};
+use super::output::{EXIT_BAD_INPUT, EXIT_BUS, EXIT_INTERNAL};
+use host_sim::experiments::experiment::{run_shard, run_whole, Experiment, RunError};
 use host_sim::experiments::shard::{Output, Shard};
 use host_sim::experiments::sweep::human;
+use serde::Serialize;
 use std::fmt::Display;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -34,18 +35,49 @@ pub struct SweepCmd<E: clap::Args> {
     pub answer: Answer,
 }
 
+/// An experiment that is one run, not a set of cases to shard: its settings and `--json`.
+#[derive(clap::Args)]
+pub struct OneCmd<E: clap::Args> {
+    /// Its settings.
+    #[command(flatten)]
+    pub settings: E,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
 /// Draws a report to a `.png` or `.svg` path.
 pub type Drawing<'a, R> = &'a dyn Fn(&R, &Path) -> Result<(), String>;
 
 /// Runs `e` as its flags say: settings refused before anything runs (exit 2); with
 /// `--shard`, that shard's JSON for `host-sim merge` (exit by its own cases' verdict);
-/// else the whole run, drawn to `plot` if given (checked writable first), printed, and
-/// the exit code of its verdict.
+/// else the whole run ([`whole`]).
 pub fn conduct<E>(
     e: &E,
     answer: Answer,
     plot: Option<(&PathBuf, Drawing<'_, E::Report>)>,
 ) -> ExitCode
+where
+    E: Experiment + Serialize,
+    E::Part: Serialize,
+    E::Report: Display,
+{
+    let Some(shard) = answer.shard else {
+        return whole(e, answer.json, plot);
+    };
+    if let Err(err) = e.validate() {
+        return bad_input(err);
+    }
+    match run_shard(e, shard, 0) {
+        Ok((output, verdict)) => print_json(&output).map_or_else(|c| c, |()| exit(verdict)),
+        Err(err) => internal(E::NAME, err),
+    }
+}
+
+/// Runs all of `e`: settings refused before anything runs (exit 2), a plot's path
+/// checked writable before the run, the report drawn and printed, and the exit code of
+/// its verdict.
+pub fn whole<E>(e: &E, json: bool, plot: Option<(&PathBuf, Drawing<'_, E::Report>)>) -> ExitCode
 where
     E: Experiment,
     E::Report: Display,
@@ -57,12 +89,6 @@ where
         Ok(s) => s,
         Err(code) => return code,
     };
-    if let Some(shard) = answer.shard {
-        return match run_shard(e, shard, 0) {
-            Ok((output, verdict)) => print_json(&output).map_or_else(|c| c, |()| exit(verdict)),
-            Err(err) => internal(E::NAME, err),
-        };
-    }
     let report = match run_whole(e, 0) {
         Ok(r) => r,
         Err(err) => return internal(E::NAME, err),
@@ -74,13 +100,17 @@ where
         }
         eprintln!("wrote {shown}");
     }
-    finish(&report, answer.json)
+    finish(&report, json)
 }
 
-/// A run that could not put its own parts together: a bug, never the input's fault.
-fn internal(name: &str, err: impl Display) -> ExitCode {
-    eprintln!("error: internal: {name}: {err} (a bug: please report it)");
-    ExitCode::from(EXIT_INTERNAL)
+/// A run that failed after its settings were accepted: its bus (exit 4), or a bug, never
+/// the input's fault (exit 5).
+fn internal(name: &str, err: RunError) -> ExitCode {
+    eprintln!("error: {name}: {err}");
+    ExitCode::from(match err {
+        RunError::Bus(_) => EXIT_BUS,
+        RunError::Internal(_) => EXIT_INTERNAL,
+    })
 }
 
 /// `host-sim merge FILES…`: the shards of one experiment, combined into its unsharded

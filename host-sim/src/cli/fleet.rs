@@ -11,21 +11,7 @@ use std::sync::Arc;
 
 /// `--bus`: the CAN medium of a fleet (`in-process` is handled by the caller).
 pub fn medium(bus: &str) -> Result<Medium, String> {
-    match bus {
-        "can-hub" => Ok(Medium::Hub),
-        // Linux interface names: 1 to 15 bytes (IFNAMSIZ − 1), no '/', no white space.
-        iface
-            if (1..=15).contains(&iface.len())
-                && iface
-                    .bytes()
-                    .all(|b| b.is_ascii_alphanumeric() || b"-_.".contains(&b)) =>
-        {
-            Ok(Medium::SocketCan(iface.to_string()))
-        }
-        other => Err(format!(
-            "--bus {other:?}: expected in-process, can-hub or a network interface name (1–15 of a-z A-Z 0-9 - _ .)"
-        )),
-    }
+    bus.parse()
 }
 
 /// Checks `--bus` before anything runs.

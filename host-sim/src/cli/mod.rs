@@ -7,10 +7,9 @@ pub mod export;
 pub mod fleet;
 pub mod output;
 pub mod run;
-pub mod sweep;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use conduct::{conduct, SweepCmd};
+use conduct::{conduct, whole, OneCmd, SweepCmd};
 use host_sim::experiments as x;
 use host_sim::world::SolverChoice;
 use std::path::PathBuf;
@@ -190,7 +189,7 @@ enum Command {
     /// One world of each size (vehicles placed on the smallest grid that holds them): the
     /// realtime factor, fallbacks and blind steps (a view that overflowed); with
     /// `--delay`, each again on a slow bus, its cost as a ratio to the clean bus's.
-    Worlds(sweep::WorldsArgs),
+    Worlds(OneCmd<x::worlds::Worlds>),
     /// Combines the shards of one sweep or experiment (each run with `--shard I/N`) into
     /// exactly the unsharded result, judged as the unsharded run is: a sweep's counts
     /// add, maxima take the max, means are weighted by cases; an experiment's runs are
@@ -300,7 +299,7 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Ids(c) => conduct(&c.settings, c.answer, None),
         Command::Layouts(c) => conduct(&c.settings, c.answer, None),
         Command::Grids(c) => conduct(&c.settings, c.answer, None),
-        Command::Worlds(a) => sweep::worlds(a),
+        Command::Worlds(c) => whole(&c.settings, c.json, None),
         Command::Merge { files, json } => conduct::merge(&files, json),
         Command::Experiment(e) => experiment::run(e),
         Command::Export(e) => export::run(e),

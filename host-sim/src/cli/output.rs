@@ -127,17 +127,6 @@ pub fn finish<T: serde::Serialize + std::fmt::Display + Judged>(r: &T, json: boo
     }
 }
 
-/// `--duration` within (0, `max`] s, or why not.
-pub fn check_duration(duration: f64, max: f64) -> Result<(), ExitCode> {
-    if duration > 0.0 && duration <= max {
-        Ok(())
-    } else {
-        Err(bad_input(format!(
-            "--duration must be in (0, {max}], got {duration}"
-        )))
-    }
-}
-
 /// A `--plot` path must end in .png or .svg and be writable now (so that a long run is
 /// not wasted on an output it cannot write): its staged file, to draw into and commit.
 pub fn check_plot(path: &std::path::Path) -> Result<Staged, ExitCode> {

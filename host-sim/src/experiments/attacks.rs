@@ -20,6 +20,8 @@
 //! cost in liveness: when the last goal was reached, beside the same world's run without
 //! any attack.
 
+use super::experiment::{Experiment, RunError, SettingsError};
+use super::shard::MergeError;
 use crate::bus::{Faults, Liar, ManagerDown};
 use crate::fleet::can::{simulation_keys, Keys, SIMULATION_MASTER};
 use crate::fleet::intruder::Attack;
@@ -41,25 +43,85 @@ pub const OUTAGE_S: (f64, f64) = (3.0, 6.0);
 const INTERSECTION: &str = include_str!("../../../scenarios/intersection.toml");
 const MULTILANE: &str = include_str!("../../../scenarios/multilane.toml");
 
-/// The attack experiment's settings.
-#[derive(Debug, Clone)]
+/// The attack experiment's settings (its flags).
+#[derive(Debug, Clone, clap::Args)]
 pub struct Settings {
-    /// Where the fleets' frames travel.
+    /// The fleets' medium: `can-hub` or a SocketCAN interface such as `vcan0`.
+    #[arg(long = "bus", default_value = "can-hub", value_parser = clap::value_parser!(Medium))]
     pub medium: Medium,
-    /// Every node authenticates (SecOC); `false` shows the attacks on a bus without.
+    /// Run without authentication, to see what it keeps out (every node authenticates,
+    /// SecOC, unless this is given).
+    #[arg(long = "without-auth", action = clap::ArgAction::SetFalse)]
     pub authenticated: bool,
     /// Every message as one CAN FD frame.
+    #[arg(long = "can-fd")]
     pub fd: bool,
-    /// The intersection's algorithm.
+    /// The intersection's algorithm (STOP, STOP-1, FIFO, CON-fair, PIPE, PLATOON).
+    #[arg(long, default_value = "FIFO", value_parser = live_algorithm)]
     pub algorithm: Algorithm,
-    /// Only these rows (by name), if any.
+    /// Only these rows (comma-separated): forged-grant, replayed-grant,
+    /// replayed-state, spoofed-id, flood, lying-vehicle, manager-crash.
+    #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
-    /// Only these worlds (`intersection`, `multilane`), if any.
+    /// Only these worlds (comma-separated): intersection, multilane.
+    #[arg(long = "world", value_delimiter = ',')]
     pub worlds: Vec<String>,
-    /// Also run each world without an attack, for the rows' `clean_*` figures.
+    /// Skip each world's run without an attack (its `clean_*` figures are then null).
+    #[arg(long = "no-baseline", action = clap::ArgAction::SetFalse)]
     pub baseline: bool,
     /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
     pub invariant: planner_core::Invariant,
+}
+
+/// A live algorithm by its name, in any case (the paper's Concurrent Crossing as written
+/// is not live).
+pub fn live_algorithm(name: &str) -> Result<Algorithm, String> {
+    super::flags::algorithm(name)
+        .ok()
+        .filter(|a| *a != Algorithm::Concurrent)
+        .ok_or_else(|| {
+            format!(
+                "{name:?} is not a live algorithm (STOP, STOP-1, FIFO, CON-fair, PIPE, PLATOON)"
+            )
+        })
+}
+
+impl Experiment for Settings {
+    const NAME: &'static str = "attacks";
+    type Part = AttackReport;
+    type Report = AttackReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        let names = row_names();
+        if let Some(bad) = self.only.iter().find(|o| !names.contains(&o.as_str())) {
+            let why = format!("unknown row {bad:?} ({})", names.join(", "));
+            return Err(SettingsError::new("--only", why));
+        }
+        match self.worlds.iter().find(|w| !WORLDS.contains(&w.as_str())) {
+            Some(bad) => Err(SettingsError::new(
+                "--world",
+                format!("unknown {bad:?} ({})", WORLDS.join(", ")),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Every attack on every world, as one fleet after another.
+    fn cases(&self) -> u64 {
+        1
+    }
+
+    fn run(&self, _range: (u64, u64), _threads: usize) -> Result<AttackReport, RunError> {
+        experiment(self).map_err(|e| RunError::Bus(e.to_string()))
+    }
+
+    fn report(&self, mut parts: Vec<AttackReport>) -> Result<AttackReport, MergeError> {
+        match (parts.pop(), parts.is_empty()) {
+            (Some(r), true) => Ok(r),
+            _ => Err(MergeError::Shape("attacks run whole".into())),
+        }
+    }
 }
 
 impl Default for Settings {
@@ -332,5 +394,48 @@ impl Judged for AttackReport {
             .iter()
             .all(|r| r.completed || r.attack == "lying-vehicle");
         Verdict::new(safety, done)
+    }
+}
+
+impl std::fmt::Display for AttackReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self;
+        writeln!(
+            f,
+            "attacks on {} (authenticated: {}, CAN FD: {}, intersection {})",
+            r.medium, r.authenticated, r.can_fd, r.algorithm
+        )?;
+        writeln!(
+            f,
+            "{:<15} {:<13} {:>8} {:>8} {:>6} {:>6} {:>6} {:>5} {:>9} {:>9}",
+            "attack",
+            "world",
+            "attempts",
+            "accepted",
+            "coll",
+            "viol",
+            "unperm",
+            "done",
+            "done at",
+            "clean"
+        )?;
+        let s = |x: Option<f64>| x.map_or("-".into(), |v| format!("{v:.1} s"));
+        for x in &r.results {
+            writeln!(
+                f,
+                "{:<15} {:<13} {:>8} {:>8} {:>6} {:>6} {:>6} {:>5} {:>9} {:>9}",
+                x.attack,
+                x.scenario,
+                x.attempts,
+                x.accepted,
+                x.collisions,
+                x.invariant_violations,
+                x.unpermitted_entries,
+                format!("{}/{}", x.done, x.vehicles),
+                s(x.done_at_s),
+                s(x.clean_done_at_s)
+            )?;
+        }
+        Ok(())
     }
 }

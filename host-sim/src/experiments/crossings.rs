@@ -9,7 +9,7 @@
 //! (SPEC §7: it admits a later vehicle ahead of an earlier waiting one it conflicts with,
 //! and a follower ahead of its own leader) and is left out of the totals.
 
-use super::experiment::{Experiment, SettingsError};
+use super::experiment::{Experiment, RunError, SettingsError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, CasesUnder, Failing, Totals};
 use crate::monitor::Limits;
@@ -45,9 +45,15 @@ impl Experiment for Crossings {
         self.sweep.sweep.cases
     }
 
-    fn run(&self, (first, end): (u64, u64), threads: usize) -> CrossingsReport {
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> Result<CrossingsReport, RunError> {
         let s = &self.sweep;
-        sweep_with(end - first, first, s.sweep.seed, threads, s.invariant)
+        Ok(sweep_with(
+            end - first,
+            first,
+            s.sweep.seed,
+            threads,
+            s.invariant,
+        ))
     }
 
     fn report(&self, parts: Vec<CrossingsReport>) -> Result<CrossingsReport, MergeError> {

@@ -6,7 +6,7 @@
 //! A case ends once every vehicle is in its target lane and stopped; it fails on any
 //! collision or violation, a vehicle not in its lane, or a deadlock.
 
-use super::experiment::{Experiment, SettingsError};
+use super::experiment::{Experiment, RunError, SettingsError};
 use super::multilane::safe_spacing;
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, CasesUnder, Failing, Totals};
@@ -43,9 +43,15 @@ impl Experiment for Deadends {
         self.sweep.sweep.cases
     }
 
-    fn run(&self, (first, end): (u64, u64), threads: usize) -> DeadendsReport {
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> Result<DeadendsReport, RunError> {
         let s = &self.sweep;
-        sweep_with(end - first, first, s.sweep.seed, threads, s.invariant)
+        Ok(sweep_with(
+            end - first,
+            first,
+            s.sweep.seed,
+            threads,
+            s.invariant,
+        ))
     }
 
     fn report(&self, parts: Vec<DeadendsReport>) -> Result<DeadendsReport, MergeError> {

@@ -14,7 +14,7 @@
 //! lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have not crossed
 //! [`GRACE_S`] after they arrived.
 
-use super::experiment::{duration_within, Experiment, SettingsError};
+use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::shard::{MergeError, Runs};
 use super::sweep::case_seed;
 use crate::monitor::Limits;
@@ -167,9 +167,9 @@ impl Experiment for DemandSettings {
         self.plan().run_count()
     }
 
-    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
+    fn run(&self, range: (u64, u64), threads: usize) -> Result<Self::Part, RunError> {
         let plan = self.plan();
-        Runs::timed(|| demand_runs(&plan, range, threads))
+        Ok(Runs::timed(|| demand_runs(&plan, range, threads)))
     }
 
     fn report(&self, parts: Vec<Self::Part>) -> Result<DemandReport, MergeError> {

@@ -17,12 +17,14 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use serde_json::Value;
 
-/// A sweep or an experiment; `Self` is its settings.
-pub trait Experiment: Serialize + DeserializeOwned {
+/// A sweep or an experiment; `Self` is its settings. One that is sharded is also
+/// written and read back (its settings and its parts: serde), as [`run_shard`] and
+/// [`merge_as`] ask.
+pub trait Experiment {
     /// Its name: the command's, and a shard header's `sweep`.
     const NAME: &'static str;
     /// What the cases of one range yield (printed by a shard, read back by the merge).
-    type Part: Serialize + DeserializeOwned;
+    type Part;
     /// What it reports.
     type Report: Serialize + Judged;
 
@@ -32,28 +34,56 @@ pub trait Experiment: Serialize + DeserializeOwned {
     /// Its cases (what shards divide).
     fn cases(&self) -> u64;
 
-    /// Cases [first, end) on `threads` threads (0: one per core).
-    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part;
+    /// Cases [first, end) on `threads` threads (0: one per core), or why they could not
+    /// run (settings already validated: a bus that failed, or a bug).
+    fn run(&self, range: (u64, u64), threads: usize) -> Result<Self::Part, RunError>;
 
     /// The report from the parts of all its cases, in case order (one part when it ran
     /// whole); refused when a part is not shaped as it should be.
     fn report(&self, parts: Vec<Self::Part>) -> Result<Self::Report, MergeError>;
 }
 
+/// Why validated settings could not run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RunError {
+    /// A CAN bus failed (exit 4).
+    Bus(String),
+    /// A bug: what failed (exit 5).
+    Internal(String),
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunError::Bus(e) => write!(f, "bus: {e}"),
+            RunError::Internal(e) => write!(f, "internal: {e} (a bug: please report it)"),
+        }
+    }
+}
+
+impl std::error::Error for RunError {}
+
+impl From<MergeError> for RunError {
+    /// A run's own part that does not report: a bug.
+    fn from(e: MergeError) -> Self {
+        RunError::Internal(e.to_string())
+    }
+}
+
 /// Runs every case of `e` and reports (settings already validated).
-pub fn run_whole<E: Experiment>(e: &E, threads: usize) -> Result<E::Report, MergeError> {
-    e.report(vec![e.run((0, e.cases()), threads)])
+pub fn run_whole<E: Experiment>(e: &E, threads: usize) -> Result<E::Report, RunError> {
+    Ok(e.report(vec![e.run((0, e.cases()), threads)?])?)
 }
 
 /// Runs shard `shard` of `e`: its output for `host-sim merge`, and the verdict on its own
 /// cases (a shard exits as the whole would on them).
-pub fn run_shard<E: Experiment>(
-    e: &E,
-    shard: Shard,
-    threads: usize,
-) -> Result<(Output, Verdict), MergeError> {
+pub fn run_shard<E>(e: &E, shard: Shard, threads: usize) -> Result<(Output, Verdict), RunError>
+where
+    E: Experiment + Serialize,
+    E::Part: Serialize,
+{
     let range = shard.range(e.cases());
-    let part = e.run(range, threads);
+    let part = e.run(range, threads)?;
     let result = to_value(&part)?;
     let verdict = e.report(vec![part])?.verdict();
     let header = Header {
@@ -68,10 +98,11 @@ pub fn run_shard<E: Experiment>(
 
 /// The merged report of `E`'s shards (already checked to belong together, in shard
 /// order) and its verdict.
-pub fn merge_as<E: Experiment>(
-    header: &Header,
-    parts: Vec<Value>,
-) -> Result<(Value, Verdict), MergeError> {
+pub fn merge_as<E>(header: &Header, parts: Vec<Value>) -> Result<(Value, Verdict), MergeError>
+where
+    E: Experiment + DeserializeOwned,
+    E::Part: DeserializeOwned,
+{
     let e: E = parse("settings", header.settings.clone())?;
     e.validate()
         .map_err(|err| MergeError::Shape(format!("settings: {err}")))?;

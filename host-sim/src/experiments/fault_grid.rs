@@ -14,7 +14,7 @@
 //! vehicles that met their goals and the mean time by which a run had met them.
 
 use super::crossings::queue_placements;
-use super::experiment::{Experiment, SettingsError};
+use super::experiment::{Experiment, RunError, SettingsError};
 use super::multilane::{paper_scenario, safe_spacing};
 use super::shard::{MergeError, Runs};
 use super::sweep::{self, case_seed, Case, Totals};
@@ -282,9 +282,11 @@ impl Experiment for GridSettings {
         run_count(&self.cell_list(), self.cells.runs)
     }
 
-    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
+    fn run(&self, range: (u64, u64), threads: usize) -> Result<Self::Part, RunError> {
         let cells = self.cell_list();
-        Runs::timed(|| grid_runs(&self.plan(&cells), range, threads))
+        Ok(Runs::timed(|| {
+            grid_runs(&self.plan(&cells), range, threads)
+        }))
     }
 
     fn report(&self, parts: Vec<Self::Part>) -> Result<GridReport, MergeError> {

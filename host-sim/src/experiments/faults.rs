@@ -2,7 +2,7 @@
 //! complete on a faulty bus? Both are run on the same seeds over a perfect bus and over
 //! one injecting the given faults, in one command, and compared.
 
-use super::experiment::{duration_within, Experiment, SettingsError};
+use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::flags::{flag_error, FaultFlags};
 use super::multilane::{
     multilane_cases, multilane_report, MultilaneCase, MultilaneReport, MultilaneSettings,
@@ -158,8 +158,8 @@ impl Experiment for FaultSettings {
         2 * self.seeds + 2 * self.throughput_seeds * Algorithm::ALL.len() as u64
     }
 
-    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
-        Runs::timed(|| self.runs(range, threads))
+    fn run(&self, range: (u64, u64), threads: usize) -> Result<Self::Part, RunError> {
+        Ok(Runs::timed(|| self.runs(range, threads)))
     }
 
     fn report(&self, parts: Vec<Self::Part>) -> Result<FaultComparison, MergeError> {

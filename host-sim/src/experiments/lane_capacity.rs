@@ -15,6 +15,8 @@
 //! queue, as saturation flow is measured), and the same world's monitor counts
 //! collisions and invariant violations.
 
+use super::experiment::{Experiment, RunError, SettingsError};
+use super::shard::MergeError;
 use crate::monitor::Limits;
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::invariant_name;
@@ -208,6 +210,88 @@ fn row(
         invariant_violations: s.invariant_violations,
         limit_violations: s.limit_violations,
         fallback_steps: s.fallback_steps,
+    }
+}
+
+/// `experiment lane-capacity`'s settings (its flags).
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct LaneCapacity {
+    /// Speeds (m/s), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "13.9,27.8")]
+    pub speeds: Vec<f64>,
+    /// The invariant (default: both, side by side).
+    #[arg(long, value_parser = super::flags::invariant())]
+    pub invariant: Option<Invariant>,
+    /// Vehicles per run (the first four are not counted).
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u16).range(6..=200))]
+    pub vehicles: u16,
+}
+
+impl Experiment for LaneCapacity {
+    const NAME: &'static str = "lane-capacity";
+    type Part = CapacityReport;
+    type Report = CapacityReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        match self.speeds.iter().find(|v| !(**v > 0.0 && **v <= 27.8)) {
+            Some(v) => Err(SettingsError::new(
+                "--speeds",
+                format!("each in (0, 27.8] m/s, got {v}"),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// The runs: every speed, both settings, each invariant asked for.
+    fn cases(&self) -> u64 {
+        (self.speeds.len() * 2 * self.invariants().len()) as u64
+    }
+
+    fn run(&self, _range: (u64, u64), _threads: usize) -> Result<CapacityReport, RunError> {
+        lane_capacity(&self.speeds, &self.invariants(), usize::from(self.vehicles))
+            .map_err(RunError::Internal)
+    }
+
+    fn report(&self, mut parts: Vec<CapacityReport>) -> Result<CapacityReport, MergeError> {
+        match (parts.pop(), parts.is_empty()) {
+            (Some(r), true) => Ok(r),
+            _ => Err(MergeError::Shape("lane-capacity runs whole".into())),
+        }
+    }
+}
+
+impl LaneCapacity {
+    /// The invariants asked for: one, or both side by side.
+    pub fn invariants(&self) -> Vec<Invariant> {
+        match self.invariant {
+            Some(i) => vec![i],
+            None => vec![Invariant::Paper, Invariant::LeaderAware],
+        }
+    }
+}
+
+/// `experiment lane-capacity`'s table (Markdown, as docs/capacity.md shows it).
+impl core::fmt::Display for CapacityReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "| speed (m/s) | mode | invariant | veh/h | mean headway (s) | collisions | invariant violations | fallback steps |\n|---|---|---|---|---|---|---|---|"
+        )?;
+        for r in &self.results {
+            write!(
+                f,
+                "\n| {} | {} | {} | {:.0} | {:.3} | {} | {} | {} |",
+                r.speed_mps,
+                r.mode.name(),
+                r.invariant,
+                r.flow_vph,
+                r.mean_headway_s,
+                r.collisions,
+                r.invariant_violations,
+                r.fallback_steps
+            )?;
+        }
+        Ok(())
     }
 }
 

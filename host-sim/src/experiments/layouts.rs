@@ -15,7 +15,7 @@
 //! unpermitted entry, no deadlock and no internal error. The report counts refusals by
 //! reason, so that a sweep shows what the loader guards against.
 
-use super::experiment::{Experiment, SettingsError};
+use super::experiment::{Experiment, RunError, SettingsError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{case_seed, keep_failing, Cases, Failing};
 use crate::reference::instances::rng;
@@ -50,8 +50,8 @@ impl Experiment for Layouts {
         self.sweep.cases
     }
 
-    fn run(&self, (first, end): (u64, u64), threads: usize) -> LayoutsReport {
-        sweep(end - first, first, self.sweep.seed, threads)
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> Result<LayoutsReport, RunError> {
+        Ok(sweep(end - first, first, self.sweep.seed, threads))
     }
 
     fn report(&self, parts: Vec<LayoutsReport>) -> Result<LayoutsReport, MergeError> {

@@ -2,7 +2,7 @@
 //! traffic for Theorem 2 (its sweep: [`super::traffic`]), and the dead-end layout of
 //! Theorem 3.
 
-use super::experiment::{Experiment, SettingsError};
+use super::experiment::{Experiment, RunError, SettingsError};
 use super::flags::{self, FaultFlags};
 use super::shard::{MergeError, Runs};
 use crate::bus::Faults;
@@ -52,8 +52,8 @@ impl Experiment for MultilaneSettings {
         self.seeds
     }
 
-    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
-        Runs::timed(|| multilane_cases(self, range, threads))
+    fn run(&self, range: (u64, u64), threads: usize) -> Result<Self::Part, RunError> {
+        Ok(Runs::timed(|| multilane_cases(self, range, threads)))
     }
 
     fn report(&self, parts: Vec<Self::Part>) -> Result<MultilaneReport, MergeError> {

@@ -11,7 +11,7 @@
 //! deadlock, and at least 95 % of the trips that arrived at least free flow + [`GRACE_S`]
 //! before the end completed.
 
-use super::experiment::{duration_within, Experiment, SettingsError};
+use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::shard::{combine_all, MergeError};
 use crate::scenario::network::NetworkScenario;
 use crate::verdict::{Judged, Safety, Verdict};
@@ -23,38 +23,106 @@ use std::path::Path;
 /// not required to have completed.
 pub const GRACE_S: f64 = 120.0;
 
-/// The experiment's settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NetworkSettings {
-    /// Rows of intersections.
+/// Rows × columns of intersections (`RxC` on the command line, each 1 to 8).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GridSize {
+    /// Rows.
     pub rows: u8,
-    /// Columns of intersections.
+    /// Columns.
     pub cols: u8,
-    /// Centre-to-centre distance (m).
+}
+
+impl std::str::FromStr for GridSize {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("{s}: rows x columns, e.g. 3x3, each 1 to 8");
+        let (r, c) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+        let (rows, cols): (u8, u8) = (
+            r.trim().parse().map_err(|_| bad())?,
+            c.trim().parse().map_err(|_| bad())?,
+        );
+        if (1..=8).contains(&rows) && (1..=8).contains(&cols) {
+            Ok(Self { rows, cols })
+        } else {
+            Err(bad())
+        }
+    }
+}
+
+/// `experiment network`'s settings (its flags).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct NetworkSettings {
+    /// Rows x columns of intersections, e.g. 3x3.
+    #[arg(long, default_value = "3x3", value_parser = clap::value_parser!(GridSize))]
+    pub grid: GridSize,
+    /// Centre-to-centre distance of intersections (m).
+    #[arg(long = "block", default_value_t = 300.0)]
     pub block_m: f64,
     /// Lanes per direction.
+    #[arg(long, default_value_t = 2)]
     pub lanes: u8,
-    /// Arrivals per boundary inlet (vehicles per hour, all its lanes).
+    /// Arrivals per boundary inlet, vehicles per hour (spread over its lanes).
+    #[arg(long = "rate", default_value_t = 300.0)]
     pub rate_vph: f64,
-    /// Simulated time (s).
+    /// Simulated seconds.
+    #[arg(long = "duration", default_value_t = 600.0)]
     pub duration_s: f64,
     /// Seed.
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[serde(with = "crate::world::invariant_serde")]
     pub invariant: planner_core::Invariant,
 }
 
 impl Default for NetworkSettings {
     fn default() -> Self {
         Self {
-            rows: 3,
-            cols: 3,
+            grid: GridSize { rows: 3, cols: 3 },
             block_m: 300.0,
             lanes: 2,
             rate_vph: 300.0,
             duration_s: 600.0,
             seed: 1,
             invariant: planner_core::Invariant::Paper,
+        }
+    }
+}
+
+impl Experiment for NetworkSettings {
+    const NAME: &'static str = "network";
+    type Part = NetworkReport;
+    type Report = NetworkReport;
+
+    /// The rate, the duration, and the grid as the scenario loader checks it.
+    fn validate(&self) -> Result<(), SettingsError> {
+        if !(self.rate_vph > 0.0 && self.rate_vph <= 3600.0) {
+            return Err(SettingsError::raw(
+                "--rate",
+                "--rate: vehicles per hour per boundary inlet, in (0, 3600]".into(),
+            ));
+        }
+        duration_within(self.duration_s, 7200.0)?;
+        self.world()
+            .map(|_| ())
+            .map_err(|e| SettingsError::raw("--grid", e))
+    }
+
+    /// One open-system simulation: one case.
+    fn cases(&self) -> u64 {
+        1
+    }
+
+    fn run(&self, _range: (u64, u64), _threads: usize) -> Result<NetworkReport, RunError> {
+        run(self).map_err(RunError::Internal)
+    }
+
+    fn report(&self, mut parts: Vec<NetworkReport>) -> Result<NetworkReport, MergeError> {
+        match (parts.pop(), parts.is_empty()) {
+            (Some(r), true) => Ok(r),
+            _ => Err(MergeError::Shape("one network run, one part".into())),
         }
     }
 }
@@ -71,8 +139,8 @@ impl NetworkSettings {
             "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"pipelined\"\n{invariant}\n\
              [grid]\nrows = {r}\ncols = {c}\nblock_m = {b}\nlanes = {l}\n\n\
              [arrivals]\nrate_vph = {rate}\n",
-            r = self.rows,
-            c = self.cols,
+            r = self.grid.rows,
+            c = self.grid.cols,
             d = self.duration_s,
             seed = self.seed,
             b = self.block_m,
@@ -90,14 +158,14 @@ impl NetworkSettings {
 }
 
 /// The `experiment network` result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct NetworkReport {
     /// "RxC".
     pub grid: String,
     /// Arrivals per boundary inlet (vehicles per hour).
     pub rate_vph: f64,
     /// The invariant every planner kept (`paper`, `leader-aware`).
-    pub invariant: &'static str,
+    pub invariant: String,
     /// Vehicles that entered the network.
     pub vehicles_spawned: u64,
     /// Trips completed (left at their destination).
@@ -176,9 +244,9 @@ pub fn run_with(
     let summary = w.summary(wall);
     let trips = Trips::of(&w, end);
     Ok(NetworkReport {
-        grid: format!("{}x{}", s.rows, s.cols),
+        grid: format!("{}x{}", s.grid.rows, s.grid.cols),
         rate_vph: s.rate_vph,
-        invariant: crate::world::invariant_name(s.invariant),
+        invariant: crate::world::invariant_name(s.invariant).into(),
         vehicles_spawned: trips.spawned,
         trips_completed: trips.completed,
         trips_in_progress: w.vehicles().len() as u64,
@@ -432,9 +500,15 @@ impl Experiment for Grids {
         self.cases
     }
 
-    fn run(&self, (first, end): (u64, u64), threads: usize) -> GridsReport {
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> Result<GridsReport, RunError> {
         let cases = (end - first, first);
-        grids(cases, self.seed, self.duration, self.invariant, threads)
+        Ok(grids(
+            cases,
+            self.seed,
+            self.duration,
+            self.invariant,
+            threads,
+        ))
     }
 
     fn report(&self, parts: Vec<GridsReport>) -> Result<GridsReport, MergeError> {
@@ -481,8 +555,10 @@ pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
     let lanes: u8 = r.random_range(1..=4);
     let min = crate::scenario::network::min_block_m(lanes);
     NetworkSettings {
-        rows: r.random_range(2..=4),
-        cols: r.random_range(2..=4),
+        grid: GridSize {
+            rows: r.random_range(2..=4),
+            cols: r.random_range(2..=4),
+        },
         block_m: (min * r.random_range(1.0..1.8)).ceil(),
         lanes,
         rate_vph: r.random_range(100.0f64..1500.0).round(),

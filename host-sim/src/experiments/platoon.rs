@@ -1,7 +1,7 @@
 //! Single-lane platoons (Theorem 1): a leader driving an adversarial admissible profile,
 //! followers each running their own planner-core instance, an independent monitor.
 
-use super::experiment::{Experiment, SettingsError};
+use super::experiment::{Experiment, RunError, SettingsError};
 use super::shard::{combine_all, MergeError};
 use crate::monitor::{Findings, Limits, Truth};
 use crate::verdict::{Judged, Safety, Verdict};
@@ -369,12 +369,12 @@ impl Experiment for Platoons {
         self.cases
     }
 
-    fn run(&self, (first, end): (u64, u64), _threads: usize) -> SweepSummary {
+    fn run(&self, (first, end): (u64, u64), _threads: usize) -> Result<SweepSummary, RunError> {
         let following = Following {
             reuse: self.reuse,
             invariant: self.invariant,
         };
-        sweep_range(first, end, self.seed, following)
+        Ok(sweep_range(first, end, self.seed, following))
     }
 
     fn report(&self, parts: Vec<SweepSummary>) -> Result<SweepSummary, MergeError> {

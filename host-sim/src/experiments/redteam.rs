@@ -25,7 +25,7 @@
 //! (SPEC §7), so its unfinished vehicles are left out of the totals, as in `crossings`.
 
 use super::crossings::{queue_placements, ALGORITHMS};
-use super::experiment::{Experiment, SettingsError};
+use super::experiment::{Experiment, RunError, SettingsError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, Cases, CasesUnder, Failing, Totals};
 use crate::bus::{is_vehicle_id, Faults, Liar, ManagerDown};
@@ -101,10 +101,19 @@ macro_rules! junction_sweep {
                 self.sweep.sweep.cases
             }
 
-            fn run(&self, (first, end): (u64, u64), threads: usize) -> JunctionFaultsReport {
+            fn run(
+                &self,
+                (first, end): (u64, u64),
+                threads: usize,
+            ) -> Result<JunctionFaultsReport, RunError> {
                 let s = &self.sweep;
                 let range = (end - first, first);
-                junction_faults($kind, range, (s.sweep.seed, s.invariant), threads)
+                Ok(junction_faults(
+                    $kind,
+                    range,
+                    (s.sweep.seed, s.invariant),
+                    threads,
+                ))
             }
 
             fn report(
@@ -147,8 +156,8 @@ impl Experiment for Ids {
         self.sweep.cases
     }
 
-    fn run(&self, (first, end): (u64, u64), threads: usize) -> IdsReport {
-        ids(end - first, first, self.sweep.seed, threads)
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> Result<IdsReport, RunError> {
+        Ok(ids(end - first, first, self.sweep.seed, threads))
     }
 
     fn report(&self, parts: Vec<IdsReport>) -> Result<IdsReport, MergeError> {

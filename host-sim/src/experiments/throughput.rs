@@ -3,7 +3,7 @@
 //! random route — for 300 s under every algorithm, on the same seeds: vehicles crossed
 //! and the mean time from entering A_C to leaving it.
 
-use super::experiment::{duration_within, Experiment, SettingsError};
+use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::flags::FaultFlags;
 use super::shard::{MergeError, Runs};
 use crate::bus::Faults;
@@ -56,8 +56,8 @@ impl Experiment for ThroughputSettings {
         self.seeds * Algorithm::ALL.len() as u64
     }
 
-    fn run(&self, range: (u64, u64), threads: usize) -> Self::Part {
-        Runs::timed(|| throughput_cases(self, range, threads))
+    fn run(&self, range: (u64, u64), threads: usize) -> Result<Self::Part, RunError> {
+        Ok(Runs::timed(|| throughput_cases(self, range, threads)))
     }
 
     fn report(&self, parts: Vec<Self::Part>) -> Result<ThroughputReport, MergeError> {

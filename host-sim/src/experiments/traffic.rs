@@ -13,7 +13,7 @@
 //! stop at the same tolerance, so the change is rounding; with reuse it is bounded per
 //! reused step by the Lagrangian-dual certificate ([`planner_core::reuse`]).
 
-use super::experiment::{duration_within, Experiment, SettingsError};
+use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::multilane::{random_traffic, run_world};
 use super::shard::{combine_all, MergeError};
 use crate::verdict::{Judged, Safety, Verdict};
@@ -79,7 +79,7 @@ impl Experiment for Traffic {
         self.cases
     }
 
-    fn run(&self, (first, end): (u64, u64), threads: usize) -> TrafficOutcome {
+    fn run(&self, (first, end): (u64, u64), threads: usize) -> Result<TrafficOutcome, RunError> {
         let planning = Planning {
             reuse: self.reuse,
             leader_aware: self.invariant == planner_core::Invariant::LeaderAware,
@@ -89,10 +89,10 @@ impl Experiment for Traffic {
         let (cases, seed) = (end - first, self.seed + first);
         if self.compare {
             let c = traffic_compare(cases, seed, self.duration, threads, planning);
-            TrafficOutcome::Compared(c)
+            Ok(TrafficOutcome::Compared(c))
         } else {
             let r = traffic_sweep_with(cases, seed, self.duration, threads, planning);
-            TrafficOutcome::Plain(r)
+            Ok(TrafficOutcome::Plain(r))
         }
     }
 

@@ -12,6 +12,8 @@
 //! that holds them standing [`SPACING_M`] apart on its segments, each going straight on
 //! to the exit ahead of it ([`grid_fleet`], which the example `grid_fleet` prints).
 
+use super::experiment::{duration_within, Experiment, RunError, SettingsError};
+use super::shard::MergeError;
 use crate::bus::Faults;
 use crate::scenario;
 use crate::verdict::{Judged, Safety, Verdict};
@@ -157,6 +159,99 @@ pub struct WorldRow {
     pub collisions: u64,
     /// Invariant violations (pairs × steps).
     pub invariant_violations: u64,
+}
+
+/// `host-sim worlds`'s settings (its flags).
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct Worlds {
+    /// World sizes (vehicles, comma-separated; each 1 to the 8x8 grid's capacity).
+    #[arg(long, value_delimiter = ',', default_value = "100,500,1000,2000,5000")]
+    pub vehicles: Vec<usize>,
+    /// Simulated seconds per world.
+    #[arg(long, default_value_t = 5.0)]
+    pub duration: f64,
+    /// Also run each world with every message delayed by this many seconds and jittered
+    /// by up to as many more (at most 10, the loader's bound).
+    #[arg(long)]
+    pub delay: Option<f64>,
+    /// The invariant every planner keeps toward the vehicle ahead.
+    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    pub invariant: planner_core::Invariant,
+}
+
+impl Experiment for Worlds {
+    const NAME: &'static str = "worlds";
+    type Part = WorldsReport;
+    type Report = WorldsReport;
+
+    fn validate(&self) -> Result<(), SettingsError> {
+        duration_within(self.duration, 600.0)?;
+        if self
+            .delay
+            .is_some_and(|d| !(d.is_finite() && d > 0.0 && d <= 10.0))
+        {
+            return Err(SettingsError::raw(
+                "--delay",
+                "--delay must be in (0, 10] s".into(),
+            ));
+        }
+        if self.vehicles.contains(&0) {
+            return Err(SettingsError::new(
+                "--vehicles",
+                "every size must be at least 1",
+            ));
+        }
+        match self.vehicles.iter().find(|&&n| smallest_grid(n).is_none()) {
+            Some(n) => Err(SettingsError::new(
+                "--vehicles",
+                format!("no grid up to 8x8 holds {n} vehicles"),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// One world per size (each run again on the slow bus, with `--delay`).
+    fn cases(&self) -> u64 {
+        self.vehicles.len() as u64
+    }
+
+    fn run(&self, _range: (u64, u64), _threads: usize) -> Result<WorldsReport, RunError> {
+        worlds(&self.vehicles, self.duration, self.delay, self.invariant)
+            .map_err(RunError::Internal)
+    }
+
+    fn report(&self, mut parts: Vec<WorldsReport>) -> Result<WorldsReport, MergeError> {
+        match (parts.pop(), parts.is_empty()) {
+            (Some(r), true) => Ok(r),
+            _ => Err(MergeError::Shape("worlds runs whole".into())),
+        }
+    }
+}
+
+impl core::fmt::Display for WorldsReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "| vehicles | grid | delay (s) | sim s | wall s | × real time | cost vs clean | fallback steps | blind | collisions |\n|---|---|---|---|---|---|---|---|---|---|"
+        )?;
+        for w in &self.worlds {
+            write!(
+                f,
+                "\n| {} | {} | {} | {:.1} | {:.1} | {:.3} | {:.2} | {} | {} | {} |",
+                w.vehicles,
+                w.grid,
+                w.delay_s,
+                w.sim_seconds,
+                w.wall_seconds,
+                w.realtime_factor,
+                w.cost_vs_clean,
+                w.fallback_steps,
+                w.blind_steps,
+                w.collisions
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// The `worlds` report.

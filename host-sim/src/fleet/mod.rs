@@ -77,6 +77,29 @@ pub enum Medium {
     Hub,
 }
 
+impl std::str::FromStr for Medium {
+    type Err = String;
+
+    /// `can-hub`, or a Linux network interface's name (1 to 15 bytes, IFNAMSIZ − 1, of
+    /// a-z A-Z 0-9 - _ .).
+    fn from_str(bus: &str) -> Result<Self, String> {
+        match bus {
+            "can-hub" => Ok(Medium::Hub),
+            iface
+                if (1..=15).contains(&iface.len())
+                    && iface
+                        .bytes()
+                        .all(|b| b.is_ascii_alphanumeric() || b"-_.".contains(&b)) =>
+            {
+                Ok(Medium::SocketCan(iface.to_string()))
+            }
+            other => Err(format!(
+                "--bus {other:?}: expected in-process, can-hub or a network interface name (1–15 of a-z A-Z 0-9 - _ .)"
+            )),
+        }
+    }
+}
+
 impl fmt::Display for Medium {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
