@@ -2,8 +2,8 @@
 # Proof that a restructuring moved nothing: builds two revisions of this repository and
 # compares what they print — every shipped scenario's trace and JSON summary (under both
 # invariants, and two of them on the CAN hub), small runs of every sweep and of the
-# paper's experiments, and shards of sweeps and experiments merged (with the merge's exit
-# code) — with wall-clock figures left out of the JSON.
+# paper's experiments, the experiments that run whole and shards of sweeps and experiments
+# merged (each with its exit code) — with wall-clock figures left out of the JSON.
 #
 # Usage: host-sim/tools/same_outputs.sh OLD NEW [WORKDIR]
 #   OLD, NEW  any git revisions (e.g. HEAD~1 HEAD)
@@ -69,8 +69,19 @@ capture() {
     for e in multilane throughput faults; do
       "$hs" experiment "$e" --json 2>/dev/null | strip_json > "$out/exp-$e.json" || true
     done
-    # Shards and their merge, with each exit code: what `host-sim merge` makes of them.
+    # The experiments that run whole, each with its exit code.
     local run
+    for run in "experiment network --grid 2x2 --duration 60" \
+      "experiment lane-capacity --speeds 13.9 --vehicles 10" "worlds --vehicles 40 --duration 2" \
+      "experiment attacks --only forged-grant,replayed-state --no-baseline"; do
+      local name=${run// /_}
+      set -- $run
+      local code=0
+      "$hs" "$@" --json > "$out/.w" 2>/dev/null || code=$?
+      { strip_json < "$out/.w"; echo "exit $code"; } > "$out/whole-${name//,/+}.json"
+      rm -f "$out/.w"
+    done
+    # Shards and their merge, with each exit code: what `host-sim merge` makes of them.
     for run in "deadends --cases 6" "crossings --cases 3" "platoons --cases 8" \
       "traffic --cases 4 --duration 10" "traffic --cases 4 --duration 10 --compare" \
       "liars --cases 3" "layouts --cases 8" "grids --cases 2 --duration 30" \
