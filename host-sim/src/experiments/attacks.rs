@@ -116,11 +116,8 @@ impl Experiment for Settings {
         experiment(self).map_err(|e| RunError::Bus(e.to_string()))
     }
 
-    fn report(&self, mut parts: Vec<AttackReport>) -> Result<AttackReport, MergeError> {
-        match (parts.pop(), parts.is_empty()) {
-            (Some(r), true) => Ok(r),
-            _ => Err(MergeError::Shape("attacks run whole".into())),
-        }
+    fn report(&self, parts: Vec<AttackReport>) -> Result<AttackReport, MergeError> {
+        super::experiment::only_part(parts, Self::NAME)
     }
 }
 

@@ -9,7 +9,7 @@
 //! (SPEC §7: it admits a later vehicle ahead of an earlier waiting one it conflicts with,
 //! and a follower ahead of its own leader) and is left out of the totals.
 
-use super::experiment::{Experiment, RunError, SettingsError};
+use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, CasesUnder, Failing, Totals};
 use crate::monitor::Limits;
@@ -36,10 +36,6 @@ impl Experiment for Crossings {
     const NAME: &'static str = "crossings";
     type Part = CrossingsReport;
     type Report = CrossingsReport;
-
-    fn validate(&self) -> Result<(), SettingsError> {
-        Ok(())
-    }
 
     fn cases(&self) -> u64 {
         self.sweep.sweep.cases

@@ -6,7 +6,7 @@
 //! A case ends once every vehicle is in its target lane and stopped; it fails on any
 //! collision or violation, a vehicle not in its lane, or a deadlock.
 
-use super::experiment::{Experiment, RunError, SettingsError};
+use super::experiment::{Experiment, RunError};
 use super::multilane::safe_spacing;
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, CasesUnder, Failing, Totals};
@@ -34,10 +34,6 @@ impl Experiment for Deadends {
     const NAME: &'static str = "deadends";
     type Part = DeadendsReport;
     type Report = DeadendsReport;
-
-    fn validate(&self) -> Result<(), SettingsError> {
-        Ok(())
-    }
 
     fn cases(&self) -> u64 {
         self.sweep.sweep.cases

@@ -28,8 +28,11 @@ pub trait Experiment {
     /// What it reports.
     type Report: Serialize + Judged;
 
-    /// Refuses settings it cannot run.
-    fn validate(&self) -> Result<(), SettingsError>;
+    /// Refuses settings it cannot run (by default none: every value its flags parse to
+    /// can run).
+    fn validate(&self) -> Result<(), SettingsError> {
+        Ok(())
+    }
 
     /// Its cases (what shards divide).
     fn cases(&self) -> u64;
@@ -67,6 +70,15 @@ impl From<MergeError> for RunError {
     /// A run's own part that does not report: a bug.
     fn from(e: MergeError) -> Self {
         RunError::Internal(e.to_string())
+    }
+}
+
+/// The report of an experiment that runs whole: its one part, or a shape error naming
+/// `name` when there is not exactly one.
+pub fn only_part<T>(mut parts: Vec<T>, name: &str) -> Result<T, MergeError> {
+    match (parts.pop(), parts.is_empty()) {
+        (Some(r), true) => Ok(r),
+        _ => Err(MergeError::Shape(format!("{name} runs whole: one part"))),
     }
 }
 

@@ -252,11 +252,8 @@ impl Experiment for LaneCapacity {
             .map_err(RunError::Internal)
     }
 
-    fn report(&self, mut parts: Vec<CapacityReport>) -> Result<CapacityReport, MergeError> {
-        match (parts.pop(), parts.is_empty()) {
-            (Some(r), true) => Ok(r),
-            _ => Err(MergeError::Shape("lane-capacity runs whole".into())),
-        }
+    fn report(&self, parts: Vec<CapacityReport>) -> Result<CapacityReport, MergeError> {
+        super::experiment::only_part(parts, Self::NAME)
     }
 }
 

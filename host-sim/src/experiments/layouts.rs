@@ -15,7 +15,7 @@
 //! unpermitted entry, no deadlock and no internal error. The report counts refusals by
 //! reason, so that a sweep shows what the loader guards against.
 
-use super::experiment::{Experiment, RunError, SettingsError};
+use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{case_seed, keep_failing, Cases, Failing};
 use crate::reference::instances::rng;
@@ -41,10 +41,6 @@ impl Experiment for Layouts {
     const NAME: &'static str = "layouts";
     type Part = LayoutsReport;
     type Report = LayoutsReport;
-
-    fn validate(&self) -> Result<(), SettingsError> {
-        Ok(())
-    }
 
     fn cases(&self) -> u64 {
         self.sweep.cases

@@ -119,11 +119,8 @@ impl Experiment for NetworkSettings {
         run(self).map_err(RunError::Internal)
     }
 
-    fn report(&self, mut parts: Vec<NetworkReport>) -> Result<NetworkReport, MergeError> {
-        match (parts.pop(), parts.is_empty()) {
-            (Some(r), true) => Ok(r),
-            _ => Err(MergeError::Shape("one network run, one part".into())),
-        }
+    fn report(&self, parts: Vec<NetworkReport>) -> Result<NetworkReport, MergeError> {
+        super::experiment::only_part(parts, Self::NAME)
     }
 }
 

@@ -1,7 +1,7 @@
 //! Single-lane platoons (Theorem 1): a leader driving an adversarial admissible profile,
 //! followers each running their own planner-core instance, an independent monitor.
 
-use super::experiment::{Experiment, RunError, SettingsError};
+use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
 use crate::monitor::{Findings, Limits, Truth};
 use crate::verdict::{Judged, Safety, Verdict};
@@ -360,10 +360,6 @@ impl Experiment for Platoons {
     const NAME: &'static str = "platoons";
     type Part = SweepSummary;
     type Report = SweepSummary;
-
-    fn validate(&self) -> Result<(), SettingsError> {
-        Ok(())
-    }
 
     fn cases(&self) -> u64 {
         self.cases

@@ -25,7 +25,7 @@
 //! (SPEC §7), so its unfinished vehicles are left out of the totals, as in `crossings`.
 
 use super::crossings::{queue_placements, ALGORITHMS};
-use super::experiment::{Experiment, RunError, SettingsError};
+use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, Cases, CasesUnder, Failing, Totals};
 use crate::bus::{is_vehicle_id, Faults, Liar, ManagerDown};
@@ -93,10 +93,6 @@ macro_rules! junction_sweep {
             type Part = JunctionFaultsReport;
             type Report = JunctionFaultsReport;
 
-            fn validate(&self) -> Result<(), SettingsError> {
-                Ok(())
-            }
-
             fn cases(&self) -> u64 {
                 self.sweep.sweep.cases
             }
@@ -147,10 +143,6 @@ impl Experiment for Ids {
     const NAME: &'static str = "ids";
     type Part = IdsReport;
     type Report = IdsReport;
-
-    fn validate(&self) -> Result<(), SettingsError> {
-        Ok(())
-    }
 
     fn cases(&self) -> u64 {
         self.sweep.cases

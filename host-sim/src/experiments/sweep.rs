@@ -48,14 +48,8 @@ pub fn text<T: Serialize>(
     failing: &[Failing],
 ) -> String {
     let value = serde_json::to_value(r).unwrap_or_default();
-    let mut text = format!("{name}, {cases} cases:\n{}{notes}", human(&value));
-    for f in failing {
-        text += &format!(
-            "\n\n# failing case {} ({}): {}\n{}",
-            f.case, f.label, f.reason, f.scenario
-        );
-    }
-    text
+    let text = format!("{name}, {cases} cases:\n{}{notes}", human(&value));
+    text + &failing_text(failing)
 }
 
 /// The top-level numbers of a result, one per line (a sweep's text summary).
@@ -70,10 +64,23 @@ pub fn human(v: &Value) -> String {
         .join("\n")
 }
 
+/// Every failing case's reason and scenario file, each after a blank line.
+fn failing_text(failing: &[Failing]) -> String {
+    failing
+        .iter()
+        .map(|f| {
+            format!(
+                "\n\n# failing case {} ({}): {}\n{}",
+                f.case, f.label, f.reason, f.scenario
+            )
+        })
+        .collect()
+}
+
 /// A liveness sweep's text: its totals in a sentence, then every failing case's reason
 /// and scenario file.
 pub fn liveness_text(t: &Totals, failing: &[Failing]) -> String {
-    let mut text = format!(
+    let text = format!(
         "{} cases, {} vehicles: {} collisions, {} invariant violations, {} limit violations, \
          {} unpermitted entries, {} unfinished vehicles, {} deadlocks; every goal met by \
          {:.1} s at the latest",
@@ -87,13 +94,7 @@ pub fn liveness_text(t: &Totals, failing: &[Failing]) -> String {
         t.deadlocks,
         t.max_finish_time_s
     );
-    for f in failing {
-        text += &format!(
-            "\n\n# failing case {} ({}): {}\n{}",
-            f.case, f.label, f.reason, f.scenario
-        );
-    }
-    text
+    text + &failing_text(failing)
 }
 
 /// The seed of case `index` of a sweep seeded `seed`.

@@ -220,11 +220,8 @@ impl Experiment for Worlds {
             .map_err(RunError::Internal)
     }
 
-    fn report(&self, mut parts: Vec<WorldsReport>) -> Result<WorldsReport, MergeError> {
-        match (parts.pop(), parts.is_empty()) {
-            (Some(r), true) => Ok(r),
-            _ => Err(MergeError::Shape("worlds runs whole".into())),
-        }
+    fn report(&self, parts: Vec<WorldsReport>) -> Result<WorldsReport, MergeError> {
+        super::experiment::only_part(parts, Self::NAME)
     }
 }
 
