@@ -51,6 +51,34 @@ fn a_liar_at_the_junction_collides_nothing() {
     }
 }
 
+#[test]
+fn a_liar_followed_closely_under_the_leader_aware_invariant_collides_nothing() {
+    // Reported: case 591 of `liars --cases 1000 --invariant leader-aware`, 687 colliding
+    // pair-steps under STOP (and some under every algorithm) though every lie was
+    // refused: the follower passed the liar's last trusted position and dropped it.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/redteam/liar-591-leader-aware.toml");
+    let text = std::fs::read_to_string(&path).expect("the file");
+    assert!(text.contains("invariant = \"leader-aware\"") && text.contains("algorithm = \"stop\""));
+    for alg in [
+        "stop",
+        "fifo",
+        "concurrent_fair",
+        "pipelined",
+        "platoon",
+        "concurrent",
+    ] {
+        let text = text.replace("algorithm = \"stop\"", &format!("algorithm = \"{alg}\""));
+        let spec = host_sim::scenario::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"));
+        let s = common::run_world(spec);
+        assert!(
+            s.lies.as_ref().is_some_and(|l| l.heard > 0),
+            "{alg}: the liar lied"
+        );
+        common::assert_safe(&s);
+    }
+}
+
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-sim"))
 }

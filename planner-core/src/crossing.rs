@@ -6,7 +6,6 @@
 //! which vehicles hold a permission; it tracks at most `CAP` vehicles.
 
 use crate::intersection::{Layout, CONFLICT_SAMPLE_M, MAX_ROUTES};
-use crate::lane_change::STALE_AFTER_S;
 use crate::params::Params;
 use crate::planner::{valid_resolution, ConfigError};
 use crate::real::Real;
@@ -1148,10 +1147,11 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
     }
 
     /// Chooses the invariant kept toward the vehicles ahead on its path (default
-    /// [`Invariant::Paper`]). Under [`Invariant::LeaderAware`] a vehicle ahead whose
-    /// report was heard within the notification bound or [`STALE_AFTER_S`], whichever is
-    /// longer, and that declared its braking limit, is credited with the least distance
-    /// it still travels ([`safety::leader_credit`]); sensor returns, vehicles known from
+    /// [`Invariant::Paper`]). Under [`Invariant::LeaderAware`] a vehicle ahead that
+    /// declared its braking limit is credited with the least distance it still travels
+    /// from its last report ([`safety::leader_credit`]), however old that report is: the
+    /// bound stays valid, and a follower that relied on it cannot do without it later
+    /// (docs/spec.md §11); sensor returns, vehicles known from
     /// other frames, unknown space and the stop line stay walls. Every vehicle at a
     /// crossing plans with a planner and reports itself, so all of them cooperate.
     pub fn set_invariant(&mut self, invariant: Invariant) {
@@ -1165,18 +1165,24 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
 
     /// How far past its reported centre a vehicle ahead, at `wall` (the distance from this
     /// vehicle's centre to its reported centre), heard `age` ago, is credited under the
-    /// invariant in use (see [`CrossingPlanner::set_invariant`]): nothing unless it is
-    /// ahead by more than both half-lengths and d0 (a vehicle beside this one is no
-    /// leader).
+    /// invariant in use (see [`CrossingPlanner::set_invariant`]): nothing unless it leads
+    /// ([`safety::leads`]: ahead by more than both half-lengths and d0 — a vehicle beside
+    /// this one is no leader — or, once its report is old, its ghost's rear ahead of this
+    /// vehicle's front). Not by its stamped position alone: a follower that relied on the
+    /// credit may be past that once the report is old, and a credit withdrawn then would
+    /// leave it no wall at all.
     fn credit(&self, r: &CrossingReport<F>, wall: F, age: F) -> F {
         let p = self.planner.params();
-        let fresh = age <= self.notify.max(F::from_f64(STALE_AFTER_S));
-        let ahead = wall - F::HALF * (r.length + self.length + self.position_step) - p.d0();
-        match r.brake {
-            Some(b) if self.invariant == Invariant::LeaderAware && fresh && ahead > F::ZERO => {
-                safety::leader_credit(p, r.v - F::HALF * self.speed_step, b.mps2())
-            }
-            _ => F::ZERO,
+        let (v, step) = (r.v - F::HALF * self.speed_step, self.position_step);
+        let Some(b) = r.brake.filter(|_| self.invariant == Invariant::LeaderAware) else {
+            return F::ZERO;
+        };
+        let ghost = safety::ghost_advance(p, v, b.mps2(), age);
+        let raw = wall - F::HALF * (r.length + self.length + step) - p.d0();
+        if safety::leads(p, raw, ghost) {
+            safety::leader_credit(p, v, b.mps2())
+        } else {
+            F::ZERO
         }
     }
 
@@ -1479,16 +1485,33 @@ mod tests {
         assert!(full > 5.0);
         assert_eq!(c.credit(&l, 20.0, 0.0), full);
         assert_eq!(c.credit(&leader(None), 20.0, 0.0), 0.0, "no limit declared");
-        // Fresh up to the longer of the notification bound and STALE_AFTER_S.
-        assert_eq!(c.credit(&l, 20.0, STALE_AFTER_S), full);
-        assert_eq!(c.credit(&l, 20.0, STALE_AFTER_S + 0.01), 0.0, "stale");
-        c.set_notify_latency(0.5).expect("finite");
-        assert_eq!(c.credit(&l, 20.0, 0.5), full);
-        assert_eq!(c.credit(&l, 20.0, 0.51), 0.0);
+        // However old the report: the bound it gives stays valid.
+        assert_eq!(c.credit(&l, 20.0, 0.25), full);
+        assert_eq!(c.credit(&l, 20.0, 60.0), full, "never withdrawn by age");
         // Ahead only when more than both half-lengths and d0 ahead.
         let touching = 4.5 + p.d0();
         assert_eq!(c.credit(&l, touching, 0.0), 0.0, "beside, not ahead");
         assert_eq!(c.credit(&l, touching + 0.01, 0.0), full);
+        // Judged by its ghost: a report 2 s old of a leader at 10 m/s whose stamped
+        // centre the follower has passed still credits it (it has moved at least
+        // ghost_advance since), and the wall stays where the stamp puts it.
+        let ghost = safety::ghost_advance(&p, 10.0, 4.5, 2.0);
+        assert!(ghost > touching + 0.3, "{ghost}");
+        assert_eq!(
+            c.credit(&l, -0.3, 2.0),
+            full,
+            "passed its stamp, behind its ghost"
+        );
+        assert_eq!(
+            c.credit(&l, 4.5 - ghost - 0.01, 2.0),
+            0.0,
+            "its ghost's rear level with this vehicle's front"
+        );
+        assert_eq!(
+            c.credit(&l, -0.5, 0.0),
+            0.0,
+            "a fresh report of a vehicle beside"
+        );
         // The speed taken half a bus step lower, the length a position step longer.
         c.set_bus_resolution(0.2, 0.5).expect("valid");
         assert_eq!(

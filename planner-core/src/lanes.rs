@@ -112,8 +112,13 @@ pub struct Other<F> {
     /// rectangle overlaps (lowest, and the other one if it straddles two), age 0, and no
     /// intention (β) is known from it.
     pub sensed: bool,
-    /// Its braking limit |amin| (m/s², > 0) as it declared it over V2V; `None` if it did
-    /// not (or it is a sensor return): then it is a wall under either invariant.
+    /// Its braking limit |amin| (m/s², > 0) as it declared it over V2V, when that bounds
+    /// where it can stop: declared by a vehicle that cooperated, in a message the
+    /// receiver trusted. It stays when the vehicle is distrusted later (`cooperative`
+    /// turns `false`): the bound its last trusted message gives is still valid, and a
+    /// follower close behind on that bound must keep it ([`crate::WorldView::others`]
+    /// fills it so). `None` if it declared none, does not cooperate, or is a sensor
+    /// return: then it is a wall under either invariant.
     pub brake: Option<crate::safety::BrakeLimit>,
 }
 

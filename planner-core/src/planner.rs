@@ -24,11 +24,16 @@ pub struct Vehicle<F> {
     /// Its speed at `x` (m/s), as it broadcast it; read only when `brake` is `Some`.
     pub v: F,
     /// Its braking limit, when the ego may credit it under the leader-aware invariant
-    /// ([`Planner::set_invariant`]): a vehicle heard over V2V within its staleness bound
-    /// that cooperates and declared one ([`crate::WorldView::lane_leaders`] fills it so).
-    /// `None` — a vehicle seen only by a sensor, silent, not cooperating, or one that
-    /// declared no limit — is a wall that may stop at once, as in Lemma 3.
+    /// ([`Planner::set_invariant`]): a vehicle heard over V2V that cooperates and
+    /// declared one ([`crate::WorldView::lane_leaders`] fills it so). `None` — a vehicle
+    /// seen only by a sensor, not cooperating, or one that declared no limit — is a wall
+    /// that may stop at once, as in Lemma 3.
     pub brake: Option<BrakeLimit>,
+    /// The age (s) of `x` and `v` at this step: now − its stamp (0 for a measurement).
+    /// A credited vehicle is judged ahead or not by its ghost, the least it has moved
+    /// since ([`safety::ghost_advance`]), not by its stamped position, which a follower
+    /// that relied on the credit may have passed.
+    pub age: F,
 }
 
 impl<F: Real> Vehicle<F> {
@@ -40,6 +45,7 @@ impl<F: Real> Vehicle<F> {
             length,
             v: F::ZERO,
             brake: None,
+            age: F::ZERO,
         }
     }
 }
@@ -233,7 +239,14 @@ pub fn obstacle_position<F: Real>(
     vehicles: &[Vehicle<F>],
     stop_line: Option<F>,
 ) -> Option<F> {
-    obstacle_nearer(p, x, vehicles, stop_line, F::ZERO, |_, _| F::ZERO)
+    obstacle_nearer(
+        p,
+        x,
+        vehicles,
+        stop_line,
+        F::ZERO,
+        (|_, _| F::ZERO, |_| F::ZERO),
+    )
 }
 
 /// [`obstacle_position`] with every vehicle taken `nearer` metres nearer (a position heard
@@ -245,11 +258,13 @@ fn obstacle_nearer<F: Real>(
     vehicles: &[Vehicle<F>],
     stop_line: Option<F>,
     nearer: F,
-    credit: impl Fn(&Vehicle<F>, F) -> F,
+    (credit, ghost): (impl Fn(&Vehicle<F>, F) -> F, impl Fn(&Vehicle<F>) -> F),
 ) -> Option<F> {
     let half = F::HALF;
     let mut best: Option<F> = stop_line.map(|xr| xr - half * p.length() - p.d0());
-    for c in vehicles.iter().filter(|c| c.x > x) {
+    // A vehicle that may be credited is judged by its ghost (0 for every other one), so
+    // that one whose old stamp the ego has passed still counts (`safety::leads`).
+    for c in vehicles.iter().filter(|c| c.x + ghost(c) > x) {
         let wall = c.x - half * (c.length + p.length()) - p.d0() - nearer;
         let xb = wall + credit(c, wall - x);
         best = Some(match best {
@@ -483,15 +498,31 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
 
     /// What vehicle `c`, `wall` metres (x̄(c) − x_t) ahead, is credited with under the
     /// invariant in use: nothing under the paper's, nor for a vehicle without a braking
-    /// limit or not ahead of the ego's front (its stopping point says nothing about the
-    /// ego's way to it).
+    /// limit or that does not lead ([`safety::leads`]: its stopping point says nothing
+    /// about the ego's way to it).
     fn credit(&self, c: &Vehicle<F>, wall: F) -> F {
         match (self.invariant, c.brake) {
-            (Invariant::LeaderAware, Some(b)) if wall > F::ZERO => safety::leader_credit(
-                &self.params,
-                c.v - F::HALF * self.speed_resolution,
-                b.mps2(),
-            ),
+            (Invariant::LeaderAware, Some(b))
+                if safety::leads(&self.params, wall, self.ghost(c)) =>
+            {
+                safety::leader_credit(&self.params, self.credited_speed(c), b.mps2())
+            }
+            _ => F::ZERO,
+        }
+    }
+
+    /// Its speed as credited: half a bus step lower (the bus may have rounded it up).
+    fn credited_speed(&self, c: &Vehicle<F>) -> F {
+        c.v - F::HALF * self.speed_resolution
+    }
+
+    /// How far past its stamped position vehicle `c` is at the least by now under the
+    /// leader-aware invariant ([`safety::ghost_advance`]); 0 for a wall.
+    fn ghost(&self, c: &Vehicle<F>) -> F {
+        match (self.invariant, c.brake) {
+            (Invariant::LeaderAware, Some(b)) => {
+                safety::ghost_advance(&self.params, self.credited_speed(c), b.mps2(), c.age)
+            }
             _ => F::ZERO,
         }
     }
@@ -545,10 +576,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         let scalars = [obs.x, obs.v_prev, obs.target_x, obs.v_ref];
         if !scalars.iter().all(|x| x.is_finite())
             || obs.stop_line.is_some_and(|x| !x.is_finite())
-            || obs
-                .vehicles
-                .iter()
-                .any(|c| !(c.x.is_finite() && c.length.is_finite() && c.v.is_finite()))
+            || obs.vehicles.iter().any(|c| {
+                !(c.x.is_finite() && c.length.is_finite() && c.v.is_finite() && c.age.is_finite())
+            })
         {
             return Err(InputError::NotFinite);
         }
@@ -557,7 +587,10 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         }
         if !(in_range(&[obs.x, obs.target_x])
             && obs.stop_line.is_none_or(|x| in_range(&[x]))
-            && obs.vehicles.iter().all(|c| in_range(&[c.x, c.length])))
+            && obs
+                .vehicles
+                .iter()
+                .all(|c| in_range(&[c.x, c.length]) && c.age >= F::ZERO))
         {
             return Err(InputError::OutOfRange);
         }
@@ -576,8 +609,16 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
         // much longer at its rear (the stop line is the planner's own, exact).
         let nearer = F::HALF * self.resolution;
         let credit = |c: &Vehicle<F>, wall: F| self.credit(c, wall);
-        let gap = obstacle_nearer(&p, obs.x, obs.vehicles, obs.stop_line, nearer, credit)
-            .map_or(free, |xb| (xb - obs.x).min(free));
+        let ghost = |c: &Vehicle<F>| self.ghost(c);
+        let gap = obstacle_nearer(
+            &p,
+            obs.x,
+            obs.vehicles,
+            obs.stop_line,
+            nearer,
+            (credit, ghost),
+        )
+        .map_or(free, |xb| (xb - obs.x).min(free));
         Ok(self.plan_speed(obs.v_prev, gap, obs.target_x - obs.x, obs.v_ref))
     }
 

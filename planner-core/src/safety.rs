@@ -209,6 +209,50 @@ pub fn leader_credit<F: Real>(p: &Params<F>, v_leader: F, leader_brake: F) -> F 
     least_travel(p, v_leader, leader_brake.max(p.brake())) * p.theta_max().cos()
 }
 
+/// How far (m) along its path a cooperating vehicle driving straight has come, at the
+/// least, `age` seconds after a stamp at which it had applied speed `v` over a period,
+/// braking at most `brake` (m/s², its own declared limit) from then on:
+/// h Σ_{k=1}^{m} max(0, v − `brake` k h) over the m whole periods in `age`. Its *ghost*.
+///
+/// Why it is needed: a follower that credits its leader comes closer to the leader's
+/// stamped position than the paper's wall allows, and once the stamp is old (a silent
+/// leader, a suspect whose later words are refused, a delayed bus) the follower's front
+/// may be past it. Judged by the stamped position alone, that leader is then "beside or
+/// behind", its credit and its wall are dropped, and the follower runs into it. Judged
+/// by its ghost ([`leads`]) it stays ahead. The ghost decides only *whether* a vehicle
+/// leads; the wall stays where the stamp puts it, so an optimistic ghost (a vehicle that
+/// is turning advances along the road only v cos θ) can at worst take a vehicle that is
+/// really behind for a leader, which only adds a wall. A pessimistic one would drop a
+/// real leader's wall: it brakes at the leader's own limit, not at b' of
+/// [`leader_credit`], and without cos θmax (the property tests find a follower level
+/// with either).
+///
+/// A speed, limit or age that is not positive gives 0; the count of periods is capped
+/// at the number in which the speed reaches 0, so the sum has a closed form and no loop.
+pub fn ghost_advance<F: Real>(p: &Params<F>, v: F, brake: F, age: F) -> F {
+    let h = p.h();
+    if !(v > F::ZERO && brake > F::ZERO && age > F::ZERO && h > F::ZERO) {
+        return F::ZERO;
+    }
+    // Whole periods since the stamp, and those in which v − b k h is still positive
+    // (float → integer casts saturate, and NaN is excluded above).
+    let elapsed = (age / h).to_f64() as u64;
+    let moving = (v / (brake * h)).to_f64() as u64;
+    let k = F::from_f64(elapsed.min(moving) as f64);
+    (h * (v * k - F::HALF * brake * h * k * (k + F::ONE))).max(F::ZERO)
+}
+
+/// Whether a vehicle on the ego's lane or path leads it, for the leader-aware credit:
+/// `wall` is x̄ − x from its stamped position (its rear less d0, less the ego's front),
+/// `ghost` its [`ghost_advance`] since the stamp. A fresh stamp leads when x̄ − x > 0 (a
+/// vehicle beside the ego is no leader), as always; an old one also when its ghost's
+/// rear is ahead of the ego's front. A follower that keeps the invariant stays more than
+/// d0 behind its leader's ghost (property-tested in `planner-core/tests/leader_aware.rs`),
+/// so d0 is to spare.
+pub fn leads<F: Real>(p: &Params<F>, wall: F, ghost: F) -> bool {
+    wall > F::ZERO || (ghost > F::ZERO && wall + ghost + p.d0() > F::ZERO)
+}
+
 /// The certified fallback of Lemma 2: v_{t+kh} = max(0, v_{t−h} + amin (k+1) h).
 /// While the invariant holds it satisfies every constraint of (10) and reaches 0.
 pub fn max_braking<F: Real, const N: usize>(p: &Params<F>, v_prev: F) -> [F; N] {

@@ -212,7 +212,8 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
                 alpha: s.alpha,
                 beta: s.beta,
                 cooperative: s.cooperative,
-                brake: s.brake,
+                // Only a cooperating vehicle's limit bounds where it can stop.
+                brake: s.brake.filter(|_| s.cooperative),
                 ..Other::v2v(s.id, s.x, s.v, length, s.lane, now.since(s.stamp).as_secs())
             });
         }
@@ -230,29 +231,22 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
     }
 
     /// [`WorldView::lane_vehicles`] for a planner keeping the leader-aware invariant
-    /// ([`crate::Invariant::LeaderAware`]): a vehicle that cooperates, declared its
-    /// braking limit and whose state is at most `stale_after` old at `now` (by its stamp)
-    /// carries its speed and limit, so the planner may credit it; every other one is a
-    /// wall. (A cooperating leader's stamped state bounds its stopping point however old
-    /// it is; the bound is for one that went silent because it is no longer there to
-    /// keep the protocol — crashed, or off the road.)
-    pub fn lane_leaders(
-        &self,
-        lane: u8,
-        length: F,
-        now: Instant,
-        stale_after: Duration,
-        out: &mut Vec<Vehicle<F>, CAP>,
-    ) {
+    /// ([`crate::Invariant::LeaderAware`]): a vehicle that cooperates and declared its
+    /// braking limit carries its stamped speed, its limit and the age of its state at
+    /// `now`, so the planner may credit it and judge it by its ghost
+    /// ([`crate::safety::ghost_advance`]); every other one is a wall. However old the
+    /// state: a cooperating leader's stamped state bounds its stopping point forever, and
+    /// a follower that came close on that bound must not lose it when the leader falls
+    /// silent (docs/spec.md §11, "A credit is never withdrawn").
+    pub fn lane_leaders(&self, lane: u8, length: F, now: Instant, out: &mut Vec<Vehicle<F>, CAP>) {
         out.clear();
         for k in self.known.iter().filter(|k| k.state.lane == lane) {
             let s = &k.state;
-            let fresh = now.since(s.stamp) <= stale_after;
-            let brake = s.brake.filter(|_| s.cooperative && fresh);
             // Cannot fail: `out` has the same capacity as `known`.
             let _ = out.push(Vehicle {
                 v: s.v,
-                brake,
+                brake: s.brake.filter(|_| s.cooperative),
+                age: now.since(s.stamp).as_secs(),
                 ..Vehicle::wall(s.x, length)
             });
         }

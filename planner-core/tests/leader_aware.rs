@@ -8,7 +8,7 @@
 //! follower reacts one period late (it keeps its speed for the period that was already
 //! commanded), then applies the certified fallback, max braking at its own limit.
 
-use planner_core::safety::{d_s, leader_credit, least_travel};
+use planner_core::safety::{d_s, ghost_advance, leader_credit, least_travel};
 use planner_core::{Params, ParamsSpec};
 use proptest::prelude::*;
 
@@ -81,6 +81,88 @@ proptest! {
             xl += ul * h;
             // Both move linearly within the period: the gap is smallest at its ends.
             prop_assert!(xl - xf > d0 - 1e-9, "step {k}: gap {} ≤ d0", xl - xf);
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(5_000))]
+
+    /// A ghost is never ahead of its vehicle: however a cooperating vehicle drives within
+    /// its limits after a stamp, it has moved at least [`ghost_advance`] since, at every
+    /// age; and the ghost stops no earlier than the stamp's credit says.
+    #[test]
+    fn the_ghost_is_never_ahead_of_its_vehicle(
+        b_f in 3.0f64..10.0,
+        b_l in 3.0f64..10.0,
+        v in 0.0f64..27.8,
+        moves in proptest::collection::vec(0.0f64..1.0, 1..600),
+        extra_ms in 0u64..10,
+    ) {
+        let p = with_brake(b_f);
+        let h = p.h();
+        let (mut x, mut u) = (0.0, v);
+        for k in 0..=moves.len() {
+            // k whole periods after the stamp, and up to one period more.
+            let age = k as f64 * h + extra_ms as f64 * 1e-3;
+            let ghost = ghost_advance(&p, v, b_l, age);
+            prop_assert!(ghost <= x + 1e-9, "k {k}: ghost {ghost} ahead of {x}");
+            let m = moves.get(k).copied().unwrap_or(0.0);
+            u = (u + (-b_l + m * (b_l + p.a_max())) * h).clamp(0.0, p.v_max());
+            x += u * h;
+        }
+        // Judging it by its ghost moves no wall back: ghost + the credit of the ghost's
+        // speed is never short of the stamp's credit.
+        for k in [0usize, 1, 7, 50] {
+            let age = k as f64 * h;
+            let slowed = (v - b_l * h * k as f64).max(0.0);
+            let stop = ghost_advance(&p, v, b_l, age) + leader_credit(&p, slowed, b_l);
+            prop_assert!(stop >= leader_credit(&p, v, b_l) - 1e-9);
+        }
+    }
+
+    /// A follower that keeps the leader-aware invariant toward a leader's stamped state
+    /// never comes level with the leader's ghost, however long the leader stays silent:
+    /// the ghost's rear stays more than d0 ahead of the follower's front, so the
+    /// follower, judging the leader by its ghost, goes on crediting it (and never by its
+    /// stamped position, which it may pass); `safety::leads` asks only that the rear be
+    /// ahead of the front, d0 to spare. The follower here drives as close to its wall as
+    /// the invariant lets it, reacting one period late. (A ghost braking at b' instead of
+    /// the leader's own limit, or shrunk by cos θmax like the credit, fails this.)
+    #[test]
+    fn a_follower_keeping_the_invariant_never_comes_level_with_the_ghost(
+        b_f in 3.0f64..10.0,
+        b_l in 3.0f64..10.0,
+        v_f in 0.0f64..27.8,
+        v_l in 0.0f64..27.8,
+        extra in 1e-6f64..5.0,
+        steps in 1usize..1500,
+    ) {
+        let p = with_brake(b_f);
+        let (h, d0, len) = (p.h(), p.d0(), p.length());
+        let credit = leader_credit(&p, v_l, b_l);
+        // The follower's centre at 0, the leader's stamped centre ahead: the invariant
+        // holds with `extra` to spare.
+        let x0 = (d_s(&p, v_f) - credit).max(0.0) + extra + d0 + len;
+        let wall = x0 - len - d0 + credit;
+        let (mut xf, mut uf) = (0.0, v_f);
+        for k in 0..steps {
+            let ghost = x0 + ghost_advance(&p, v_l, b_l, k as f64 * h);
+            prop_assert!(
+                ghost - len - xf > d0 - 1e-9,
+                "step {k}: ghost {ghost}, follower {xf}: gap {} ≤ d0", ghost - len - xf
+            );
+            // The fastest speed for the next period that keeps x + h u + dS(u) ≤ wall.
+            let mut next = (uf + p.a_max() * h).min(p.v_max());
+            let brake = (uf - b_f * h).max(0.0);
+            for _ in 0..60 {
+                if xf + h * next + d_s(&p, next) <= wall || next <= brake {
+                    break;
+                }
+                next = (next - 0.05).max(brake);
+            }
+            uf = next;
+            xf += uf * h;
         }
     }
 }
@@ -201,6 +283,40 @@ fn a_vehicle_not_ahead_of_the_front_is_not_credited() {
     assert!(gap_to(&mut aware, ahead) > 0.01 + 1.0);
 }
 
+/// The red team's case: a leader goes silent (or its later words are refused) while its
+/// follower is close behind on the credit; the follower passes the leader's stamped
+/// centre. Judged by that stamp the leader would be behind it and dropped — no wall at all
+/// — so it is judged by its ghost, and keeps its credit and its wall.
+#[test]
+fn a_silent_leader_whose_stamp_the_follower_passed_keeps_its_credit() {
+    use planner_core::{BrakeLimit, CostWeights, Invariant, Planner, Vehicle};
+    let p = Params::<f64>::table_i();
+    let mut aware = Planner::<f64, 20>::new(p, CostWeights::default()).expect("valid");
+    aware.set_invariant(Invariant::LeaderAware);
+    let stamped = Vehicle {
+        v: 12.0,
+        brake: BrakeLimit::from_mps2(7.9),
+        ..Vehicle::wall(-1.0, 4.5)
+    };
+    let raw = -1.0 - 4.5 - p.d0();
+    let silent = Vehicle {
+        age: 2.0,
+        ..stamped
+    };
+    let credited = raw + leader_credit(&p, 12.0, 7.9);
+    assert!(credited > 0.5, "{credited}");
+    assert!((gap_to(&mut aware, silent) - credited).abs() < 1e-12);
+    // Heard this period at that place, it is a vehicle beside or behind: no obstacle.
+    let free = planner_core::planner::free_road_gap(&p, 20);
+    assert!((gap_to(&mut aware, stamped) - free).abs() < 1e-12);
+    // A wall (no limit) is judged where it stands, however old.
+    let wall = Vehicle {
+        age: 2.0,
+        ..Vehicle::wall(-1.0, 4.5)
+    };
+    assert!((gap_to(&mut aware, wall) - free).abs() < 1e-12);
+}
+
 #[test]
 fn a_speed_that_is_not_a_number_is_refused() {
     use planner_core::{BrakeLimit, CostWeights, InputError, Observation, Planner, Vehicle};
@@ -228,9 +344,9 @@ fn a_speed_that_is_not_a_number_is_refused() {
 }
 
 #[test]
-fn the_view_hands_over_a_limit_only_for_a_fresh_cooperating_vehicle() {
+fn the_view_hands_over_the_limit_and_age_of_every_cooperating_vehicle() {
     use planner_core::heapless::Vec;
-    use planner_core::{BrakeLimit, Duration, Instant, VehicleState, WorldView};
+    use planner_core::{BrakeLimit, Instant, VehicleState, WorldView};
     let t = |ms| Instant::from_millis(ms);
     let state = |id, stamp, cooperative, brake| VehicleState {
         id,
@@ -252,13 +368,13 @@ fn the_view_hands_over_a_limit_only_for_a_fresh_cooperating_vehicle() {
         state(1, 1_000, true, b),    // fresh, cooperating, declared: credited
         state(2, 1_000, false, b),   // not cooperating
         state(3, 1_000, true, None), // no limit declared
-        state(4, 500, true, b),      // exactly as old as allowed: credited
-        state(5, 499, true, b),      // older
+        state(4, 500, true, b),      // half a second old: credited, with its age
+        state(5, 1, true, b),        // silent for a second: still credited
     ] {
         view.update(&s, t(1_000)).expect("taken");
     }
     let mut out = Vec::new();
-    view.lane_leaders(0, 4.5, t(1_000), Duration::from_millis(500), &mut out);
+    view.lane_leaders(0, 4.5, t(1_000), &mut out);
     let brake_of = |id: usize| out[id - 1].brake;
     assert_eq!(
         [
@@ -268,8 +384,10 @@ fn the_view_hands_over_a_limit_only_for_a_fresh_cooperating_vehicle() {
             brake_of(4),
             brake_of(5)
         ],
-        [b, None, None, b, None]
+        [b, None, None, b, b]
     );
+    let ages: std::vec::Vec<f64> = out.iter().map(|c| c.age).collect();
+    assert_eq!(ages, [0.0, 0.0, 0.0, 0.5, 0.999]);
     assert!(out
         .iter()
         .all(|c| c.v == 12.0 && c.x == 50.0 && c.length == 4.5));
@@ -277,6 +395,6 @@ fn the_view_hands_over_a_limit_only_for_a_fresh_cooperating_vehicle() {
     view.lane_vehicles(0, 4.5, &mut out);
     assert!(out.iter().all(|c| c.brake.is_none()));
     // Another lane's vehicles are not handed over.
-    view.lane_leaders(1, 4.5, t(1_000), Duration::from_millis(500), &mut out);
+    view.lane_leaders(1, 4.5, t(1_000), &mut out);
     assert!(out.is_empty());
 }

@@ -95,7 +95,10 @@ impl Record {
     }
 
     /// Marks the record's vehicle as one that does not cooperate (a state; a crossing
-    /// report carries no such flag).
+    /// report carries no such flag). Its braking limit stays: it came in a message that
+    /// was trusted, from a vehicle that cooperated then, so the stopping point that
+    /// message bounds stays valid — and a follower that came close on that bound must
+    /// not lose it now (docs/spec.md §11, "A credit is never withdrawn").
     fn distrusted(mut self) -> Self {
         if let Record::Lane { state, .. } = &mut self {
             state.cooperative = false;
@@ -306,7 +309,8 @@ impl View {
     /// a few periods after the jump), not its `Left` or `Gone` (which would make the
     /// others forget it). Its last trusted record stays, ageing, and marked as a vehicle
     /// that does not cooperate, so the planners take it at the worst case reachable from
-    /// there: a vehicle ahead no further on than that position (v ≥ 0), one behind
+    /// there: a vehicle ahead no further on than its ghost from that position (v ≥ 0 and
+    /// its declared limit; the credit a leader-aware follower gave it stays), one behind
     /// inflated at amax for the age, and no lane change starting in front of it (stale
     /// data). Safety never rests on its word again; what that costs in liveness, the
     /// attack experiment reports.
@@ -320,6 +324,9 @@ impl View {
                 if !f.iter().all(|x| x.is_finite()) || state.v < 0.0 {
                     return Err(Reject::Invalid);
                 }
+                // Only a cooperating vehicle's limit bounds where it can stop.
+                let brake = state.brake.filter(|_| state.cooperative);
+                let state = VehicleState { brake, ..state };
                 Record::Lane { state, segment }
             }
             Message::Crossing {

@@ -3,7 +3,7 @@
 //! cooperating leader is credited under the leader-aware invariant; vehicles behind in
 //! a target lane, fused from V2V and the range sensors, for the start check (17).
 
-use super::{round_to, LaneObservation, LanePlanner, StartBlock, STALE_AFTER_S};
+use super::{round_to, LaneObservation, LanePlanner, StartBlock};
 use crate::lanes::{in_front_set, in_yield_set, may_occupy, Key, Other};
 use crate::params::Params;
 use crate::real::Real;
@@ -143,15 +143,30 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// What a vehicle ahead at wall distance `raw` is credited with under the
     /// leader-aware invariant: the least distance it still travels from its stamped
     /// speed (the speed taken half a bus step lower, as the bus may have rounded it up),
-    /// if it is known over V2V, cooperates, declared its braking limit, was heard
-    /// recently enough, and is ahead (`raw` > 0: a vehicle beside or behind the ego's
-    /// front is no leader, and its stop point says nothing about the ego's way to it).
+    /// if it is known over V2V with a braking limit (one a cooperating vehicle declared,
+    /// from its last trusted message: [`Other::brake`]) and it leads ([`safety::leads`]
+    /// with its [`LanePlanner::ghost`]: a vehicle beside or behind the ego's front is no
+    /// leader, and its stop point says nothing about the ego's way to it). However old
+    /// the message: the bound stays valid, and a follower that used it may be past the
+    /// stamped position by now (docs/spec.md §11, "A credit is never withdrawn").
     pub(super) fn credit(&self, c: &Other<F>, raw: F) -> F {
         let p = self.params();
-        let fresh = c.age <= self.notify.max(F::from_f64(STALE_AFTER_S));
         match c.brake {
-            Some(b) if !c.sensed && c.cooperative && fresh && raw > F::ZERO => {
+            Some(b) if !c.sensed && safety::leads(p, raw, self.ghost(c)) => {
                 safety::leader_credit(p, c.v - F::HALF * self.resolution.speed, b.mps2())
+            }
+            _ => F::ZERO,
+        }
+    }
+
+    /// Under the leader-aware invariant, how far past its stamped position a vehicle
+    /// that may be credited is at the least by now ([`safety::ghost_advance`]); 0 under
+    /// the paper's invariant, for sensor returns and for vehicles without a limit.
+    pub(super) fn ghost(&self, c: &Other<F>) -> F {
+        match c.brake {
+            Some(b) if self.invariant == Invariant::LeaderAware && !c.sensed => {
+                let v = c.v - F::HALF * self.resolution.speed;
+                safety::ghost_advance(self.params(), v, b.mps2(), c.age)
             }
             _ => F::ZERO,
         }
@@ -204,8 +219,14 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let mine = |j: u8| j == lane || Some(j) == alpha;
         // A return up to `e` behind the ego may be ahead of it.
         let e = self.errors().0;
+        // A vehicle that may be credited is ahead by its ghost: the least it has moved
+        // since its stamp (a leader this vehicle follows closely is past its old stamp).
         let ahead = |c: &Other<F>| Other {
-            x: if c.sensed { c.x + e } else { c.x },
+            x: if c.sensed {
+                c.x + e
+            } else {
+                c.x + self.ghost(c)
+            },
             ..*c
         };
         // (15). While changing into α, also whatever may be entering α unheard of.

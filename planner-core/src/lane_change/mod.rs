@@ -463,10 +463,11 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     }
 
     /// Chooses the invariant kept toward the vehicle ahead (default
-    /// [`Invariant::Paper`]). Under [`Invariant::LeaderAware`] a vehicle ahead that is
-    /// known over V2V, cooperates, declared its braking limit and was heard within the
-    /// notification bound or [`STALE_AFTER_S`], whichever is longer, is credited with the least
-    /// distance it still travels ([`safety::leader_credit`]); the lane-change checks
+    /// [`Invariant::Paper`]). Under [`Invariant::LeaderAware`] a vehicle that leads
+    /// ([`safety::leads`], judged by its ghost once its message is old) and whose
+    /// braking limit is known over V2V ([`crate::Other::brake`]) is credited with the
+    /// least distance it still travels ([`safety::leader_credit`]) from its last
+    /// message, however old (docs/spec.md §11, "A credit is never withdrawn"); the lane-change checks
     /// toward vehicles behind, yielding and road ends keep the paper's wall, which
     /// implies the leader-aware invariant (its wall is never farther).
     pub fn set_invariant(&mut self, invariant: Invariant) {

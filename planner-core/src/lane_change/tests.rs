@@ -108,19 +108,29 @@ fn a_cooperating_leader_is_credited_with_its_least_travel_and_nothing_else_is() 
     let free = crate::planner::free_road_gap(&p, 20);
     let want = (gap + safety::leader_credit(&p, v, p.brake())).min(free);
     assert!((aware.gap - want).abs() < 1e-9, "{} vs {want}", aware.gap);
-    // No credit for what is not a cooperating leader heard recently that declared
-    // its braking limit, nor for a vehicle whose rear is not ahead.
+    // No credit for what carries no braking limit over V2V (the views give none for a
+    // vehicle that does not cooperate), nor for a vehicle whose rear is not ahead.
     type Case = (&'static str, f64, fn(&mut Other<f64>));
-    let cases: [Case; 5] = [
+    let cases: [Case; 3] = [
         ("no limit declared", gap, |c| c.brake = None),
-        ("not cooperating", gap, |c| c.cooperative = false),
         ("a sensor return", gap, |c| c.sensed = true),
-        ("silent", gap, |c| c.age = 1.0),
         ("beside", -1.0, |_| {}),
     ];
     for (why, g, f) in cases {
         let c = follow(Invariant::LeaderAware, g, f);
         assert!(c.gap <= g + 1e-9, "{why}: gap {} > {g}", c.gap);
+    }
+    // A credit is never withdrawn: not when the leader falls silent, nor when its later
+    // words are refused (the view then marks it as not cooperating and keeps the limit
+    // of its last trusted message). The wall stays where its stamp puts it.
+    type Kept = (&'static str, fn(&mut Other<f64>));
+    let kept: [Kept; 2] = [
+        ("silent for a second", |c| c.age = 1.0),
+        ("distrusted since", |c| c.cooperative = false),
+    ];
+    for (why, f) in kept {
+        let c = follow(Invariant::LeaderAware, gap, f);
+        assert!((c.gap - want).abs() < 1e-9, "{why}: {} vs {want}", c.gap);
     }
     // A leader with a weaker brake is taken to brake at the follower's limit: its
     // stop is placed earlier than it can be, never later (what makes comparing
