@@ -60,8 +60,8 @@
 //! <!-- resources: begin (firmware-example/resources.py) -->
 //! | N | `size_of` `Planner` | `size_of` `LanePlanner` | stack per call: approach | stack per call: lane change, both planners | peak stack, whole firmware | instructions per single-lane step, median / worst | per lane-change step, median / worst |
 //! |---|---|---|---|---|---|---|---|
-//! | 20 | 5,272 B | 8,780 B | 3,168 B | 3,744 B | 4,008 B | 50,730 / 330,550 | 197,515 / 203,290 |
-//! | 50 | 12,992 B | 16,620 B | 6,464 B | 7,592 B | 7,848 B | 125,470 / 1,050,480 | 255,030 / 701,335 |
+//! | 20 | 5,272 B | 8,780 B | 3,168 B | 3,744 B | 4,008 B | 50,765 / 330,585 | 197,535 / 203,325 |
+//! | 50 | 12,992 B | 16,620 B | 6,464 B | 7,568 B | 7,824 B | 125,505 / 1,050,515 | 255,050 / 701,355 |
 //! <!-- resources: end -->
 
 use crate::mpc::CostWeights;
