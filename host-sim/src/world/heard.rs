@@ -476,7 +476,12 @@ impl View {
                 } => match net.on_segment(junction, report.route, report.s) {
                     Some((sg, x, lane)) if sg == seg => {
                         let age = now.since(stamp).as_secs();
-                        Other::v2v(report.id, x, report.v, length, lane, age)
+                        // A crossing vehicle is driven by its planner: its declared
+                        // limit bounds its stop as on a lane.
+                        Other {
+                            brake: report.brake,
+                            ..Other::v2v(report.id, x, report.v, length, lane, age)
+                        }
                     }
                     _ => continue,
                 },
@@ -502,13 +507,20 @@ impl View {
         })
     }
 
-    /// The positions along junction `j`'s route `route` of the vehicles heard of on the
-    /// segments that carry its inlet or outlet in its lane or changing into it (states),
-    /// and of those crossing
-    /// the next junction whose inlet is that outlet's segment (reports); reports at `j`
-    /// itself are the crossing planner's own business.
-    pub fn on_path(&self, net: &Network, j: usize, route: u8) -> Vec<f64> {
-        let mut out = Vec::new();
+    /// The vehicles along junction `j`'s route `route` heard of on the segments that
+    /// carry its inlet or outlet, in its lane or changing into it (states), and of those
+    /// crossing the next junction whose inlet is that outlet's segment (reports); reports
+    /// at `j` itself are the crossing planner's own business.
+    ///
+    /// Those whose braking limit is known (a cooperating vehicle in the lane, a planner
+    /// crossing the next junction) come as reports on `route` itself, stamped as heard,
+    /// `length` long, so a leader-aware crossing planner credits them like any leader on
+    /// its path: a follower closed up on its leader by the credit keeps it when the
+    /// leader leaves the junction. The rest are positions, walls: vehicles changing into
+    /// the lane (an entering vehicle's check takes the follower at the paper's wall, so
+    /// it is not credited), and those that declared no limit.
+    pub fn on_path(&self, net: &Network, (j, route): (usize, u8), length: f64) -> OnPath {
+        let mut out = OnPath::default();
         for r in &self.records {
             match *r {
                 Record::Lane { state, segment } => {
@@ -518,20 +530,47 @@ impl View {
                     // drives this crossing planner, not a multi-lane one that would see
                     // the change itself (the grid at 500 veh/h: a follower
                     // leaving a junction closed in on a vehicle changing into its lane).
-                    for lane in core::iter::once(state.lane).chain(state.alpha) {
-                        if let Some(s) = net.on_route(segment, state.x, lane, j, route) {
-                            out.push(s);
-                        }
+                    let lane = net.on_route(segment, state.x, state.lane, j, route);
+                    let report = |s| CrossingReport {
+                        id: state.id,
+                        route,
+                        s,
+                        v: state.v,
+                        length,
+                        brake: state.brake,
+                    };
+                    match (lane, state.brake) {
+                        (Some(s), Some(_)) => out.leaders.push((report(s), state.stamp)),
+                        (Some(s), None) => out.walls.push(s),
+                        (None, _) => {}
                     }
+                    let entering = state
+                        .alpha
+                        .and_then(|a| net.on_route(segment, state.x, a, j, route));
+                    out.walls.extend(entering);
                 }
                 Record::Crossing {
-                    report, junction, ..
+                    report,
+                    junction,
+                    stamp,
                 } if junction != j => {
-                    if let Some(s) = net
+                    let Some(s) = net
                         .on_segment(junction, report.route, report.s)
                         .and_then(|(seg, x, lane)| net.on_route(seg, x, lane, j, route))
-                    {
-                        out.push(s);
+                    else {
+                        continue;
+                    };
+                    match report.brake {
+                        Some(_) => out.leaders.push((
+                            CrossingReport {
+                                route,
+                                s,
+                                length,
+                                ..report
+                            },
+                            stamp,
+                        )),
+                        None => out.walls.push(s),
                     }
                 }
                 Record::Crossing { .. } => {}
@@ -539,6 +578,16 @@ impl View {
         }
         out
     }
+}
+
+/// What a crossing planner hears of the vehicles on its path from other frames
+/// ([`View::on_path`]).
+#[derive(Debug, Default)]
+pub struct OnPath {
+    /// Positions along the path of vehicles taken as walls.
+    pub walls: Vec<f64>,
+    /// Vehicles whose braking limit is known, as reports on the path, with their stamps.
+    pub leaders: Vec<(CrossingReport<f64>, Instant)>,
 }
 
 /// The distance (m) between two points: a square root of squares, not `hypot` (which

@@ -745,16 +745,16 @@ impl<const N: usize> Vehicle<N> {
         if b.crossing.is_none() {
             b.crossing = Some(b.crossing_planner((self.id, route), layout, v_limit));
         }
-        let mapped = b.view.on_path(ctx.net, junction, route);
+        let on_path = b.view.on_path(ctx.net, (junction, route), LENGTH_M);
         let Some(c) = b.crossing.as_mut() else {
             return self.fallback(ctx, counters);
         };
         // Its view of the junction, as it stands this period.
         c.clear_reports();
-        for (report, stamp) in b.view.reports_at(junction) {
+        for (report, stamp) in b.view.reports_at(junction).chain(on_path.leaders) {
             c.hear_report(&report, stamp);
         }
-        c.hear_paths(&ctx.returns.on_path, &mapped);
+        c.hear_paths(&ctx.returns.on_path, &on_path.walls);
         let permitted = c.permitted(layout, s, ctx.now);
         self.granted = Some(permitted);
         counters.planner_steps += 1;
