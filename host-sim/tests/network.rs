@@ -188,19 +188,51 @@ fn a_vehicle_changing_into_an_outlets_lane_is_on_the_crossing_followers_path() {
         )
         .expect("taken")
     };
+    let on = |view: &View| view.on_path(&net, (j, route), 4.5);
     heard(&mut view, state(7, 0, None));
+    let o = on(&view);
     assert!(
-        view.on_path(&net, j, route).is_empty(),
+        o.walls.is_empty() && o.leaders.is_empty(),
         "lane 0, staying there"
     );
     heard(&mut view, state(8, 0, Some(1)));
-    assert_eq!(
-        view.on_path(&net, j, route),
-        [exit + 20.0],
-        "changing into lane 1"
-    );
+    assert_eq!(on(&view).walls, [exit + 20.0], "changing into lane 1");
     heard(&mut view, state(9, 1, None));
-    assert_eq!(view.on_path(&net, j, route).len(), 2, "and one in lane 1");
+    assert_eq!(on(&view).walls.len(), 2, "and one in lane 1");
+    // One in lane 1 that declared its braking limit comes as a report on the route, so a
+    // leader-aware crossing planner may credit it; one changing in with a limit is still
+    // a wall (an entering vehicle is not credited).
+    let brake = planner_core::BrakeLimit::from_mps2(7.9);
+    heard(
+        &mut view,
+        VehicleState {
+            brake,
+            ..state(10, 1, None)
+        },
+    );
+    heard(
+        &mut view,
+        VehicleState {
+            brake,
+            ..state(11, 0, Some(1))
+        },
+    );
+    let o = on(&view);
+    assert_eq!(o.walls.len(), 3, "{o:?}");
+    let [(report, stamp)] = o.leaders.as_slice() else {
+        panic!("one leader: {o:?}");
+    };
+    assert_eq!(
+        (
+            report.id,
+            report.route,
+            report.s,
+            report.v,
+            report.brake,
+            *stamp
+        ),
+        (10, route, exit + 20.0, 10.0, brake, common::secs(1.0))
+    );
 }
 
 /// Layouts that cannot be run safely are refused at load, naming the line: two
