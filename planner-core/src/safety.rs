@@ -230,15 +230,19 @@ pub fn leader_credit<F: Real>(p: &Params<F>, v_leader: F, leader_brake: F) -> F 
 /// A speed, limit or age that is not positive gives 0; the count of periods is capped
 /// at the number in which the speed reaches 0, so the sum has a closed form and no loop.
 pub fn ghost_advance<F: Real>(p: &Params<F>, v: F, brake: F, age: F) -> F {
-    let h = p.h();
-    if !(v > F::ZERO && brake > F::ZERO && age > F::ZERO && h > F::ZERO) {
+    if !(brake > F::ZERO) {
         return F::ZERO;
     }
-    // Whole periods since the stamp, and those in which v − b k h is still positive
-    // (float → integer casts saturate, and NaN is excluded above).
+    // Whole periods since the stamp, and those in which v − b k h is still positive: a
+    // negative or NaN age or speed counts none (float → integer casts saturate, NaN → 0).
+    let h = p.h();
     let elapsed = (age / h).to_f64() as u64;
     let moving = (v / (brake * h)).to_f64() as u64;
-    let k = F::from_f64(elapsed.min(moving) as f64);
+    let k = elapsed.min(moving);
+    if k == 0 {
+        return F::ZERO;
+    }
+    let k = F::from_f64(k as f64);
     (h * (v * k - F::HALF * brake * h * k * (k + F::ONE))).max(F::ZERO)
 }
 
@@ -278,6 +282,48 @@ mod tests {
 
     fn p() -> Params<f64> {
         Params::table_i()
+    }
+
+    /// The ghost by hand, and what it makes of values that are not positive.
+    #[test]
+    fn the_ghost_by_hand_and_at_the_edges() {
+        let p = p();
+        // 10 m/s braking at 5: after 0.025 s two whole periods, 0.01 (9.95 + 9.9) m.
+        let two = ghost_advance(&p, 10.0, 5.0, 0.025);
+        assert!((two - 0.1985).abs() < 1e-12, "{two}");
+        // Long after it stopped: the whole sum, h Σ_{k=1}^{199} (10 − 0.05 k) = 9.95 m.
+        let all = ghost_advance(&p, 10.0, 5.0, 1e6);
+        assert!((all - 9.95).abs() < 1e-9, "{all}");
+        // Less than a period, no speed, no limit, a limit or an age that is not a number:
+        // nothing is known to have been covered.
+        for (v, b, age) in [
+            (10.0, 5.0, 0.009),
+            (0.0, 5.0, 1.0),
+            (-3.0, 5.0, 1.0),
+            (f64::NAN, 5.0, 1.0),
+            (10.0, 0.0, 1.0),
+            (10.0, -5.0, 1.0),
+            (10.0, f64::NAN, 1.0),
+            (10.0, 5.0, -1.0),
+            (10.0, 5.0, f64::NAN),
+        ] {
+            assert_eq!(ghost_advance(&p, v, b, age), 0.0, "{v} {b} {age}");
+        }
+    }
+
+    /// `leads`: a fresh stamp by its wall alone; an old one by its ghost's rear.
+    #[test]
+    fn who_leads() {
+        let p = p();
+        let d0 = p.d0();
+        assert!(leads(&p, 0.01, 0.0));
+        assert!(!leads(&p, 0.0, 0.0), "level with the wall, fresh: beside");
+        assert!(!leads(&p, -0.01, 0.0));
+        // An old stamp: its ghost's rear (wall + ghost + d0) ahead of the front.
+        assert!(leads(&p, -3.0, 3.0 - d0 + 0.01));
+        assert!(!leads(&p, -3.0, 3.0 - d0 - 0.01));
+        assert!(!leads(&p, -3.0, 3.0 - d0), "rear level with the front");
+        assert!(leads(&p, 0.5, 1.0), "either way");
     }
 
     #[test]
