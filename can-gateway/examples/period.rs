@@ -65,6 +65,7 @@ impl Car {
             stamp,
             cooperative: true,
             brake: BrakeLimit::from_mps2(7.9f32),
+            length: None,
         }
     }
 }
@@ -217,6 +218,7 @@ fn main() -> std::process::ExitCode {
             stamp: now,
             cooperative: true,
             brake: BrakeLimit::from_mps2(7.9f32),
+            length: None,
         };
         match encode::<f32, PlainFrame>(&Message::State(own), EGO as u8, (k % 16) as u8) {
             Ok(frames) => tally.frames_out += frames.len() as u32,

@@ -39,6 +39,8 @@ pub struct StateFields {
     pub stamp: Field,
     /// Braking limit, 0.1 m/s² (u8, 0 = not declared).
     pub brake: Field,
+    /// Length, 0.1 m (u8, 0 = not declared).
+    pub length: Field,
     /// The segment (u16; empty for [`STATE`]).
     pub segment: Field,
     /// Bytes the fields cover.
@@ -46,7 +48,8 @@ pub struct StateFields {
 }
 
 /// A vehicle state (kind 1): id, x, lanes | y, heading, speed, β and flags | yaw rate,
-/// stamp, braking limit | reserved, CRC.
+/// stamp, braking limit | length, reserved, CRC. The length took frame 3's first
+/// reserved byte: 0, as an older sender wrote it, reads "not declared".
 pub const STATE: StateFields = StateFields {
     id: 0..2,
     x: 2..6,
@@ -59,12 +62,14 @@ pub const STATE: StateFields = StateFields {
     stamp: 16..20,
     brake: 20..21,
     segment: 0..0,
-    len: 21,
+    length: 21..22,
+    len: 22,
 };
 
 /// A vehicle state on a segment (kind 7): id, segment, lanes, β and flags, braking limit
-/// | x, y, reserved | heading, speed, yaw rate, reserved | stamp, CRC. The braking limit
-/// took frame 0's reserved byte: 0, as an older sender wrote it, reads "not declared".
+/// | x, y, length | heading, speed, yaw rate, reserved | stamp, CRC. The braking limit
+/// took frame 0's reserved byte, the length frame 1's: 0, as an older sender wrote
+/// them, reads "not declared".
 pub const LOCATED: StateFields = StateFields {
     id: 0..2,
     segment: 2..4,
@@ -73,6 +78,7 @@ pub const LOCATED: StateFields = StateFields {
     brake: 6..7,
     x: 7..11,
     y: 11..13,
+    length: 13..14,
     heading: 14..16,
     speed: 16..18,
     yaw: 18..20,
@@ -214,7 +220,7 @@ mod tests {
         use MessageKind as K;
         let (s, l) = (STATE, LOCATED);
         let mut out = heapless::Vec::new();
-        let rows: [Row; 21] = [
+        let rows: [Row; 23] = [
             (K::State, "id", s.id),
             (K::State, "x", s.x),
             (K::State, "lanes", s.lanes),
@@ -225,11 +231,13 @@ mod tests {
             (K::State, "yaw", s.yaw),
             (K::State, "stamp", s.stamp),
             (K::State, "brake", s.brake),
+            (K::State, "length", s.length),
             (K::Located, "id", l.id),
             (K::Located, "segment", l.segment),
             (K::Located, "lanes", l.lanes),
             (K::Located, "beta_flags", l.beta_flags),
             (K::Located, "brake", l.brake),
+            (K::Located, "length", l.length),
             (K::Located, "x", l.x),
             (K::Located, "y", l.y),
             (K::Located, "heading", l.heading),
@@ -269,7 +277,7 @@ mod tests {
 
     #[test]
     fn no_field_straddles_a_frame_and_the_crc_stays_clear() {
-        assert_eq!(all().len(), 41);
+        assert_eq!(all().len(), 43);
         for (kind, name, f) in all() {
             assert!(!f.is_empty(), "{kind:?}.{name}");
             assert_eq!(
@@ -305,13 +313,9 @@ mod tests {
             }
             let last = used.iter().rposition(|u| *u).map_or(0, |i| i + 1);
             assert_eq!(last, len, "{kind:?}");
-            // Only the located state has gaps (reserved bytes 13 and 20).
+            // Only the located state has a gap (reserved byte 20).
             let gaps = used[..len].iter().filter(|u| !**u).count();
-            assert_eq!(
-                gaps,
-                if kind == MessageKind::Located { 2 } else { 0 },
-                "{kind:?}"
-            );
+            assert_eq!(gaps, usize::from(kind == MessageKind::Located), "{kind:?}");
         }
     }
 }

@@ -9,7 +9,7 @@
 use can_gateway::log::candump_line;
 use can_gateway::wire::{Request, TrackWire, CLOCK_ADDRESS, MANAGER_ADDRESS};
 use can_gateway::{encode, Frames, Instant, Message};
-use planner_core::{BrakeLimit, VehicleState};
+use planner_core::{BodyLength, BrakeLimit, VehicleState};
 
 /// `ms` milliseconds after the epoch.
 fn ms(ms: u64) -> Instant {
@@ -139,6 +139,7 @@ fn cantools_decodes_the_gateways_candump_log() {
             cooperative: i != 1,
             // Not declared, a truck's, a car's.
             brake: [None, BrakeLimit::from_mps2(4.5), BrakeLimit::from_mps2(7.9)][i],
+            length: [None, BodyLength::from_m(16.5), BodyLength::from_m(4.5)][i],
         };
         let frames: Frames<F8> = encode(&Message::State(s), s.id as u8, i as u8).expect("encodes");
         let deg = 180.0 / std::f64::consts::PI;
@@ -167,7 +168,10 @@ fn cantools_decodes_the_gateways_candump_log() {
                     ("BrakeLimit", s.brake.map_or(0.0, |b| b.mps2())),
                     ("FrameIndex", 2.0),
                 ],
-                vec![("FrameIndex", 3.0)],
+                vec![
+                    ("Length", s.length.map_or(0.0, |l| l.m())),
+                    ("FrameIndex", 3.0),
+                ],
             ],
             &mut log,
             &mut expected,
@@ -258,6 +262,7 @@ fn cantools_decodes_the_gateways_candump_log() {
         stamp: ms(42_125),
         cooperative: false,
         brake: planner_core::BrakeLimit::from_mps2(4.5),
+        length: planner_core::BodyLength::from_m(16.5),
     };
     let deg = 180.0 / std::f64::consts::PI;
     let frames: Frames<F8> = encode(
@@ -281,7 +286,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                 ("NotCooperative", 1.0),
                 ("BrakeLimit", 4.5),
             ],
-            vec![("X", st.x), ("Y", st.y)],
+            vec![("X", st.x), ("Y", st.y), ("Length", 16.5)],
             vec![
                 ("Heading", st.theta * deg),
                 ("Speed", st.v),

@@ -7,7 +7,7 @@ use can_gateway::wire::{
 };
 use can_gateway::{encode, Frames, Instant, Message, Reassembler};
 use embedded_can::{ExtendedId, Frame, Id, StandardId};
-use planner_core::VehicleState;
+use planner_core::{BodyLength, BrakeLimit, VehicleState};
 use proptest::prelude::*;
 
 use can_gateway::PlainFrame as F8;
@@ -81,11 +81,13 @@ proptest! {
         skew_ms in -86_400_000i64..86_400_000,
         counter in 0u8..16,
         cooperative in any::<bool>(),
+        (brake, length) in (any::<u8>(), any::<u8>()),
     ) {
         // Any uptime; the receiver's clock within a day of the stamp either way.
         let stamp = Instant::from_millis(stamp_ms);
         let now = Instant::from_millis(stamp_ms.saturating_add_signed(skew_ms));
-        let s = VehicleState { id, x, y, theta, v, omega, lane, alpha, beta, stamp, cooperative, brake: None };
+        let s = VehicleState { id, x, y, theta, v, omega, lane, alpha, beta, stamp, cooperative,
+            brake: BrakeLimit::from_tenths(brake), length: BodyLength::from_tenths(length) };
         let frames: Frames<F8> = encode(&Message::State(s), (id & 0xFF) as u8, counter).expect("in range");
         prop_assert_eq!(frames.len(), MessageKind::State.frames());
         let mut r = Reassembler::<2>::new();
@@ -95,6 +97,8 @@ proptest! {
         }
         let Some(Message::State(d)) = got else { panic!("a state") };
         prop_assert_eq!((d.id, d.lane, d.alpha, d.beta, d.cooperative), (id, lane, alpha, beta, cooperative));
+        // The declared limit and length arrive exactly; 0 is "not declared" both ways.
+        prop_assert_eq!((d.brake, d.length), (s.brake, s.length));
         prop_assert!((d.x - x).abs() <= POS_RES / 2.0 + 1e-9);
         prop_assert!((d.y - y).abs() <= POS_RES / 2.0 + 1e-9);
         prop_assert!((d.theta - theta).abs() <= HEADING_RES / 2.0 + 1e-9);

@@ -58,6 +58,7 @@ fn fields() -> Vec<(MessageKind, &'static str, Field, &'static [&'static str])> 
             (k, p, f.yaw, &["YawRate"][..]),
             (k, p, f.stamp, &["Timestamp"][..]),
             (k, p, f.brake, &["BrakeLimit"][..]),
+            (k, p, f.length, &["Length"][..]),
         ];
         if !f.segment.is_empty() {
             v.push((k, p, f.segment, &["Segment"][..]));

@@ -20,6 +20,7 @@ fn state(id: u16) -> VehicleState<f32> {
         stamp: Instant::from_millis(1_000),
         cooperative: true,
         brake: None,
+        length: None,
     }
 }
 

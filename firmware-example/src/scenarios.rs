@@ -13,8 +13,8 @@ use can_gateway::{encode, Frames, Message, PlainFrame, Reassembler};
 use embedded_can::{nb::Can, ErrorKind};
 use planner_core::planner::Vehicle;
 use planner_core::{
-    BrakeLimit, Duration, FallbackReason, Instant, LaneEvent, LaneObservation, LanePlanner,
-    Observation, Other, Planner, Pose, Road, StepStatus, VehicleState, WorldView,
+    BodyLength, BrakeLimit, Duration, FallbackReason, Instant, LaneEvent, LaneObservation,
+    LanePlanner, Observation, Other, Planner, Pose, Road, StepStatus, VehicleState, WorldView,
 };
 
 /// What the firmware's clock reads at power-up: 60 days of uptime, so that every run
@@ -228,6 +228,7 @@ pub fn approach<const N: usize>(
             // A stopped car: whatever drives it, it is not a planner that yields.
             cooperative: false,
             brake: None,
+            length: None,
         };
         node.exchange(&[leader], (step % 16) as u8, t)?;
         node.view.lane_vehicles(0, 4.5, &mut node.ahead);
@@ -335,6 +336,7 @@ pub fn lane_change<const N: usize>(
             stamp: t,
             cooperative: true,
             brake: BrakeLimit::from_mps2(7.9f32),
+            length: BodyLength::from_m(4.5f32),
         };
         node.exchange(&[car], (step % 16) as u8, t)?;
         node.view.others(t, params.length(), &mut node.others);

@@ -41,6 +41,7 @@ fn state(k: u32) -> Message<f32> {
             .saturating_add(Duration::from_millis(10 * u64::from(k))),
         cooperative: true,
         brake: None,
+        length: None,
     })
 }
 

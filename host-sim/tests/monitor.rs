@@ -490,6 +490,7 @@ fn truth(id: u16, at: At, v: f64) -> VehicleTruth {
         unmet: true,
         target_lane: 0,
         leader_aware: false,
+        body: host_sim::world::Body::CAR,
     }
 }
 
@@ -742,13 +743,14 @@ fn a_leader_aware_follower_at_a_junction_is_judged_with_the_leaders_least_travel
     // The same follower under the paper's invariant: the wall.
     let cars = [leader(1), on(2, r, 60.0 - need - MM, 10.0)];
     assert_eq!(junction(&w, &cars).invariant_violations, 1);
-    // A follower that brakes softer than the leader is judged at the leader's limit.
+    // A follower that brakes softer than the leader is judged at the leader's limit for
+    // the credit, and at its own for its stopping distance.
     let soft = least_travel(10.0, 4.5, lim.h);
     let strong = OnRoute {
         brake: 9.0,
         ..on(1, r, 60.0, 10.0)
     };
-    let gap = LENGTH_M + lim.d0 + lim.safe_distance(10.0) - least_travel(10.0, 9.0, lim.h);
+    let gap = LENGTH_M + lim.d0 + lim.safe_distance_at(10.0, 4.5) - least_travel(10.0, 9.0, lim.h);
     let cars = [strong, aware(2, 60.0 - gap - MM, 10.0, 4.5)];
     assert_eq!(junction(&w, &cars).invariant_violations, 0, "{soft}");
     let cars = [strong, aware(2, 60.0 - gap + MM, 10.0, 4.5)];

@@ -172,6 +172,7 @@ fn a_vehicle_changing_into_an_outlets_lane_is_on_the_crossing_followers_path() {
         stamp: common::secs(1.0),
         cooperative: true,
         brake: None,
+        length: None,
     };
     let mut view = View::new(99, 1e9);
     let heard = |view: &mut View, s: VehicleState<f64>| {

@@ -89,7 +89,7 @@ pub use slot::{LanePlannerSlot, PlannerSlot, Slot};
 pub use solver::{IpmSolver, Method, MpcSolver, Settings, SettingsError, Solution, SolveError};
 pub use time::{Duration, Instant};
 pub use unicycle::Pose;
-pub use world::{VehicleState, WorldError, WorldView};
+pub use world::{BodyLength, VehicleState, WorldError, WorldView};
 
 /// The `heapless` this crate's API is written in ([`WorldView::others`] and
 /// [`WorldView::lane_vehicles`] fill a `heapless::Vec`): name it as

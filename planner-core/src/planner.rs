@@ -213,6 +213,8 @@ pub enum ConfigError {
     InvalidSensing,
     /// A [`ReusePolicy`] tolerance that is negative or not finite.
     InvalidReuse,
+    /// A braking limit that is not a positive finite number.
+    InvalidBrake,
 }
 
 /// The first sentence of each variant's documentation (and its data).
@@ -224,6 +226,7 @@ impl core::fmt::Display for ConfigError {
             Self::InvalidResolution => f.write_str("a bus resolution that is negative, not finite, or 1 or more"),
             Self::InvalidSensing => f.write_str("sensing values that are not finite, ranges below Sensing::min_range, or error bounds outside [0, 1)"),
             Self::InvalidReuse => f.write_str("a ReusePolicy tolerance that is negative or not finite"),
+            Self::InvalidBrake => f.write_str("a braking limit that is not a positive finite number"),
         }
     }
 }

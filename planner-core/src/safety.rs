@@ -34,6 +34,15 @@ pub fn d_s<F: Real>(p: &Params<F>, v: F) -> F {
     d_mb(p, v) + d_h(p, v)
 }
 
+/// dS(v) of (8) for a vehicle braking at `brake` (m/s², > 0) instead of |amin|:
+/// (v + brake h)² / (2 brake), the room a vehicle of another braking limit needs to stop
+/// reacting one period late — a truck behind a car that changes in front of it (17).
+#[inline]
+pub fn d_s_braking<F: Real>(p: &Params<F>, v: F, brake: F) -> F {
+    let w = v + brake * p.h();
+    w * w / (F::TWO * brake)
+}
+
 /// The per-step speed bounds of eqs. (3)(4) for the current step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

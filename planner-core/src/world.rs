@@ -41,6 +41,60 @@ pub struct VehicleState<F> {
     /// Its braking limit |amin| (m/s²), if it declares one: what a follower keeping the
     /// leader-aware invariant ([`crate::safety::Invariant::LeaderAware`]) credits it with.
     pub brake: Option<crate::safety::BrakeLimit>,
+    /// Its length (m), if it declares one; a receiver takes a vehicle that declares
+    /// none at the length it assumes for every such vehicle (the longest it expects:
+    /// [`WorldView::others`]).
+    pub length: Option<BodyLength>,
+}
+
+/// A vehicle's length as it declares it over V2V: in steps of 0.1 m, from 0.1 to 25.5 m
+/// (a 16.5 m articulated truck fits) — one byte, as a CAN signal carries it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BodyLength(u8);
+
+impl BodyLength {
+    /// The step (m).
+    pub const STEP_M: f64 = 0.1;
+
+    /// `l` m rounded *up* to the next step (within 1e-4 m, so that 4.5 in f32 stays
+    /// 4.5): a vehicle taken longer than it is only keeps more room. `None` unless
+    /// 0 < l ≤ 25.5 m.
+    pub fn from_m<F: Real>(l: F) -> Option<Self> {
+        let tenths = l.to_f64() / Self::STEP_M;
+        if !(tenths > 0.0 && tenths <= 255.0 + 1e-3) {
+            return None;
+        }
+        // Truncation toward zero, then up unless already (all but) on a step.
+        let down = tenths as u32;
+        let up = if tenths - f64::from(down) > 1e-3 {
+            down + 1
+        } else {
+            down
+        };
+        u8::try_from(up).ok().filter(|&t| t > 0).map(Self)
+    }
+
+    /// From its wire value, tenths of a metre; `None` for 0 (no length declared).
+    pub fn from_tenths(tenths: u8) -> Option<Self> {
+        (tenths > 0).then_some(Self(tenths))
+    }
+
+    /// Its wire value, tenths of a metre (1–255).
+    pub fn tenths(self) -> u8 {
+        self.0
+    }
+
+    /// In metres.
+    pub fn m<F: Real>(self) -> F {
+        F::from_f64(f64::from(self.0) * Self::STEP_M)
+    }
+}
+
+/// The length (m) a receiver takes the sender of `s` at: its declared length, else
+/// `undeclared`.
+fn length_of<F: Real>(s: &VehicleState<F>, undeclared: F) -> F {
+    s.length.map_or(undeclared, BodyLength::m)
 }
 
 impl<F> VehicleState<F> {
@@ -60,6 +114,7 @@ impl<F> VehicleState<F> {
             stamp: self.stamp,
             cooperative: self.cooperative,
             brake: self.brake,
+            length: self.length,
         }
     }
 }
@@ -120,7 +175,7 @@ pub struct Known<F> {
 /// let now = Instant::from_secs(60 * 86_400); // 60 days of uptime: integer time
 /// let car = VehicleState {
 ///     id: 1, x: 50.0, y: 1.8, theta: 0.0, v: 12.0, omega: 0.0, lane: 0,
-///     alpha: None, beta: None, stamp: now, cooperative: true, brake: None,
+///     alpha: None, beta: None, stamp: now, cooperative: true, brake: None, length: None,
 /// };
 /// view.update(&car, now)?;
 /// // The same stamp again is refused and changes nothing.
@@ -200,8 +255,8 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
         self.known.is_empty()
     }
 
-    /// Every tracked vehicle as the multi-lane planner wants it (all assumed `length`
-    /// long), with the age of its data at `now` (by its stamp), into `out` (cleared
+    /// Every tracked vehicle as the multi-lane planner wants it (its declared length, or
+    /// `length` if it declares none), with the age of its data at `now` (by its stamp), into `out` (cleared
     /// first; at most `CAP`).
     pub fn others(&self, now: Instant, length: F, out: &mut Vec<Other<F>, CAP>) {
         out.clear();
@@ -214,19 +269,26 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
                 cooperative: s.cooperative,
                 // Only a cooperating vehicle's limit bounds where it can stop.
                 brake: s.brake.filter(|_| s.cooperative),
-                ..Other::v2v(s.id, s.x, s.v, length, s.lane, now.since(s.stamp).as_secs())
+                ..Other::v2v(
+                    s.id,
+                    s.x,
+                    s.v,
+                    length_of(s, length),
+                    s.lane,
+                    now.since(s.stamp).as_secs(),
+                )
             });
         }
     }
 
-    /// The vehicles in `lane` (all assumed `length` long), as the single-lane planner
+    /// The vehicles in `lane` (each its declared length, or `length`), as the single-lane planner
     /// wants them, into `out` (cleared first; at most `CAP`): every one a wall (Lemma 3),
     /// whatever invariant the planner keeps.
     pub fn lane_vehicles(&self, lane: u8, length: F, out: &mut Vec<Vehicle<F>, CAP>) {
         out.clear();
         for k in self.known.iter().filter(|k| k.state.lane == lane) {
             // Cannot fail: `out` has the same capacity as `known`.
-            let _ = out.push(Vehicle::wall(k.state.x, length));
+            let _ = out.push(Vehicle::wall(k.state.x, length_of(&k.state, length)));
         }
     }
 
@@ -247,7 +309,7 @@ impl<F: Real, const CAP: usize> WorldView<F, CAP> {
                 v: s.v,
                 brake: s.brake.filter(|_| s.cooperative),
                 age: now.since(s.stamp).as_secs(),
-                ..Vehicle::wall(s.x, length)
+                ..Vehicle::wall(s.x, length_of(s, length))
             });
         }
     }
@@ -271,7 +333,43 @@ mod tests {
             stamp: Instant::from_millis(stamp_ms),
             cooperative: true,
             brake: None,
+            length: None,
         }
+    }
+
+    #[test]
+    fn a_declared_length_is_rounded_up_and_used_else_the_assumed_one() {
+        let t = |l: f64| BodyLength::from_m(l).map(BodyLength::tenths);
+        assert_eq!(t(4.5), Some(45));
+        assert_eq!(BodyLength::from_m(4.5f32).map(BodyLength::tenths), Some(45));
+        assert_eq!(t(16.51), Some(166));
+        assert_eq!(t(0.01), Some(1));
+        assert_eq!(t(25.5), Some(255));
+        for bad in [0.0, -1.0, 25.6, f64::NAN, f64::INFINITY] {
+            assert_eq!(t(bad), None, "{bad}");
+        }
+        assert_eq!(BodyLength::from_tenths(0), None);
+        assert_eq!(
+            BodyLength::from_tenths(165).map(|l| l.m::<f64>()),
+            Some(16.5)
+        );
+        let now = Instant::from_millis(0);
+        let mut w = WorldView::<f64, 4>::new(7);
+        let truck = VehicleState {
+            length: BodyLength::from_m(16.5),
+            ..msg(1, 50.0, 0)
+        };
+        w.update(&truck, now).expect("taken");
+        w.update(&msg(2, 80.0, 0), now).expect("taken");
+        let mut others = Vec::new();
+        w.others(now, 6.0, &mut others);
+        let lengths: [f64; 2] = [others[0].length, others[1].length];
+        assert_eq!(lengths, [16.5, 6.0]);
+        let mut lane = Vec::new();
+        w.lane_vehicles(0, 6.0, &mut lane);
+        assert_eq!([lane[0].length, lane[1].length], [16.5, 6.0]);
+        w.lane_leaders(0, 6.0, now, &mut lane);
+        assert_eq!([lane[0].length, lane[1].length], [16.5, 6.0]);
     }
 
     #[test]
@@ -333,6 +431,7 @@ mod tests {
                     stamp,
                     cooperative: true,
                     brake: None,
+                    length: None,
                 };
                 taken += usize::from(w.update(&s, now).is_ok());
                 w.others(now, F::from_f64(4.5), &mut others);

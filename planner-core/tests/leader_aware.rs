@@ -361,6 +361,7 @@ fn the_view_hands_over_the_limit_and_age_of_every_cooperating_vehicle() {
         stamp: t(stamp),
         cooperative,
         brake,
+        length: None,
     };
     let b = BrakeLimit::from_mps2(7.9);
     let mut view = WorldView::<f64, 8>::new(9);

@@ -75,6 +75,7 @@ fn a_state_carries_every_field() {
         stamp: Instant::from_micros(5_000_000),
         cooperative: false,
         brake: BrakeLimit::from_mps2(4.5f32),
+        length: None,
     };
     let wide = s.map(|x| f64::from(x) * 2.0);
     assert_eq!(

@@ -90,6 +90,7 @@ fn approach<F: Real>(start: Instant) -> (Vec<u64>, u32) {
             stamp: now,
             cooperative: false,
             brake: None,
+            length: None,
         };
         let frames: Frames<PlainFrame> =
             encode(&Message::State(leader), 1, (k % 16) as u8).expect("encodes");

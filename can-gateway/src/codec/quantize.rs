@@ -73,6 +73,8 @@ pub(super) struct StateWire {
     pub(super) stamp: u32,
     /// The braking limit in tenths of m/s² (0: not declared).
     pub(super) brake: u8,
+    /// The length in tenths of a metre (0: not declared).
+    pub(super) length: u8,
 }
 
 impl StateWire {
@@ -105,6 +107,7 @@ impl StateWire {
             beta_flags: lane_nibble(s.beta)? | flags,
             stamp: time(s.stamp),
             brake: s.brake.map_or(0, planner_core::BrakeLimit::tenths),
+            length: s.length.map_or(0, planner_core::BodyLength::tenths),
         })
     }
 
@@ -121,6 +124,7 @@ impl StateWire {
         put(b, f.yaw.clone(), &self.yaw.to_le_bytes());
         put(b, f.stamp.clone(), &self.stamp.to_le_bytes());
         put(b, f.brake.clone(), &[self.brake]);
+        put(b, f.length.clone(), &[self.length]);
         f.len
     }
 
@@ -136,6 +140,7 @@ impl StateWire {
             beta_flags: byte(b, f.beta_flags.clone()),
             stamp: u32::from_le_bytes(get(b, f.stamp.clone())),
             brake: byte(b, f.brake.clone()),
+            length: byte(b, f.length.clone()),
         };
         (wire, u16::from_le_bytes(get(b, f.id.clone())))
     }
@@ -177,6 +182,7 @@ impl StateWire {
             stamp: restore_millis(self.stamp, now),
             cooperative: self.beta_flags & NOT_COOPERATIVE == 0,
             brake: planner_core::BrakeLimit::from_tenths(self.brake),
+            length: planner_core::BodyLength::from_tenths(self.length),
         })
     }
 }

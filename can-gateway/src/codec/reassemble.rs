@@ -26,6 +26,7 @@ use planner_core::{Instant, Real};
 /// let state = VehicleState {
 ///     id: 7, x: 120.25f32, y: 1.8, theta: 0.0, v: 13.9, omega: 0.0, lane: 0,
 ///     alpha: None, beta: None, stamp: now, cooperative: true, brake: None,
+///     length: None,
 /// };
 /// // Source address 7, E2E counter 0.
 /// let frames: Frames<PlainFrame> = encode(&Message::State(state), 7, 0)?;

@@ -34,6 +34,7 @@ fn state() -> VehicleState<f64> {
         stamp: secs(12.34),
         cooperative: true,
         brake: None,
+        length: None,
     }
 }
 
@@ -908,6 +909,7 @@ mod mutation_audit {
             beta_flags: NO_LANE,
             stamp: 1,
             brake: 0,
+            length: 0,
         }
     }
 

@@ -102,6 +102,8 @@ pub fn case(seed: u64, index: u64) -> RoadScenario {
         back[usize::from(lane)] = Some(x);
         vehicles.push(RoadVehicle {
             cooperative: None,
+            length: None,
+            brake: None,
             id: i as u16 + 1,
             x,
             lane,

@@ -483,6 +483,8 @@ fn platoon(seed: u64) -> RoadScenario {
             },
             goal_x: None,
             v_ref: Some(v),
+            length: None,
+            brake: None,
             cooperative: None,
         })
         .collect();
@@ -530,6 +532,8 @@ fn non_cooperative(seed: u64) -> RoadScenario {
             script: Vec::new(),
             goal_x: None,
             v_ref: None,
+            length: None,
+            brake: None,
             cooperative: None,
         });
     }

@@ -24,6 +24,11 @@ pub fn is_paper(i: &Invariant) -> bool {
     *i == Invariant::Paper
 }
 
+/// For serde's `skip_serializing_if`: a count or percent left at 0.
+pub fn is_zero(n: &u8) -> bool {
+    *n == 0
+}
+
 /// `--solver ours|ours-interior-point|clarabel`.
 pub fn solver() -> impl TypedValueParser<Value = SolverChoice> {
     PossibleValuesParser::new(["ours", "ours-interior-point", "clarabel"]).map(|s| {

@@ -11,7 +11,7 @@ use crate::scenario::road::{commitment_bound, Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::summary::Summary;
-use crate::world::{SolverChoice, TraceRow, World, LENGTH_M, START_MARGIN_M};
+use crate::world::{Body, SolverChoice, TraceRow, World, LENGTH_M, START_MARGIN_M};
 use planner_core::Invariant;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -88,6 +88,19 @@ pub fn safe_spacing(v: f64) -> f64 {
     LENGTH_M + lim.d0 + lim.safe_distance(v) + START_MARGIN_M
 }
 
+/// [`safe_spacing`] for a follower of `body` at `v` behind a leader of `lead`: half of
+/// each length, d0, dS at the follower's own limit, the margin.
+pub fn spacing(v: f64, lead: Body, body: Body) -> f64 {
+    if lead == Body::CAR && body == Body::CAR {
+        return safe_spacing(v);
+    }
+    let lim = Limits::table_i();
+    0.5 * (lead.length + body.length)
+        + lim.d0
+        + lim.safe_distance_at(v, body.brake)
+        + START_MARGIN_M
+}
+
 /// The paper's multi-lane experiment (SPEC §8): 3 lanes, 2 vehicles per lane spaced by
 /// the smallest safe gap, all at v0 = 15 m/s, each with a random target lane.
 pub fn paper_scenario(seed: u64) -> RoadScenario {
@@ -98,6 +111,8 @@ pub fn paper_scenario(seed: u64) -> RoadScenario {
         for (i, x) in [spacing, 0.0].into_iter().enumerate() {
             vehicles.push(RoadVehicle {
                 cooperative: None,
+                length: None,
+                brake: None,
                 id: u16::from(lane) * 2 + i as u16 + 1,
                 x,
                 lane,
@@ -125,22 +140,38 @@ pub fn paper_scenario(seed: u64) -> RoadScenario {
 /// Random traffic for Theorem 2: 3–4 lanes, 5–`max_vehicles` planner-driven vehicles at
 /// random safe spacings and speeds, random reference speeds and random target lanes.
 pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> RoadScenario {
+    random_mixed_traffic(seed, max_vehicles, duration_s, 0)
+}
+
+/// [`random_traffic`] with `trucks_percent` of its vehicles trucks
+/// ([`crate::world::Body::TRUCK`]), each drawn at random; each follower starts at the
+/// smallest safe spacing behind its leader for both bodies and its own braking limit, or
+/// up to 30 m more. With 0 the cases are [`random_traffic`]'s as they always were (no
+/// draw is added).
+pub fn random_mixed_traffic(
+    seed: u64,
+    max_vehicles: usize,
+    duration_s: f64,
+    trucks_percent: u8,
+) -> RoadScenario {
     let lim = Limits::table_i();
     let mut rng = crate::reference::instances::rng(seed ^ 0x7468_656f_7265_6d32);
     let lanes: u8 = rng.random_range(3..=4);
     let n = rng.random_range(5..=max_vehicles.max(5));
-    // Per lane, the last placed vehicle (x, v): new ones go behind it.
-    let mut back: Vec<Option<(f64, f64)>> = vec![None; usize::from(lanes)];
+    // Per lane, the last placed vehicle (x, its body): new ones go behind it.
+    let mut back: Vec<Option<(f64, Body)>> = vec![None; usize::from(lanes)];
     let mut vehicles = Vec::with_capacity(n);
     for i in 0..n {
         let lane = rng.random_range(0..lanes);
         let v = rng.random_range(0.0..0.9 * lim.v_max);
+        let truck = trucks_percent > 0 && rng.random_range(0..100u8) < trucks_percent;
+        let body = if truck { Body::TRUCK } else { Body::CAR };
         let slot = &mut back[usize::from(lane)];
         let x = match *slot {
             None => rng.random_range(0.0..60.0),
-            Some((xl, _)) => xl - safe_spacing(v) - rng.random_range(0.0..30.0),
+            Some((xl, lead)) => xl - spacing(v, lead, body) - rng.random_range(0.0..30.0),
         };
-        *slot = Some((x, v));
+        *slot = Some((x, body));
         vehicles.push(RoadVehicle {
             cooperative: None,
             id: i as u16 + 1,
@@ -152,6 +183,8 @@ pub fn random_traffic(seed: u64, max_vehicles: usize, duration_s: f64) -> RoadSc
             script: Vec::new(),
             goal_x: None,
             v_ref: Some(rng.random_range(3.0..lim.v_max)),
+            length: truck.then_some(body.length),
+            brake: truck.then_some(body.brake),
         });
     }
     RoadScenario::new(

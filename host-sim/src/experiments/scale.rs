@@ -134,6 +134,8 @@ pub fn road(index: usize, n: usize, duration_s: f64, seed: u64) -> RoadScenario 
         }
         vehicles.push(RoadVehicle {
             cooperative: None,
+            length: None,
+            brake: None,
             id: i as u16 + 1,
             x,
             lane: 0,
@@ -181,6 +183,8 @@ pub fn traffic_road(index: usize, n: usize, duration_s: f64, seed: u64) -> RoadS
         *slot = x;
         vehicles.push(RoadVehicle {
             cooperative: None,
+            length: None,
+            brake: None,
             id: i as u16 + 1,
             x,
             lane,

@@ -14,7 +14,7 @@
 //! reused step by the Lagrangian-dual certificate ([`planner_core::reuse`]).
 
 use super::experiment::{duration_within, Experiment, RunError, SettingsError};
-use super::multilane::{random_traffic, run_world};
+use super::multilane::{random_mixed_traffic, run_world};
 use super::shard::{combine_all, MergeError};
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::summary::Summary;
@@ -53,6 +53,11 @@ pub struct Traffic {
     #[arg(long)]
     #[serde(default, skip_serializing_if = "core::ops::Not::not")]
     pub compare: bool,
+    /// Percent of the vehicles that are trucks (16.5 m, braking at 4.5 m/s²), drawn per
+    /// vehicle; 0 gives the cases as they always were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 /// What `traffic` reports: the sweep, or with `--compare` the comparison (each written
@@ -83,6 +88,7 @@ impl Experiment for Traffic {
         let planning = Planning {
             reuse: self.reuse,
             leader_aware: self.invariant == planner_core::Invariant::LeaderAware,
+            trucks_percent: self.trucks,
             ..Planning::DEFAULT
         };
         // Case i's seed is seed + i: it depends on the index alone.
@@ -160,6 +166,9 @@ pub struct Planning {
     /// the paper's.
     #[serde(default)]
     pub leader_aware: bool,
+    /// Percent of the vehicles that are trucks ([`crate::world::Body::TRUCK`]).
+    #[serde(default)]
+    pub trucks_percent: u8,
 }
 
 impl Planning {
@@ -168,12 +177,14 @@ impl Planning {
         solver: SolverChoice::Ours,
         reuse: false,
         leader_aware: false,
+        trucks_percent: 0,
     };
     /// The every-step baseline: the interior-point method alone, no reuse.
     pub const EVERY_STEP: Self = Self {
         solver: SolverChoice::OursInteriorPoint,
         reuse: false,
         leader_aware: false,
+        trucks_percent: 0,
     };
 }
 
@@ -251,7 +262,7 @@ impl TrafficReport {
 
 /// One case run to its end: its summary and the planners' counters.
 fn run_case(seed: u64, duration_s: f64, planning: Planning) -> (Summary, Counters) {
-    let mut spec = random_traffic(seed, 30, duration_s).world();
+    let mut spec = random_mixed_traffic(seed, 30, duration_s, planning.trucks_percent).world();
     if planning.leader_aware {
         spec.invariant = planner_core::Invariant::LeaderAware;
     }

@@ -85,6 +85,11 @@ impl<const N: usize> Harness<N> {
         }
     }
 
+    /// What its planners assume of vehicles that do not say.
+    fn fleet(&self) -> crate::world::Fleet {
+        crate::world::Fleet::of(self.spec.vehicles.iter().map(|v| v.body))
+    }
+
     pub(super) fn setup(&self) -> PlannerSetup {
         PlannerSetup {
             solver: self.solver,
@@ -94,8 +99,13 @@ impl<const N: usize> Harness<N> {
             sensing: self.spec.sensing,
             reuse: None,
             precision: self.spec.precision,
-            relevant_m: crate::world::heard::relevance_radius(&self.spec.network, self.lim.v_max),
+            relevant_m: crate::world::heard::relevance_radius(
+                &self.spec.network,
+                self.lim.v_max,
+                self.fleet(),
+            ),
             invariant: self.spec.invariant,
+            fleet: self.fleet(),
         }
     }
 

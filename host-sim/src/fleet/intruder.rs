@@ -194,7 +194,13 @@ impl<P: CanPort> Intruder<P> {
             Attack::ReplayedGrant | Attack::ReplayedState => self.replay(k)?,
             Attack::SpoofedId => {
                 for v in present {
-                    let claimed = announce(v.id, ahead(v.at), (v.v, 0.0), true, later(h / 2.0));
+                    let claimed = announce(
+                        (v.id, v.body),
+                        ahead(v.at),
+                        (v.v, 0.0),
+                        true,
+                        later(h / 2.0),
+                    );
                     let msg = map.to_wire(&claimed, now)?;
                     self.write(&msg, vehicle_address(v.id)?, now_ms)?;
                 }

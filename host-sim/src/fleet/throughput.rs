@@ -52,6 +52,7 @@ fn state(sa: u8, now: At) -> wire::Message<f64> {
         stamp: now,
         cooperative: true,
         brake: None,
+        length: None,
     })
 }
 

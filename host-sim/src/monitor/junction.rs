@@ -42,7 +42,7 @@ pub fn keeps_invariant(lim: &Limits, a: &OnRoute, b: &OnRoute, ahead: f64) -> bo
     } else {
         0.0
     };
-    room + credit > lim.safe_distance(a.v)
+    room + credit > lim.safe_distance_at(a.v, a.brake)
 }
 
 /// What a junction's monitor remembers: who was ever granted a permission.

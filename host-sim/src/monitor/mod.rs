@@ -52,8 +52,13 @@ impl Limits {
 
     /// dS(v) by the identity dS(v) = (v + |amin| h)² / (2|amin|).
     pub fn safe_distance(&self, v: f64) -> f64 {
-        let w = v + self.brake * self.h;
-        w * w / (2.0 * self.brake)
+        self.safe_distance_at(v, self.brake)
+    }
+
+    /// dS(v) for a vehicle braking at `brake` (m/s²): (v + brake h)² / (2 brake).
+    pub fn safe_distance_at(&self, v: f64, brake: f64) -> f64 {
+        let w = v + brake * self.h;
+        w * w / (2.0 * brake)
     }
 }
 

@@ -36,7 +36,8 @@ pub fn collisions(all: &[Truth]) -> u64 {
 }
 
 /// Whether follower `b`, `gap` (m, bumper to bumper) behind `a`, keeps its invariant
-/// toward it. Lemma 3's, extent-adjusted: x_f < x̄ − dS(v_{t−h}(f)). The leader-aware
+/// toward it. Lemma 3's, extent-adjusted: x_f < x̄ − dS(v_{t−h}(f)), dS at `b`'s own
+/// braking limit. The leader-aware
 /// one, when `b` keeps it and `a` is a cooperating vehicle: the same with x̄ moved ahead
 /// by the exact least distance `a` still travels braking at the larger of the two limits
 /// ([`least_travel`]) times cos θmax (along the road), and `b` behind `a` by more than
@@ -49,7 +50,7 @@ pub fn keeps_invariant(lim: &Limits, b: &Truth, a: &Truth, gap: f64) -> bool {
     } else {
         0.0
     };
-    room + credit > lim.safe_distance(b.v)
+    room + credit > lim.safe_distance_at(b.v, b.brake)
 }
 
 /// The least distance a vehicle of this plant (speed constant over each period) still
@@ -99,7 +100,7 @@ pub fn lanes(f: &mut Findings, lim: &Limits, all: &[Truth], end_x: Option<f64>, 
         }
         if let (Some(end), Some(c)) = (end_x, order.last()) {
             let room = end - c.x - 0.5 * c.length;
-            if c.keeps_invariant && room - lim.d0 <= lim.safe_distance(c.v) {
+            if c.keeps_invariant && room - lim.d0 <= lim.safe_distance_at(c.v, c.brake) {
                 f.invariant_violations += 1;
             }
         }
@@ -118,7 +119,7 @@ pub fn lanes(f: &mut Findings, lim: &Limits, all: &[Truth], end_x: Option<f64>, 
 }
 
 /// One vehicle's limits: heading within ±θmax of the road, speed in [0, vmax],
-/// acceleration in [amin, amax] (to [`LIMIT_TOL`]).
+/// acceleration in [−its own braking limit, amax] (to [`LIMIT_TOL`]).
 pub fn limits(f: &mut Findings, lim: &Limits, c: &Truth) {
     if c.theta.abs() > lim.theta_max + 1e-12 {
         f.limit_violations += 1;
@@ -127,7 +128,7 @@ pub fn limits(f: &mut Findings, lim: &Limits, c: &Truth) {
     if c.v < -LIMIT_TOL
         || c.v > lim.v_max + LIMIT_TOL
         || dv > lim.a_max * lim.h + LIMIT_TOL
-        || dv < -lim.brake * lim.h - LIMIT_TOL
+        || dv < -c.brake * lim.h - LIMIT_TOL
     {
         f.limit_violations += 1;
     }

@@ -583,6 +583,7 @@ pub fn placed(layout: &Layout<f64>, p: &Placement) -> VehicleSpec {
         driver: super::DriverKind::Planner,
         script: Vec::new(),
         cooperative: true,
+        body: crate::world::Body::CAR,
         trip: Trip {
             target_lane: r.map_or(0, |r| r.inlet.lane),
             goal_x: None,

@@ -821,6 +821,8 @@ pub fn change_distance(v: f64) -> f64 {
         driver: crate::scenario::DriverKind::Planner,
         script: Vec::new(),
         cooperative: None,
+        length: None,
+        brake: None,
         goal_x: None,
         v_ref: None,
     };
@@ -898,6 +900,7 @@ fn vehicle(
         driver: crate::scenario::DriverKind::Planner,
         script: Vec::new(),
         cooperative: true,
+        body: crate::world::Body::CAR,
         trip: Trip {
             target_lane: v.lane,
             goal_x: None,

@@ -32,11 +32,11 @@ use crate::monitor::Limits;
 use crate::world::at::At;
 use crate::world::network::Network;
 use crate::world::vehicle::Trip;
-use crate::world::{Arrivals, Finish, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M, WIDTH_M};
+use crate::world::{Arrivals, Body, Finish, WorldSpec, LANE_WIDTH_M, START_MARGIN_M, WIDTH_M};
 use planner_core::free_space::FreeSpace;
 use planner_core::lane_change::commitment_distance;
 use planner_core::lanes::Band;
-use planner_core::{Params, Pose};
+use planner_core::Pose;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::Path;
@@ -94,6 +94,12 @@ pub struct RoadVehicle {
     /// vehicle the others must not count on.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cooperative: Option<bool>,
+    /// Its length (m; default Table I's 4.5 m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length: Option<f64>,
+    /// Its braking limit |amin| (m/s²; default Table I's 7.9).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub brake: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -276,6 +282,33 @@ impl RoadScenario {
 }
 
 impl RoadVehicle {
+    /// Its body: Table I's car unless `length` or `brake` say otherwise.
+    pub fn body(&self) -> Body {
+        Body {
+            length: self.length.unwrap_or(Body::CAR.length),
+            brake: self.brake.unwrap_or(Body::CAR.brake),
+        }
+    }
+
+    /// A planner-driven car of Table I (the sweeps' vehicles), `id` at `x` in `lane` at
+    /// `v`; the rest as a file that gives only these keys.
+    pub fn car(id: u16, x: f64, lane: u8, v: f64) -> Self {
+        Self {
+            id,
+            x,
+            lane,
+            v,
+            target_lane: None,
+            driver: DriverKind::Planner,
+            script: Vec::new(),
+            goal_x: None,
+            v_ref: None,
+            cooperative: None,
+            length: None,
+            brake: None,
+        }
+    }
+
     /// The world's vehicle: on segment 0 at (x, centre of its lane), straight.
     pub fn spec(&self, v_max: f64) -> crate::world::VehicleSpec {
         crate::world::VehicleSpec {
@@ -301,6 +334,7 @@ impl RoadVehicle {
             cooperative: self
                 .cooperative
                 .unwrap_or(self.driver == DriverKind::Planner),
+            body: self.body(),
         }
     }
 }
@@ -346,6 +380,7 @@ fn check_vehicle(v: &RoadVehicle, road: &Road) -> Result<(), String> {
     if !(v.v >= 0.0 && v.v <= lim.v_max) {
         return Err(format!("v must be in [0, {}], got {}", lim.v_max, v.v));
     }
+    check_body(v, &lim)?;
     if v.lane >= road.lanes {
         return Err(format!(
             "lane {} does not exist (road has {})",
@@ -371,19 +406,52 @@ fn check_vehicle(v: &RoadVehicle, road: &Road) -> Result<(), String> {
     }
     check_script(v, &lim)?;
     let Some(end) = road.end_x else { return Ok(()) };
-    if v.x + 0.5 * LENGTH_M >= end {
+    let body = v.body();
+    if v.x + 0.5 * body.length >= end {
         return Err(format!("starts beyond the road end x = {end}"));
     }
-    let room = end - v.x - 0.5 * LENGTH_M - lim.d0;
-    if v.driver == DriverKind::Planner && !(room > lim.safe_distance(v.v) + START_MARGIN_M) {
+    let room = end - v.x - 0.5 * body.length - lim.d0;
+    let d_s = lim.safe_distance_at(v.v, body.brake);
+    if v.driver == DriverKind::Planner && !(room > d_s + START_MARGIN_M) {
         return Err(format!(
             "cannot stop before the road end: {room:.3} m of room, needs more than dS(v) = \
-             {:.3} m",
-            lim.safe_distance(v.v)
+             {d_s:.3} m"
         ));
     }
     Ok(())
 }
+
+/// A body within what the bus can say of it (a length of 25.5 m at most) and no
+/// stronger brakes than Table I's car (the fleet's bound on braking).
+fn check_body(v: &RoadVehicle, lim: &Limits) -> Result<(), String> {
+    if v.length
+        .is_some_and(|l| !(MIN_LENGTH_M..=MAX_LENGTH_M).contains(&l))
+    {
+        return Err(format!(
+            "length must be in [{MIN_LENGTH_M}, {MAX_LENGTH_M}] m (what a V2V state can \
+             declare)"
+        ));
+    }
+    if v.brake
+        .is_some_and(|b| !(b >= MIN_BRAKE_MPS2 && b <= lim.brake))
+    {
+        return Err(format!(
+            "brake must be in [{MIN_BRAKE_MPS2}, {}] m/s² (no vehicle brakes harder than \
+             Table I's car)",
+            lim.brake
+        ));
+    }
+    Ok(())
+}
+
+/// The shortest vehicle a scenario may have (m): shorter than a moped is an error.
+pub const MIN_LENGTH_M: f64 = 1.0;
+/// The longest (m): the largest length a V2V state declares
+/// ([`planner_core::BodyLength`]).
+pub const MAX_LENGTH_M: f64 = 25.5;
+/// The weakest braking limit a scenario may give (m/s²): below a loaded truck's on a
+/// wet road is an error.
+pub const MIN_BRAKE_MPS2: f64 = 1.0;
 
 /// A scripted driver has increasing phases within the acceleration limits; nobody else
 /// has a script.
@@ -402,8 +470,8 @@ fn check_script(v: &RoadVehicle, lim: &Limits) -> Result<(), String> {
         if !(p.until_s > last && p.until_s.is_finite()) {
             return Err("script phases need increasing until_s > 0".into());
         }
-        if !(p.accel >= -lim.brake && p.accel <= lim.a_max) {
-            let (lo, hi) = (-lim.brake, lim.a_max);
+        if !(p.accel >= -v.body().brake && p.accel <= lim.a_max) {
+            let (lo, hi) = (-v.body().brake, lim.a_max);
             return Err(format!("script accel {} outside [{lo}, {hi}]", p.accel));
         }
         last = p.until_s;
@@ -450,7 +518,6 @@ fn check_lanes(
     invariant: planner_core::Invariant,
 ) -> Result<(), (Range<usize>, String)> {
     let lim = Limits::table_i();
-    let p = Params::<f64>::table_i();
     for lane in 0..lanes {
         let mut in_lane: Vec<&(RoadVehicle, Range<usize>)> =
             vehicles.iter().filter(|(v, _)| v.lane == lane).collect();
@@ -458,7 +525,7 @@ fn check_lanes(
         for pair in in_lane.windows(2) {
             let (lead, (follow, span)) = (&pair[0].0, (&pair[1].0, &pair[1].1));
             let fail = |p: String| Err((span.clone(), p));
-            let gap = lead.x - follow.x - LENGTH_M;
+            let gap = lead.x - follow.x - 0.5 * (lead.body().length + follow.body().length);
             if gap <= 0.0 {
                 return fail(format!(
                     "vehicle {} overlaps vehicle {} in lane {lane}",
@@ -471,13 +538,15 @@ fn check_lanes(
                     follow.id, follow.driver, lead.id
                 ));
             }
+            let p = crate::world::vehicle::params(lim.v_max, follow.body());
             let credit = match invariant {
                 planner_core::Invariant::LeaderAware if lead.driver == DriverKind::Planner => {
-                    planner_core::safety::leader_credit(&p, lead.v, p.brake())
+                    planner_core::safety::leader_credit(&p, lead.v, lead.body().brake)
                 }
                 _ => 0.0,
             };
-            let need = lim.safe_distance(follow.v) + START_MARGIN_M - credit;
+            let need =
+                lim.safe_distance_at(follow.v, follow.body().brake) + START_MARGIN_M - credit;
             if !(gap - lim.d0 > need.max(START_MARGIN_M)) {
                 return fail(format!(
                     "vehicle {} violates the safety invariant behind vehicle {}: bumper gap \
@@ -501,8 +570,8 @@ pub fn commitment_bound(
     index: usize,
     v: f64,
 ) -> Option<f64> {
-    let p = Params::<f64>::table_i();
     let spec = vehicles.get(index)?;
+    let p = crate::world::vehicle::params(Limits::table_i().v_max, spec.body());
     let target = spec.target_lane.unwrap_or(spec.lane);
     let m = spec.lane.abs_diff(target);
     if m == 0 {
@@ -525,8 +594,8 @@ pub fn commitment_bound(
     let ahead = vehicles
         .iter()
         .filter(|o| o.x > spec.x && (o.lane == spec.lane || o.lane == next))
-        .map(|o| o.x - LENGTH_M - lim.d0)
-        .chain(road.end_x.map(|e| e - 0.5 * LENGTH_M - lim.d0))
+        .map(|o| o.x - 0.5 * (o.body().length + spec.body().length) - lim.d0)
+        .chain(road.end_x.map(|e| e - 0.5 * spec.body().length - lim.d0))
         .fold(f64::INFINITY, f64::min);
     let gap = (ahead - spec.x).min(planner_core::planner::free_road_gap(&p, 20));
     let fs = FreeSpace::new(&p, pose, spec.v, 0.0, Band { lo, hi }, gap).ok()?;

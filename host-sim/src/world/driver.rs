@@ -6,7 +6,7 @@
 use super::at::At;
 use super::heard::{View, VIEW_CAP};
 use super::precision::{params32, sensing32, CrossingF32, LaneF32, Precision, CROSS_HORIZON};
-use super::{AnySolver, Phase, SolverChoice, LENGTH_M};
+use super::{AnySolver, Body, Fleet, Phase, SolverChoice};
 use crate::reference::ClarabelSolver;
 use planner_core::crossing::{CrossingPlanner, CrossingReport};
 use planner_core::intersection::Layout;
@@ -17,10 +17,13 @@ use planner_core::{
 };
 use rand_chacha::ChaCha8Rng;
 
-/// Table I with vmax replaced by `v_max` (a segment's or a junction's speed limit).
-pub fn params(v_max: f64) -> Params<f64> {
+/// Table I with vmax replaced by `v_max` (a segment's or a junction's speed limit), and
+/// the length and braking limit of `body`.
+pub fn params(v_max: f64, body: Body) -> Params<f64> {
     let spec = ParamsSpec {
         v_max,
+        length: body.length,
+        a_min: -body.brake,
         ..ParamsSpec::table_i()
     };
     // Limits at or below Table I's keep every Table I relation; loaders check the range.
@@ -56,6 +59,9 @@ pub struct PlannerSetup {
     pub relevant_m: f64,
     /// The invariant kept toward the vehicle ahead.
     pub invariant: planner_core::Invariant,
+    /// What the planners assume of vehicles that do not say (the longest, the weakest
+    /// braking).
+    pub fleet: Fleet,
 }
 
 /// A vehicle's multi-lane planner, in the setup's precision.
@@ -156,6 +162,8 @@ pub struct Brain<const N: usize> {
     pub(super) others: Box<heapless::Vec<Other<f64>, VIEW_CAP>>,
     /// How its planners are set up.
     pub(super) setup: PlannerSetup,
+    /// Its vehicle's body (its planners' length and braking limit).
+    pub(super) body: Body,
 }
 
 /// How a vehicle is driven.
@@ -177,14 +185,15 @@ pub enum Driver<const N: usize> {
 }
 
 impl<const N: usize> Brain<N> {
-    /// A brain for vehicle `id` with `setup`.
-    pub fn new(id: u16, setup: PlannerSetup) -> Self {
+    /// A brain for vehicle `id` of `body` with `setup`.
+    pub fn new(id: u16, setup: PlannerSetup, body: Body) -> Self {
         Self {
             lane: None,
             crossing: None,
             view: View::new(id, setup.relevant_m),
             others: Box::new(heapless::Vec::new()),
             setup,
+            body,
         }
     }
 
@@ -208,8 +217,9 @@ impl<const N: usize> Brain<N> {
                 ..ClarabelSolver::default()
             }),
         };
-        let mut p = LanePlanner::with_solver(params(v_max), CostWeights::default(), s, lane)
-            .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
+        let mut p =
+            LanePlanner::with_solver(params(v_max, self.body), CostWeights::default(), s, lane)
+                .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
         // The setup was validated where it was made (finite bound, resolution, sensing).
         let _ = p.set_notify_latency(self.setup.notify);
         let (pos, speed) = self.setup.resolution;
@@ -217,18 +227,20 @@ impl<const N: usize> Brain<N> {
         let _ = p.set_sensing(self.setup.sensing);
         let _ = p.set_reuse(self.setup.reuse);
         p.set_invariant(self.setup.invariant);
+        let _ = p.set_weakest_brake(self.setup.fleet.weakest_brake);
         LaneBrain::F64(Box::new(p))
     }
 
     /// The multi-lane planner in `f32`: planner-core's solver, the setup rounded.
     fn lane_planner32(&self, lane: u8, v_max: f64) -> LaneF32<N> {
-        let mut p = LanePlanner::new(params32(v_max), CostWeights::default(), lane)
+        let mut p = LanePlanner::new(params32(v_max, self.body), CostWeights::default(), lane)
             .unwrap_or_else(|_| unreachable!("default cost weights are valid"));
         let _ = p.set_notify_latency(self.setup.notify as f32);
         let (pos, speed) = self.setup.resolution;
         let _ = p.set_bus_resolution(pos as f32, speed as f32);
         let _ = p.set_sensing(self.setup.sensing.map(sensing32));
         p.set_invariant(self.setup.invariant);
+        let _ = p.set_weakest_brake(self.setup.fleet.weakest_brake as f32);
         LaneF32::new(p)
     }
 
@@ -245,9 +257,9 @@ impl<const N: usize> Brain<N> {
                 target_position: 1e-3,
                 ..CostWeights::default()
             };
-            let planner = Planner::new(params32(v_limit), w)
+            let planner = Planner::new(params32(v_limit, self.body), w)
                 .unwrap_or_else(|_| unreachable!("the weights are valid"));
-            let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M as f32);
+            let mut c = CrossingPlanner::new(planner, id, route, self.body.length as f32);
             let _ = c.set_notify_latency(self.setup.notify as f32);
             let (pos, speed) = self.setup.resolution;
             let _ = c.set_bus_resolution(pos as f32, speed as f32);
@@ -255,9 +267,9 @@ impl<const N: usize> Brain<N> {
             c.set_invariant(self.setup.invariant);
             return CrossingBrain::F32(Box::new(CrossingF32::new(c, layout)));
         }
-        let planner = Planner::new(params(v_limit), crossing_weights())
+        let planner = Planner::new(params(v_limit, self.body), crossing_weights())
             .unwrap_or_else(|_| unreachable!("the weights are valid"));
-        let mut c = CrossingPlanner::new(planner, id, route, LENGTH_M);
+        let mut c = CrossingPlanner::new(planner, id, route, self.body.length);
         let _ = c.set_notify_latency(self.setup.notify);
         let (pos, speed) = self.setup.resolution;
         let _ = c.set_bus_resolution(pos, speed);
@@ -480,6 +492,7 @@ mod tests {
             precision: Precision::F64,
             relevant_m: 200.0,
             invariant: planner_core::Invariant::Paper,
+            fleet: Fleet::default(),
         }
     }
 
@@ -500,7 +513,7 @@ mod tests {
 
     #[test]
     fn only_planners_are_in_junctions() {
-        let brain = || Box::new(Brain::<20>::new(7, setup()));
+        let brain = || Box::new(Brain::<20>::new(7, setup(), Body::CAR));
         assert!(Role::new(JUNCTION, Driver::<20>::Script(Vec::new())).is_none());
         assert!(Role::new(JUNCTION, Driver::Planner(brain())).is_some());
         for at in [ROAD, JUNCTION] {
@@ -515,7 +528,7 @@ mod tests {
 
     #[test]
     fn the_brain_goes_where_the_vehicle_goes() {
-        let mut r = Role::planner(ROAD, Box::new(Brain::<20>::new(7, setup())));
+        let mut r = Role::planner(ROAD, Box::new(Brain::<20>::new(7, setup(), Body::CAR)));
         assert!(r.enter_junction(1, 3, 4.0));
         assert_eq!(r.at(), JUNCTION);
         assert!(r.brain().is_some());

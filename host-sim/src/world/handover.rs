@@ -33,7 +33,7 @@ pub(super) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now:
                 return Moved::Stays;
             };
             match sg.end {
-                End::Exit(end) if x - 0.5 * LENGTH_M >= end => {
+                End::Exit(end) if x - 0.5 * v.body.length >= end => {
                     v.log.left_at = Some(now);
                     Moved::LeftWorld
                 }

@@ -37,7 +37,7 @@ use super::network::Network;
 use super::plausible::{Bounds, Implausible};
 use crate::bus::Message;
 use planner_core::crossing::CrossingReport;
-use planner_core::{Instant, Other, VehicleState};
+use planner_core::{BodyLength, Instant, Other, VehicleState};
 
 /// Vehicles one view holds: more than fit near one vehicle at any density (within
 /// 100 m of road in every direction a few lanes hold fewer than 200).
@@ -180,12 +180,15 @@ pub fn slack(d: f64, v: f64, w: f64) -> f64 {
 /// safe distance dS(vmax) (8) plus a second at vmax, for vehicles ahead and behind alike —
 /// and the diagonal of the largest junction's communication region (a manager hears every
 /// vehicle in A_C), whichever is larger, with [`SPARE_M`]. With Table I and the four-leg
-/// layout of docs/spec.md: max(155, 175) + 20 = 195 m. A record of a vehicle within it
-/// that falls silent is kept ([`View::forget_silent`]); which records a full view keeps
-/// is judged by [`slack`].
-pub fn relevance_radius(net: &Network, v_max: f64) -> f64 {
+/// layout of docs/spec.md: max(155, 175) + 20 = 195 m. With trucks in the `fleet`, dS
+/// is at the weakest braking limit and the longest vehicle's extra length is added (a
+/// 16.5 m truck braking at 4.5 m/s²: 256 m). A record of a vehicle within it that falls
+/// silent is kept ([`View::forget_silent`]); which records a full view keeps is judged
+/// by [`slack`].
+pub fn relevance_radius(net: &Network, v_max: f64, fleet: super::Fleet) -> f64 {
     let lim = crate::monitor::Limits::table_i();
-    let lanes = 2.0 * (lim.safe_distance(v_max) + v_max);
+    let lanes = 2.0 * (lim.safe_distance_at(v_max, fleet.weakest_brake) + v_max) + fleet.longest_m
+        - super::LENGTH_M;
     let junctions = net
         .junctions
         .iter()
@@ -447,8 +450,8 @@ impl View {
         &self.records
     }
 
-    /// The vehicles on segment `seg` as its multi-lane planner wants them, at `now`, all
-    /// `length` long, into `out` (cleared first): states sent on it, and crossing reports
+    /// The vehicles on segment `seg` as its multi-lane planner wants them, at `now`, each
+    /// as long as it says (`length` if a state declares none), into `out` (cleared first): states sent on it, and crossing reports
     /// of vehicles whose path lies on it there (the inlet part before a stop line, the
     /// outlet part after a junction) — taken in its frame, its lane, and going straight.
     pub fn others_on(
@@ -467,7 +470,14 @@ impl View {
                     beta: s.beta,
                     cooperative: s.cooperative,
                     brake: s.brake,
-                    ..Other::v2v(s.id, s.x, s.v, length, s.lane, now.since(s.stamp).as_secs())
+                    ..Other::v2v(
+                        s.id,
+                        s.x,
+                        s.v,
+                        s.length.map_or(length, BodyLength::m),
+                        s.lane,
+                        now.since(s.stamp).as_secs(),
+                    )
                 },
                 Record::Crossing {
                     report,
@@ -480,7 +490,7 @@ impl View {
                         // limit bounds its stop as on a lane.
                         Other {
                             brake: report.brake,
-                            ..Other::v2v(report.id, x, report.v, length, lane, age)
+                            ..Other::v2v(report.id, x, report.v, report.length, lane, age)
                         }
                     }
                     _ => continue,
@@ -514,7 +524,7 @@ impl View {
     ///
     /// Those whose braking limit is known (a cooperating vehicle in the lane, a planner
     /// crossing the next junction) come as reports on `route` itself, stamped as heard,
-    /// `length` long, so a leader-aware crossing planner credits them like any leader on
+    /// as long as they say (`length` if a state declares none), so a leader-aware crossing planner credits them like any leader on
     /// its path: a follower closed up on its leader by the credit keeps it when the
     /// leader leaves the junction. The rest are positions, walls: vehicles changing into
     /// the lane (an entering vehicle's check takes the follower at the paper's wall, so
@@ -536,7 +546,7 @@ impl View {
                         route,
                         s,
                         v: state.v,
-                        length,
+                        length: state.length.map_or(length, BodyLength::m),
                         brake: state.brake,
                     };
                     match (lane, state.brake) {
@@ -561,15 +571,9 @@ impl View {
                         continue;
                     };
                     match report.brake {
-                        Some(_) => out.leaders.push((
-                            CrossingReport {
-                                route,
-                                s,
-                                length,
-                                ..report
-                            },
-                            stamp,
-                        )),
+                        Some(_) => out
+                            .leaders
+                            .push((CrossingReport { route, s, ..report }, stamp)),
                         None => out.walls.push(s),
                     }
                 }

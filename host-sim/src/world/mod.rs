@@ -307,6 +307,69 @@ pub enum Finish {
     GoalsMetAndStill,
 }
 
+/// A vehicle's body: what makes a truck other than a car to the planners, the monitors
+/// and the bus. Its length and braking limit travel in its state messages
+/// ([`planner_core::BodyLength`], [`planner_core::BrakeLimit`]); width, acceleration
+/// and speed limits are Table I's for every vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Body {
+    /// Length L (m).
+    pub length: f64,
+    /// Braking limit |amin| (m/s²).
+    pub brake: f64,
+}
+
+impl Body {
+    /// Table I's car: 4.5 m, 7.9 m/s².
+    pub const CAR: Self = Self {
+        length: LENGTH_M,
+        brake: 7.9,
+    };
+    /// An articulated truck: 16.5 m (the EU's longest), 4.5 m/s².
+    pub const TRUCK: Self = Self {
+        length: 16.5,
+        brake: 4.5,
+    };
+}
+
+impl Default for Body {
+    fn default() -> Self {
+        Self::CAR
+    }
+}
+
+/// What every planner of a world assumes of the vehicles it cannot measure: the longest
+/// vehicle and the weakest braking limit among them (the paper's vehicles are all
+/// alike: Table I's car). A vehicle that declares no length is taken at the longest;
+/// a vehicle behind that declares no limit, at the weakest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fleet {
+    /// The longest vehicle (m).
+    pub longest_m: f64,
+    /// The weakest braking limit (m/s²).
+    pub weakest_brake: f64,
+}
+
+impl Fleet {
+    /// The fleet of `bodies` (and of cars, which arrivals bring).
+    pub fn of(bodies: impl IntoIterator<Item = Body>) -> Self {
+        bodies.into_iter().fold(Self::default(), |f, b| Self {
+            longest_m: f.longest_m.max(b.length),
+            weakest_brake: f.weakest_brake.min(b.brake),
+        })
+    }
+}
+
+impl Default for Fleet {
+    /// Cars alone.
+    fn default() -> Self {
+        Self {
+            longest_m: Body::CAR.length,
+            weakest_brake: Body::CAR.brake,
+        }
+    }
+}
+
 /// A vehicle at t = 0.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VehicleSpec {
@@ -328,6 +391,8 @@ pub struct VehicleSpec {
     /// intentions). Others assume one that does not may accelerate at amax and never
     /// yield.
     pub cooperative: bool,
+    /// Its body (a car unless the scenario says otherwise).
+    pub body: Body,
 }
 
 /// Vehicles entering while the world runs.
@@ -425,7 +490,8 @@ impl<const N: usize> World<N, InProcessBus> {
         let mut bus = InProcessBus::with_faults(&nodes, spec.faults, seed, lim.h);
         // A radio that reaches every vehicle that can matter before a message from it
         // can arrive ([`InProcessBus::set_range`]).
-        let relevant = heard::relevance_radius(&spec.network, lim.v_max);
+        let fleet = Fleet::of(spec.vehicles.iter().map(|v| v.body));
+        let relevant = heard::relevance_radius(&spec.network, lim.v_max, fleet);
         let notify = spec.faults.notify_bound(lim.h);
         bus.set_range(Some(relevant + 2.0 * lim.v_max * (notify + lim.h)));
         Self::with_bus(spec, solver, Some(seed), bus)
@@ -437,6 +503,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     pub fn with_bus(spec: WorldSpec, solver: SolverChoice, seed: Option<u64>, bus: B) -> Self {
         let lim = Limits::table_i();
         let seed = seed.unwrap_or(spec.seed);
+        let fleet = Fleet::of(spec.vehicles.iter().map(|v| v.body));
         let setup = PlannerSetup {
             solver,
             notify: spec.faults.notify_bound(lim.h),
@@ -444,8 +511,9 @@ impl<const N: usize, B: Bus> World<N, B> {
             sensing: spec.sensing,
             reuse: None,
             precision: spec.precision,
-            relevant_m: heard::relevance_radius(&spec.network, lim.v_max),
+            relevant_m: heard::relevance_radius(&spec.network, lim.v_max, fleet),
             invariant: spec.invariant,
+            fleet,
         };
         let net = spec.network.clone();
         let vehicles = spec

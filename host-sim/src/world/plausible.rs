@@ -149,6 +149,7 @@ mod tests {
             stamp,
             cooperative: true,
             brake: None,
+            length: None,
         }
     }
 

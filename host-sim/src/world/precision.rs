@@ -112,10 +112,12 @@ pub fn layout32(l: &Layout<f64>) -> Layout<f32> {
     }
 }
 
-/// The f32 planners' parameters: Table I with `v_max`.
-pub fn params32(v_max: f64) -> planner_core::Params<f32> {
+/// The f32 planners' parameters: Table I with `v_max` and `body`'s length and limit.
+pub fn params32(v_max: f64, body: super::Body) -> planner_core::Params<f32> {
     let spec = planner_core::ParamsSpec {
         v_max: r(v_max),
+        length: r(body.length),
+        a_min: -r(body.brake),
         ..planner_core::ParamsSpec::table_i()
     };
     planner_core::Params::new(spec).unwrap_or_else(|_| planner_core::Params::table_i())

@@ -42,12 +42,14 @@ pub struct Seen {
     pub at: At,
     /// Speed (m/s).
     pub v: f64,
+    /// Length (m): range sensors measure a vehicle's extent.
+    pub length: f64,
 }
 
-/// The lanes (lowest, highest) a rectangle at lateral position `y`, heading `theta`
-/// overlaps on a road of `lanes` lanes.
-fn lanes_overlapped(y: f64, theta: f64, lanes: u8) -> (u8, u8) {
-    let ext = 0.5 * (LENGTH_M * theta.sin().abs() + WIDTH_M * theta.cos().abs());
+/// The lanes (lowest, highest) a rectangle `length` long at lateral position `y`,
+/// heading `theta` overlaps on a road of `lanes` lanes.
+fn lanes_overlapped((y, theta): (f64, f64), length: f64, lanes: u8) -> (u8, u8) {
+    let ext = 0.5 * (length * theta.sin().abs() + WIDTH_M * theta.cos().abs());
     let lane = |v: f64| ((v / LANE_WIDTH_M).floor().max(0.0) as u8).min(lanes.saturating_sub(1));
     (lane(y - ext + 1e-9), lane(y + ext - 1e-9))
 }
@@ -93,10 +95,11 @@ pub fn sense(
                 let Some((cx, cy, cth)) = on_segment(net, seg, c) else {
                     continue;
                 };
-                let (lo, hi) = lanes_overlapped(cy, cth, lanes);
+                let (lo, hi) = lanes_overlapped((cy, cth), c.length, lanes);
                 let near_lane = hi + 1 >= lane && lo <= lane + 1;
-                let ahead = cx - LENGTH_M - x <= s.ahead_m && cx >= x;
-                let behind = x - LENGTH_M - cx <= s.behind_m && cx < x;
+                let half = 0.5 * (c.length + me.length);
+                let ahead = cx - half - x <= s.ahead_m && cx >= x;
+                let behind = x - half - cx <= s.behind_m && cx < x;
                 if near_lane && (ahead || behind) {
                     let e = s.position_error_m;
                     let ev = s.speed_error_mps;
@@ -116,7 +119,7 @@ pub fn sense(
                         alpha: (hi != lo).then_some(hi),
                         cooperative: false,
                         sensed: true,
-                        ..Other::v2v(c.id, mx, mv.max(0.0), LENGTH_M, lo, 0.0)
+                        ..Other::v2v(c.id, mx, mv.max(0.0), c.length, lo, 0.0)
                     });
                 }
             }
@@ -129,12 +132,12 @@ pub fn sense(
             out.gap_ahead = all
                 .iter()
                 .filter(|c| c.id != me.id)
-                .filter_map(|c| on_segment(net, seg, c))
-                .filter(|&(cx, cy, cth)| {
-                    let (lo, hi) = lanes_overlapped(cy, cth, lanes);
+                .filter_map(|c| on_segment(net, seg, c).map(|p| (p, c.length)))
+                .filter(|&((cx, cy, cth), length)| {
+                    let (lo, hi) = lanes_overlapped((cy, cth), length, lanes);
                     cx >= x && lo <= lane && lane <= hi
                 })
-                .map(|(cx, ..)| cx - x - LENGTH_M)
+                .map(|((cx, ..), length)| cx - x - 0.5 * (length + me.length))
                 .reduce(f64::min);
         }
         (At::Crossing { .. }, None) => {}
@@ -246,11 +249,11 @@ mod tests {
 
     #[test]
     fn straddling_rectangles_are_in_both_lanes() {
-        assert_eq!(lanes_overlapped(1.8, 0.0, 3), (0, 0));
-        assert_eq!(lanes_overlapped(3.6, 0.0, 3), (0, 1));
-        assert_eq!(lanes_overlapped(3.6 + 0.86, 0.0, 3), (1, 1));
+        assert_eq!(lanes_overlapped((1.8, 0.0), LENGTH_M, 3), (0, 0));
+        assert_eq!(lanes_overlapped((3.6, 0.0), LENGTH_M, 3), (0, 1));
+        assert_eq!(lanes_overlapped((3.6 + 0.86, 0.0), LENGTH_M, 3), (1, 1));
         // Turned 0.3 rad, the rectangle reaches 1.48 m to either side of its centre.
-        assert_eq!(lanes_overlapped(8.0, 0.3, 3), (1, 2));
-        assert_eq!(lanes_overlapped(9.0, 0.3, 3), (2, 2));
+        assert_eq!(lanes_overlapped((8.0, 0.3), LENGTH_M, 3), (1, 2));
+        assert_eq!(lanes_overlapped((9.0, 0.3), LENGTH_M, 3), (2, 2));
     }
 }

@@ -9,7 +9,7 @@ use super::network::Network;
 use super::vehicle::{Brain, Role, Trip, Vehicle};
 use super::watch::segment_truth;
 use super::START_MARGIN_M;
-use super::{World, LENGTH_M};
+use super::{Body, World, LENGTH_M};
 use crate::bus::{Bus, BusError};
 use crate::monitor::Limits;
 use planner_core::intersection::Movement;
@@ -379,7 +379,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             v_ref: None,
             movements,
         };
-        let role = Role::planner(at, Box::new(Brain::new(id, self.setup)));
+        let role = Role::planner(at, Box::new(Brain::new(id, self.setup, Body::CAR)));
         let mut car = Vehicle::new(id, role, v, trip, since);
         car.note_free_flow(&self.net);
         car.retarget(&self.net);

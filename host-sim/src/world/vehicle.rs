@@ -16,14 +16,14 @@ use super::heard::Reject;
 use super::network::{End, Network, Place};
 use super::sensor::Sensed;
 use super::{DriverKind, VehicleSpec};
-use super::{Mode, TraceRow, LANE_WIDTH_M, LENGTH_M};
+use super::{Mode, TraceRow, LANE_WIDTH_M};
 use crate::bus::{Clock, Message, Received};
 use crate::monitor::Limits;
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::Movement;
 use planner_core::lane_change::LaneEvent;
 use planner_core::{
-    CostWeights, FallbackReason, Instant, LaneObservation, Method, Params, Pose, Road, StepStatus,
+    CostWeights, FallbackReason, Instant, LaneObservation, Method, Pose, Road, StepStatus,
     VehicleState,
 };
 use rand::{Rng, SeedableRng};
@@ -101,6 +101,8 @@ pub struct Vehicle<const N: usize> {
     pub cooperative: bool,
     /// At a junction, whether it held its manager's permission at its last step.
     pub granted: Option<bool>,
+    /// Its body: length and braking limit.
+    pub body: super::Body,
 }
 
 /// What the monitors and the other vehicles' sensors know of a vehicle at an instant:
@@ -123,6 +125,8 @@ pub struct VehicleTruth {
     pub target_lane: u8,
     /// It keeps the leader-aware invariant toward a cooperating leader.
     pub leader_aware: bool,
+    /// Its body.
+    pub body: super::Body,
 }
 
 impl VehicleTruth {
@@ -132,21 +136,22 @@ impl VehicleTruth {
             id: self.id,
             at: self.at,
             v: self.v,
+            length: self.body.length,
         }
     }
 }
 
-/// What vehicle `id` at `at`, moving at (v, ω) = `vw`, broadcasts at `now` (its clock):
-/// its state on a segment, its crossing report in a junction.
+/// What vehicle `id` of `body` at `at`, moving at (v, ω) = `vw`, broadcasts at `now` (its
+/// clock): its state on a segment, its crossing report in a junction. Every vehicle of
+/// this world says how long it is and how hard it can brake.
 pub fn announce(
-    id: u16,
+    (id, body): (u16, super::Body),
     at: At,
     (v, omega): (f64, f64),
     cooperative: bool,
     now: Instant,
 ) -> Message {
-    // Every vehicle of this world brakes at Table I's limit, and says so.
-    let brake = planner_core::safety::BrakeLimit::from_mps2(Params::<f64>::table_i().brake());
+    let brake = planner_core::safety::BrakeLimit::from_mps2(body.brake);
     match at {
         At::Lane {
             seg,
@@ -170,6 +175,7 @@ pub fn announce(
                 stamp: now,
                 cooperative,
                 brake,
+                length: planner_core::BodyLength::from_m(body.length),
             },
             segment: seg,
         },
@@ -181,7 +187,7 @@ pub fn announce(
                 route,
                 s,
                 v,
-                length: LENGTH_M,
+                length: body.length,
                 brake,
             },
             stamp: now,
@@ -308,6 +314,7 @@ impl<const N: usize> Vehicle<N> {
                 ..Log::default()
             },
             last_status: None,
+            body: super::Body::CAR,
         }
     }
 
@@ -334,6 +341,7 @@ impl<const N: usize> Vehicle<N> {
             id: self.id,
             at: self.at(),
             v: self.v,
+            length: self.body.length,
         }
     }
 
@@ -351,6 +359,7 @@ impl<const N: usize> Vehicle<N> {
                 .role
                 .brain()
                 .is_some_and(|b| b.setup.invariant == planner_core::Invariant::LeaderAware),
+            body: self.body,
         }
     }
 
@@ -359,7 +368,7 @@ impl<const N: usize> Vehicle<N> {
     pub fn message(&self, now: Instant) -> Message {
         // Scripted and random drivers neither hear intentions nor yield.
         announce(
-            self.id,
+            (self.id, self.body),
             self.at(),
             (self.v, self.omega),
             self.cooperative,
@@ -493,7 +502,7 @@ impl<const N: usize> Vehicle<N> {
     fn fallback(&mut self, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
         counters.fallback_steps += 1;
         self.mode = Mode::Fallback;
-        let p = params(self.speed_limit(ctx.net));
+        let p = params(self.speed_limit(ctx.net), self.body);
         let v = planner_core::safety::max_braking_command(&p, self.v);
         let w = match self.at() {
             At::Lane { theta, .. } => planner_core::lane_change::straighten(&p, theta, v),
@@ -635,8 +644,13 @@ impl<const N: usize> Vehicle<N> {
         if b.lane.is_none() {
             b.lane = Some(b.lane_planner(lane, v_max));
         }
-        b.view
-            .others_on(ctx.net, seg, ctx.now, LENGTH_M, &mut b.others);
+        b.view.others_on(
+            ctx.net,
+            seg,
+            ctx.now,
+            b.setup.fleet.longest_m,
+            &mut b.others,
+        );
         for r in &ctx.returns.others {
             let _ = b.others.push(*r);
         }
@@ -745,7 +759,9 @@ impl<const N: usize> Vehicle<N> {
         if b.crossing.is_none() {
             b.crossing = Some(b.crossing_planner((self.id, route), layout, v_limit));
         }
-        let on_path = b.view.on_path(ctx.net, (junction, route), LENGTH_M);
+        let on_path = b
+            .view
+            .on_path(ctx.net, (junction, route), b.setup.fleet.longest_m);
         let Some(c) = b.crossing.as_mut() else {
             return self.fallback(ctx, counters);
         };
@@ -788,7 +804,7 @@ impl<const N: usize> Vehicle<N> {
             }
             Err(_) => {
                 counters.fallback_steps += 1;
-                let p = params(v_limit);
+                let p = params(v_limit, self.body);
                 (
                     planner_core::safety::max_braking_command(&p, self.v),
                     Some(FallbackReason::Lateral),
@@ -849,9 +865,9 @@ impl<const N: usize> Vehicle<N> {
                 At::Crossing { .. } => self.granted,
                 At::Lane { .. } => None,
             },
-            length: LENGTH_M,
+            length: self.body.length,
             width: super::WIDTH_M,
-            brake: ctx.lim.brake,
+            brake: self.body.brake,
             invariant: self.role.brain().map(|b| b.setup.invariant),
         }
     }
@@ -1011,9 +1027,10 @@ pub(crate) fn build_vehicle<const N: usize>(
     }
     // Only planners cross junctions: one that starts in a junction is its planners' (no
     // loader writes another driver there; see `VehicleSpec::driver`).
-    .unwrap_or_else(|| Role::planner(spec.at, Box::new(Brain::new(spec.id, setup))));
+    .unwrap_or_else(|| Role::planner(spec.at, Box::new(Brain::new(spec.id, setup, spec.body))));
     let mut v = Vehicle::new(spec.id, role, spec.v, spec.trip.clone(), 0.0);
     v.cooperative = spec.cooperative;
+    v.body = spec.body;
     v.note_free_flow(net);
     if let At::Lane { x, lane, .. } = spec.at {
         if spec.trip.target_lane == lane {

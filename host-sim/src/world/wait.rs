@@ -148,8 +148,8 @@ fn on_segment(v: &VehicleTruth, all: &[VehicleTruth], net: &Network, lim: &Limit
     let ahead = all
         .iter()
         .filter(|o| o.id != v.id && in_lane(o, lane))
-        .filter_map(|o| x_of(o).map(|ox| (o.id, ox - x - LENGTH_M)))
-        .filter(|&(_, gap)| gap >= -LENGTH_M && gap <= NEAR_M + lim.d0)
+        .filter_map(|o| x_of(o).map(|ox| (o.id, ox - x - 0.5 * (o.body.length + v.body.length))))
+        .filter(|&(_, gap)| gap >= -v.body.length.max(LENGTH_M) && gap <= NEAR_M + lim.d0)
         .min_by(|a, b| a.1.total_cmp(&b.1));
     if let Some((id, _)) = ahead {
         out.push(WaitsOn::Vehicle { id });
@@ -161,7 +161,10 @@ fn on_segment(v: &VehicleTruth, all: &[VehicleTruth], net: &Network, lim: &Limit
             lane.saturating_sub(1)
         }
     })) {
-        let reach = LENGTH_M + lim.d0 + lim.safe_distance(lim.v_max);
+        // Who may be behind in the target lane: as far as the longest, weakest-braking
+        // vehicle at vmax needs.
+        let fleet = crate::world::Fleet::of(all.iter().map(|o| o.body));
+        let reach = fleet.longest_m + lim.d0 + lim.safe_distance_at(lim.v_max, fleet.weakest_brake);
         let ids: Vec<u16> = all
             .iter()
             .filter(|o| o.id != v.id && in_lane(o, m))
@@ -180,7 +183,7 @@ fn on_segment(v: &VehicleTruth, all: &[VehicleTruth], net: &Network, lim: &Limit
         ),
         _ => None,
     });
-    if end.is_some_and(|e| e - x - 0.5 * LENGTH_M <= NEAR_M + lim.d0) && ahead.is_none() {
+    if end.is_some_and(|e| e - x - 0.5 * v.body.length <= NEAR_M + lim.d0) && ahead.is_none() {
         out.push(WaitsOn::RoadEnd);
     }
     out
@@ -265,6 +268,7 @@ mod tests {
             unmet: true,
             target_lane: lane,
             leader_aware: false,
+            body: crate::world::Body::CAR,
         }
     }
 

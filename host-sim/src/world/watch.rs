@@ -6,7 +6,7 @@
 use super::at::At;
 use super::network::{End, Network};
 use super::vehicle::VehicleTruth;
-use super::{LENGTH_M, WIDTH_M};
+use super::WIDTH_M;
 use crate::monitor::junction::{JunctionWatch, OnRoute};
 use crate::monitor::{road, Findings, Limits, Truth};
 
@@ -69,9 +69,9 @@ impl WorldMonitor {
                         route,
                         s,
                         v: v.v,
-                        length: LENGTH_M,
+                        length: v.body.length,
                         leader_aware: v.leader_aware,
-                        brake: lim.brake,
+                        brake: v.body.brake,
                     }),
                     _ => None,
                 })
@@ -157,12 +157,12 @@ fn rectangle(v: &VehicleTruth, pose: planner_core::Pose<f64>, lane: u8, mapped: 
         x: pose.x,
         y: pose.y,
         theta: pose.theta,
-        length: LENGTH_M,
+        length: v.body.length,
         width: WIDTH_M,
         lane,
         keeps_invariant: v.planner,
         leader_aware: v.leader_aware,
-        brake: crate::monitor::Limits::table_i().brake,
+        brake: v.body.brake,
         v: v.v,
         v_before: v.v_before,
         mapped,

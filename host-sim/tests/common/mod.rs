@@ -32,6 +32,7 @@ pub fn lane_state(id: u16, x: f64, v: f64, stamp: f64) -> planner_core::VehicleS
         stamp: secs(stamp),
         cooperative: true,
         brake: None,
+        length: None,
     }
 }
 

@@ -11,6 +11,7 @@ use super::steer::*;
 use super::*;
 use crate::free_space::D_TURN_M;
 use crate::lanes::Band;
+use crate::safety::BrakeLimit;
 use crate::unicycle::{lateral_half_extent, step};
 use heapless::Vec;
 
@@ -792,5 +793,54 @@ fn a_rectangle_exactly_touching_a_lane_does_not_overlap_it() {
             ..above_me
         };
         assert!(overlaps(&p, at(0.0, y, theta), nudge));
+    }
+}
+
+#[test]
+fn a_truck_behind_is_given_the_room_it_needs_to_stop_at_its_own_limit() {
+    let mut pl = planner(0);
+    let p = params();
+    let x = 100.0;
+    let o = obs(at(x, 1.8, 0.0), 10.0, &[], 0);
+    let tau = 0.3;
+    let (reach, v_up) = unaware_reach(&p, 15.0, tau);
+    // (17) at its boundary for a vehicle behind braking at `b`, 16.5 m long.
+    let edge = |b: f64| {
+        x - 0.5 * (16.5 + p.length())
+            - p.d0()
+            - reach
+            - <f64 as Real>::SAFETY_MARGIN_M
+            - safety::d_s_braking(&p, v_up, b)
+    };
+    let truck = |brake| Other {
+        brake,
+        ..Other::v2v(8, 0.0, 15.0, 16.5, 1, 0.0)
+    };
+    // Declared 4.5 m/s²: the truck's own dS, far longer than a car's.
+    let declared = truck(BrakeLimit::from_mps2(4.5));
+    assert!(edge(4.5) < edge(p.brake()) - 10.0);
+    assert!(pl.clear_of(&o, &declared, edge(4.5) - 1e-6, 15.0, tau));
+    assert!(!pl.clear_of(&o, &declared, edge(4.5) + 1e-6, 15.0, tau));
+    // Declared none: the paper's homogeneous fleet by default (the ego's own limit)...
+    let silent = truck(None);
+    assert!(pl.clear_of(&o, &silent, edge(p.brake()) - 1e-6, 15.0, tau));
+    assert!(!pl.clear_of(&o, &silent, edge(p.brake()) + 1e-6, 15.0, tau));
+    // ...and the weakest limit in traffic once it is set.
+    pl.set_weakest_brake(4.5).expect("valid");
+    assert!(!pl.clear_of(&o, &silent, edge(p.brake()) - 1e-6, 15.0, tau));
+    assert!(pl.clear_of(&o, &silent, edge(4.5) - 1e-6, 15.0, tau));
+    // A car that declared its limit is still taken at its own.
+    let car = Other {
+        brake: BrakeLimit::from_mps2(7.9),
+        ..Other::v2v(9, 0.0, 15.0, 4.5, 1, 0.0)
+    };
+    let car_edge = edge(p.brake()) + 0.5 * (16.5 - 4.5);
+    assert!(pl.clear_of(&o, &car, car_edge - 1e-6, 15.0, tau));
+    // Above the ego's own limit counts as its own; nonsense is refused and changes nothing.
+    pl.set_weakest_brake(20.0).expect("valid");
+    assert_eq!(pl.weakest_brake(), p.brake());
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert_eq!(pl.set_weakest_brake(bad), Err(ConfigError::InvalidBrake));
+        assert_eq!(pl.weakest_brake(), p.brake());
     }
 }

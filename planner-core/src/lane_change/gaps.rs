@@ -334,7 +334,8 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     }
 
     /// (17) toward one vehicle behind, taken at worst-case position `cx` and speed `cv`
-    /// and moving unaware for `tau`: it can still stop behind the ego.
+    /// and moving unaware for `tau`: it can still stop behind the ego, braking at its own
+    /// limit ([`LanePlanner::set_weakest_brake`] for one that declares none).
     pub(super) fn clear_of(
         &self,
         obs: &LaneObservation<'_, F>,
@@ -353,6 +354,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             - cx
             - reach
             - F::SAFETY_MARGIN_M;
-        safety::invariant_holds(p, v, room)
+        // It stops at its own limit: declared (a cooperating vehicle's, trusted), else
+        // the weakest any vehicle here may have.
+        let brake = c.brake.map_or(self.weakest_brake, |b| b.mps2());
+        safety::d_s_braking(p, v, brake) < room
     }
 }

@@ -262,6 +262,7 @@ impl core::error::Error for LaneInputError {
 ///     let car = VehicleState {
 ///         id: 3, x: 40.0 + 0.15 * k as f32, y: 5.4, theta: 0.0, v: 15.0, omega: 0.0,
 ///         lane: 1, alpha: None, beta: None, stamp: now, cooperative: true, brake: None,
+///         length: None,
 ///     };
 ///     view.update(&car, now)?;
 ///     view.others(now, p.length(), &mut others);
@@ -303,6 +304,9 @@ pub struct LanePlanner<F, const N: usize, S = IpmSolver<F, N>> {
     lateral: LateralWork<F>,
     /// The invariant kept toward the vehicle ahead.
     invariant: Invariant,
+    /// The braking limit (m/s²) a vehicle behind is taken at when it declares none
+    /// ([`LanePlanner::set_weakest_brake`]).
+    weakest_brake: F,
 }
 
 impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
@@ -334,6 +338,7 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
             reference: None,
             lateral: LateralWork::new(),
             invariant: Invariant::Paper,
+            weakest_brake: F::ZERO,
         }
     }
 
@@ -362,6 +367,7 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
             reference,
             lateral,
             invariant,
+            weakest_brake,
         } = self;
         speed.rebuild(params, weights)?;
         *lateral_weights = LateralWeights::default();
@@ -377,6 +383,7 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
         *reference = None;
         lateral.clear();
         *invariant = Invariant::Paper;
+        *weakest_brake = params.brake();
         Ok(())
     }
 }
@@ -404,6 +411,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             reference: None,
             lateral: LateralWork::new(),
             invariant: Invariant::Paper,
+            weakest_brake: params.brake(),
         })
     }
 
@@ -472,6 +480,29 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     /// implies the leader-aware invariant (its wall is never farther).
     pub fn set_invariant(&mut self, invariant: Invariant) {
         self.invariant = invariant;
+    }
+
+    /// Sets the braking limit |amin| (m/s²) of the weakest-braking vehicle that may be
+    /// behind this one without declaring its own limit (a sensor return, a vehicle that
+    /// does not cooperate or sent none): the Lane Change Protocol's check (17) that a
+    /// vehicle behind in the target lane can still stop takes it at this limit, and a
+    /// cooperating vehicle that declared one at its own ([`Other::brake`]). The paper's
+    /// vehicles are all alike, so the default is this vehicle's own limit; in traffic
+    /// with trucks it is the trucks' (docs/spec.md §11, "Vehicles of different
+    /// sizes"). Values above this vehicle's own limit count as its own (it is itself
+    /// such a vehicle to others); one that is not positive and finite is refused and
+    /// changes nothing.
+    pub fn set_weakest_brake(&mut self, brake: F) -> Result<(), ConfigError> {
+        if !(brake.is_finite() && brake > F::ZERO) {
+            return Err(ConfigError::InvalidBrake);
+        }
+        self.weakest_brake = brake.min(self.params().brake());
+        Ok(())
+    }
+
+    /// The braking limit a vehicle behind that declares none is taken at.
+    pub fn weakest_brake(&self) -> F {
+        self.weakest_brake
     }
 
     /// The invariant kept toward the vehicle ahead.
