@@ -18,8 +18,8 @@ fn leader_aware_followers_close_up_on_followers_and_stay_safe() {
             12,
             1,
             Following {
-                reuse: false,
                 invariant,
+                ..Following::default()
             },
         )
     };

@@ -5,6 +5,7 @@ use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
 use crate::monitor::{Findings, Limits, Truth};
 use crate::verdict::{Judged, Safety, Verdict};
+use crate::world::Body;
 use planner_core::planner::Vehicle;
 use planner_core::{
     BrakeLimit, CostWeights, FallbackReason, Invariant, Observation, Params, Planner, Real,
@@ -46,6 +47,9 @@ pub struct PlatoonSpec {
     /// allows; the adversarial leader is scripted, not cooperating, so its follower takes
     /// it as a wall, as it would any vehicle that does not keep the protocol.
     pub invariant: Invariant,
+    /// Percent of the vehicles (leader included) that are trucks
+    /// ([`crate::world::Body::TRUCK`]), each drawn at random; 0 draws nothing.
+    pub trucks_percent: u8,
 }
 
 /// Result of a platoon run.
@@ -139,6 +143,7 @@ pub fn random_spec(i: u64, seed: u64) -> PlatoonSpec {
         f32_planners: i % 4 == 3,
         reuse: false,
         invariant: Invariant::Paper,
+        trucks_percent: 0,
     }
 }
 
@@ -153,13 +158,14 @@ pub fn run(spec: &PlatoonSpec) -> PlatoonOutcome {
 
 fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
     let lim = Limits::table_i();
-    let params = Params::<F>::table_i();
     let mut rng = crate::reference::instances::rng(spec.seed);
     let mut cars = initial_platoon(spec, &lim, &mut rng);
     let n = cars.len();
     let policy = spec.reuse.then(ReusePolicy::<F>::default);
-    let mut planners: Vec<Planner<F, HORIZON>> = (1..n)
-        .map(|_| {
+    let mut planners: Vec<Planner<F, HORIZON>> = cars[1..]
+        .iter()
+        .map(|c| {
+            let params = params_of::<F>(c);
             let mut p = Planner::new(params, CostWeights::default()).expect("valid weights");
             p.set_reuse(policy).expect("the default policy is valid");
             p.set_invariant(spec.invariant);
@@ -196,8 +202,9 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
         seen.extend(cars.iter().map(seen_as::<F>));
         let a = leader.accel(t, &lim, &mut rng);
         let v0 = cars[0].v;
+        // Within its own limits: a truck leader's full braking is its own.
         commands[0] = (v0 + a * lim.h).clamp(
-            (v0 - lim.brake * lim.h).max(0.0),
+            (v0 - cars[0].brake * lim.h).max(0.0),
             (v0 + lim.a_max * lim.h).min(lim.v_max),
         );
         for (i, planner) in planners.iter_mut().enumerate() {
@@ -219,9 +226,20 @@ fn run_in<F: Real>(spec: &PlatoonSpec) -> PlatoonOutcome {
 fn closer_than_walls(lim: &Limits, cars: &[Truth]) -> u64 {
     let close = |w: &[Truth]| {
         let gap = w[0].x - w[1].x - 0.5 * (w[0].length + w[1].length);
-        gap - lim.d0 <= lim.safe_distance(w[1].v)
+        gap - lim.d0 <= lim.safe_distance_at(w[1].v, w[1].brake)
     };
     cars.windows(2).filter(|w| close(w)).count() as u64
+}
+
+/// Table I's parameters with `c`'s length and braking limit, in `F`.
+fn params_of<F: Real>(c: &Truth) -> Params<F> {
+    let spec = planner_core::ParamsSpec {
+        length: F::from_f64(c.length),
+        a_min: F::from_f64(-c.brake),
+        ..planner_core::ParamsSpec::table_i()
+    };
+    // A body the platoon drew (a car or a truck) is always valid.
+    Params::new(spec).unwrap_or_else(|_| Params::table_i())
 }
 
 /// How the followers see `c`: exactly where it is; with its speed and braking limit
@@ -245,37 +263,38 @@ fn seen_as<F: Real>(c: &Truth) -> Vehicle<F> {
 /// invariant a follower behind a follower starts closer by what it credits that one
 /// with (never closer than the extent, d0 and the margin).
 fn initial_platoon(spec: &PlatoonSpec, lim: &Limits, rng: &mut impl Rng) -> Vec<Truth> {
-    let pf64 = Params::<f64>::table_i();
     let n = spec.vehicles.max(2);
-    let length = pf64.length();
     let margin = f64::from(f32::SAFETY_MARGIN_M) + 0.01;
     let aware = spec.invariant == Invariant::LeaderAware;
     let mut cars: Vec<Truth> = Vec::with_capacity(n);
     let mut x = 0.0;
-    let mut v_ahead = 0.0;
     for i in 0..n {
         let v = rng.random_range(0.0..lim.v_max);
-        if i > 0 {
+        let pct = spec.trucks_percent;
+        let truck = pct > 0 && rng.random_range(0..100u8) < pct;
+        let body = if truck { Body::TRUCK } else { Body::CAR };
+        if let Some(ahead) = cars.last() {
             // The planners' credit (a lower bound of the monitor's exact one).
+            let p = crate::world::vehicle::params(lim.v_max, body);
             let credit = if aware && i > 1 {
-                planner_core::safety::leader_credit(&pf64, v_ahead, lim.brake)
+                planner_core::safety::leader_credit(&p, ahead.v, ahead.brake)
             } else {
                 0.0
             };
-            let room = (lim.safe_distance(v) - credit).max(0.0);
-            x -= length + lim.d0 + room + margin + rng.random_range(0.0..20.0);
+            let room = (lim.safe_distance_at(v, body.brake) - credit).max(0.0);
+            let extent = 0.5 * (ahead.length + body.length);
+            x -= extent + lim.d0 + room + margin + rng.random_range(0.0..20.0);
         }
-        v_ahead = v;
         cars.push(Truth {
             x,
             y: 0.5 * crate::world::LANE_WIDTH_M,
             theta: 0.0,
-            length,
-            width: pf64.width(),
+            length: body.length,
+            width: crate::world::WIDTH_M,
             lane: 0,
             keeps_invariant: i > 0,
             leader_aware: aware && i > 0,
-            brake: 7.9,
+            brake: body.brake,
             v,
             v_before: v,
             mapped: false,
@@ -306,7 +325,7 @@ fn follower_command<F: Real>(
         // Bad input cannot happen here; brake if it ever does.
         Err(_) => {
             out.fallback_steps += 1;
-            return (me.v - lim.brake * lim.h).max(0.0);
+            return (me.v - me.brake * lim.h).max(0.0);
         }
     };
     if let StepStatus::Reused { .. } = c.status {
@@ -354,6 +373,11 @@ pub struct Platoons {
         with = "crate::world::invariant_serde"
     )]
     pub invariant: Invariant,
+    /// Percent of the vehicles that are trucks (16.5 m, braking at 4.5 m/s²), drawn per
+    /// vehicle, the leader too; 0 gives the platoons as they always were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 impl Experiment for Platoons {
@@ -369,6 +393,7 @@ impl Experiment for Platoons {
         let following = Following {
             reuse: self.reuse,
             invariant: self.invariant,
+            trucks_percent: self.trucks,
         };
         Ok(sweep_range(first, end, self.seed, following))
     }
@@ -439,6 +464,8 @@ pub struct Following {
     pub reuse: bool,
     /// The invariant they keep toward the vehicle ahead.
     pub invariant: Invariant,
+    /// Percent of the vehicles that are trucks.
+    pub trucks_percent: u8,
 }
 
 /// Runs `cases` random platoons of a sweep on all cores: (spec, outcome) per case, in
@@ -462,6 +489,7 @@ pub fn run_range(
         let spec = PlatoonSpec {
             reuse: following.reuse,
             invariant: following.invariant,
+            trucks_percent: following.trucks_percent,
             ..random_spec(first + i as u64, seed)
         };
         let out = run(&spec);

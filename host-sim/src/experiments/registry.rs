@@ -91,6 +91,7 @@ mod tests {
             seed: 4,
             reuse: false,
             invariant: planner_core::Invariant::Paper,
+            trucks: 0,
         };
         let whole = run_whole(&e, 1).expect("one part");
         let parts: Vec<Output> = (0..2)
@@ -123,6 +124,7 @@ mod tests {
             seed: 1,
             reuse: false,
             invariant: planner_core::Invariant::Paper,
+            trucks: 0,
         };
         let (mut out, _) = run_shard(&e, Shard::ALL, 1).expect("a shard");
         out.header.sweep = "nothing".into();
