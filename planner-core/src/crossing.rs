@@ -1177,13 +1177,8 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         let Some(b) = r.brake.filter(|_| self.invariant == Invariant::LeaderAware) else {
             return F::ZERO;
         };
-        let ghost = safety::ghost_advance(p, v, b.mps2(), age);
         let raw = wall - F::HALF * (r.length + self.length + step) - p.d0();
-        if safety::leads(p, raw, ghost) {
-            safety::leader_credit(p, v, b.mps2())
-        } else {
-            F::ZERO
-        }
+        safety::credit_if_leads(p, v, b.mps2(), raw, age)
     }
 
     /// Takes another vehicle's report stamped `stamp`; older or duplicate reports and

@@ -505,10 +505,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> Planner<F, N, S> {
     /// about the ego's way to it).
     fn credit(&self, c: &Vehicle<F>, wall: F) -> F {
         match (self.invariant, c.brake) {
-            (Invariant::LeaderAware, Some(b))
-                if safety::leads(&self.params, wall, self.ghost(c)) =>
-            {
-                safety::leader_credit(&self.params, self.credited_speed(c), b.mps2())
+            (Invariant::LeaderAware, Some(b)) => {
+                let v = self.credited_speed(c);
+                safety::credit_if_leads(&self.params, v, b.mps2(), wall, c.age)
             }
             _ => F::ZERO,
         }

@@ -266,6 +266,19 @@ pub fn leads<F: Real>(p: &Params<F>, wall: F, ghost: F) -> bool {
     wall > F::ZERO || (ghost > F::ZERO && wall + ghost + p.d0() > F::ZERO)
 }
 
+/// The leader-aware credit (m) of a vehicle heard at speed `v` (already taken half a bus
+/// step lower), braking limit `brake` (m/s²), `age` seconds ago, whose wall is `wall`
+/// (x̄ − x from its stamped position): [`leader_credit`] if it [`leads`] judged by its
+/// [`ghost_advance`], else 0. The one rule the crossing, lane and single-lane planners
+/// each apply to the vehicles they may credit.
+pub fn credit_if_leads<F: Real>(p: &Params<F>, v: F, brake: F, wall: F, age: F) -> F {
+    if leads(p, wall, ghost_advance(p, v, brake, age)) {
+        leader_credit(p, v, brake)
+    } else {
+        F::ZERO
+    }
+}
+
 /// The certified fallback of Lemma 2: v_{t+kh} = max(0, v_{t−h} + amin (k+1) h).
 /// While the invariant holds it satisfies every constraint of (10) and reaches 0.
 pub fn max_braking<F: Real, const N: usize>(p: &Params<F>, v_prev: F) -> [F; N] {

@@ -152,8 +152,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
     pub(super) fn credit(&self, c: &Other<F>, raw: F) -> F {
         let p = self.params();
         match c.brake {
-            Some(b) if !c.sensed && safety::leads(p, raw, self.ghost(c)) => {
-                safety::leader_credit(p, c.v - F::HALF * self.resolution.speed, b.mps2())
+            Some(b) if !c.sensed => {
+                let v = c.v - F::HALF * self.resolution.speed;
+                safety::credit_if_leads(p, v, b.mps2(), raw, c.age)
             }
             _ => F::ZERO,
         }

@@ -151,6 +151,49 @@ fn a_cooperating_leader_is_credited_with_its_least_travel_and_nothing_else_is() 
     assert!((strong.gap - less).abs() < 1e-9, "{} vs {less}", strong.gap);
 }
 
+/// On a bus that rounds speeds, a leader's credit is taken at its speed half a step
+/// lower (the bus may have rounded it up): exactly leader_credit(v − step/2) more than the
+/// wall, in the front set (15).
+#[test]
+fn the_credit_takes_the_leaders_speed_half_a_bus_step_lower() {
+    let p = Params::<f64>::table_i();
+    let v = 15.0;
+    let leader = Other {
+        brake: safety::BrakeLimit::from_mps2(p.brake()),
+        ..Other::v2v(2, 40.0, v, p.length(), 0, 0.0)
+    };
+    let others = [leader];
+    let obs = LaneObservation {
+        pose: Pose {
+            x: 0.0,
+            y: 1.8,
+            theta: 0.0,
+        },
+        v_prev: v,
+        omega_prev: 0.0,
+        others: &others,
+        road: Road {
+            lanes: 1,
+            lane_width: 3.6,
+            end_x: None,
+        },
+        target_lane: 0,
+        target: 0.0,
+        v_ref: v,
+    };
+    let front = |invariant| {
+        let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
+        pl.set_bus_resolution(0.25, 0.125).expect("valid");
+        pl.set_invariant(invariant);
+        pl.steps = 100;
+        pl.gaps(&obs, None, None).0.expect("a leader")
+    };
+    let credit = front(Invariant::LeaderAware) - front(Invariant::Paper);
+    let want = safety::leader_credit(&p, v - 0.0625, p.brake());
+    assert!((credit - want).abs() < 1e-9, "{credit} vs {want}");
+    assert!(want < safety::leader_credit(&p, v, p.brake()) - 0.05);
+}
+
 /// The lane [0, 3.6] m and the table's vehicle.
 fn lane0() -> Band<f64> {
     Band { lo: 0.0, hi: 3.6 }
