@@ -7,7 +7,7 @@
 //! collision or violation, a vehicle not in its lane, or a deadlock.
 
 use super::experiment::{Experiment, RunError};
-use super::multilane::safe_spacing;
+use super::multilane::spacing;
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, CasesUnder, Failing, Totals};
 use crate::monitor::Limits;
@@ -16,7 +16,7 @@ use crate::scenario::road::commitment_bound;
 use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
 use crate::verdict::{Judged, Verdict};
-use crate::world::{Finish, LENGTH_M, START_MARGIN_M};
+use crate::world::{Body, Finish, START_MARGIN_M};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -28,6 +28,11 @@ pub struct Deadends {
     #[command(flatten)]
     #[serde(flatten)]
     pub sweep: CasesUnder,
+    /// Percent of the vehicles that are trucks (16.5 m, braking at 4.5 m/s²), drawn per
+    /// vehicle; 0 gives the cases as they always were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 impl Experiment for Deadends {
@@ -44,7 +49,7 @@ impl Experiment for Deadends {
         Ok(sweep_with(
             end - first,
             first,
-            s.sweep.seed,
+            (s.sweep.seed, self.trucks),
             threads,
             s.invariant,
         ))
@@ -85,25 +90,34 @@ pub struct DeadendsReport {
 
 /// Case `index` of the sweep seeded `seed`, as a scenario the loader accepts.
 pub fn case(seed: u64, index: u64) -> RoadScenario {
+    case_with(seed, index, 0)
+}
+
+/// [`case`] with `trucks_percent` of its vehicles trucks ([`Body::TRUCK`]), each drawn at
+/// random (with 0 nothing is drawn: [`case`]'s own), every follower at least its own
+/// safe spacing behind the vehicle ahead.
+pub fn case_with(seed: u64, index: u64, trucks_percent: u8) -> RoadScenario {
     let lim = Limits::table_i();
     let mut rng = rng(case_seed(seed, index));
     let lanes: u8 = rng.random_range(2..=5);
     let n: usize = rng.random_range(4..=40);
     let common = rng.random_bool(0.25).then(|| rng.random_range(0..lanes));
-    let mut back: Vec<Option<f64>> = vec![None; usize::from(lanes)];
+    let mut back: Vec<Option<(f64, Body)>> = vec![None; usize::from(lanes)];
     let mut vehicles = Vec::with_capacity(n);
     for i in 0..n {
         let lane = rng.random_range(0..lanes);
         let v = rng.random_range(0.0..lim.v_max);
+        let truck = trucks_percent > 0 && rng.random_range(0..100u8) < trucks_percent;
+        let body = if truck { Body::TRUCK } else { Body::CAR };
         let x = match back[usize::from(lane)] {
             None => rng.random_range(0.0..40.0),
-            Some(xl) => xl - safe_spacing(v) - rng.random_range(0.0..25.0),
+            Some((xl, lead)) => xl - spacing(v, lead, body) - rng.random_range(0.0..25.0),
         };
-        back[usize::from(lane)] = Some(x);
+        back[usize::from(lane)] = Some((x, body));
         vehicles.push(RoadVehicle {
             cooperative: None,
-            length: None,
-            brake: None,
+            length: truck.then_some(body.length),
+            brake: truck.then_some(body.brake),
             id: i as u16 + 1,
             x,
             lane,
@@ -122,7 +136,9 @@ pub fn case(seed: u64, index: u64) -> RoadScenario {
         .enumerate()
         .map(|(i, v)| {
             let commit = commitment_bound(&vehicles, &open, i, lim.v_max).unwrap_or(0.0);
-            let stop = 0.5 * LENGTH_M + lim.d0 + lim.safe_distance(v.v) + START_MARGIN_M + 1.0;
+            let b = v.body();
+            let stop =
+                0.5 * b.length + lim.d0 + lim.safe_distance_at(v.v, b.brake) + START_MARGIN_M + 1.0;
             v.x + commit.max(stop)
         })
         .fold(0.0, f64::max)
@@ -161,21 +177,28 @@ pub fn case(seed: u64, index: u64) -> RoadScenario {
 
 /// Runs `cases` cases from index `first` of the sweep seeded `seed` on `threads` threads.
 pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> DeadendsReport {
-    sweep_with(cases, first, seed, threads, planner_core::Invariant::Paper)
+    sweep_with(
+        cases,
+        first,
+        (seed, 0),
+        threads,
+        planner_core::Invariant::Paper,
+    )
 }
 
-/// [`sweep()`], every planner keeping `invariant` (a failing case's scenario names it).
+/// [`sweep()`] with its seed and `trucks` percent of trucks, every planner keeping
+/// `invariant` (a failing case's scenario names it).
 pub fn sweep_with(
     cases: u64,
     first: u64,
-    seed: u64,
+    (seed, trucks): (u64, u8),
     threads: usize,
     invariant: planner_core::Invariant,
 ) -> DeadendsReport {
     let t0 = std::time::Instant::now();
     let results: Vec<Case> = super::par::map_indexed(cases as usize, threads, |i| {
         let index = first + i as u64;
-        let sc = case(seed, index);
+        let sc = case_with(seed, index, trucks);
         let mut world = sc.world();
         world.finish = Finish::GoalsMetAndStill;
         world.invariant = invariant;
