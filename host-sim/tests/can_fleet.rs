@@ -30,6 +30,22 @@ fn on_hub(name: &str) -> FleetSummary {
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// Cars and trucks over CAN frames (scenarios/trucks.toml): each state carries its
+/// sender's length and braking limit through the codec; safe and every lane change done
+/// under both invariants, every frame accepted.
+#[test]
+fn cars_and_trucks_on_can_frames() {
+    for invariant in [planner_core::Invariant::Paper, planner_core::Invariant::LeaderAware] {
+        let mut sc = scenario("trucks.toml");
+        sc.invariant = invariant;
+        let f = fleet::Fleet::new()
+            .run(sc, Medium::Hub, &mut |_| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        safe_and_complete(&f.run);
+        assert!(f.can.rejected.is_empty(), "{:?}", f.can.rejected);
+    }
+}
+
 /// The multi-lane scenario as a fleet: a task per vehicle, every state through the codec;
 /// safe, every lane change done, every frame accepted, one SYNC per period.
 #[test]
