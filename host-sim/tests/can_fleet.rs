@@ -35,7 +35,10 @@ fn on_hub(name: &str) -> FleetSummary {
 /// under both invariants, every frame accepted.
 #[test]
 fn cars_and_trucks_on_can_frames() {
-    for invariant in [planner_core::Invariant::Paper, planner_core::Invariant::LeaderAware] {
+    for invariant in [
+        planner_core::Invariant::Paper,
+        planner_core::Invariant::LeaderAware,
+    ] {
         let mut sc = scenario("trucks.toml");
         sc.invariant = invariant;
         let f = fleet::Fleet::new()

@@ -88,6 +88,33 @@ fn the_intersection_exports_with_a_connection_per_route_and_its_vehicles() {
     assert!(routes.contains(r#"length="4.5""#) && routes.contains(r#"decel="7.9""#));
 }
 
+/// Trucks export as SUMO's own vehicle type, with their length and braking limit, and
+/// depart with their front where host-sim has it.
+#[test]
+fn trucks_export_as_their_own_vehicle_type() {
+    let dir = scratch("sumo-trucks");
+    let (code, err) = export(&root().join("scenarios/trucks.toml"), &dir, &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let routes = read(&dir, "trucks.rou.xml");
+    assert!(routes.contains(r#"<vType id="truck" length="16.5" width="1.7" accel="3.8" decel="4.5" emergencyDecel="4.5""#), "{routes}");
+    assert!(
+        routes.contains(r#"<vType id="car" length="4.5""#),
+        "{routes}"
+    );
+    // Truck 1 at x = 0 in lane 0: its front at 8.25 m, never before its own length.
+    assert!(
+        routes.contains(
+            r#"<vehicle id="v1" type="truck" depart="0" departLane="0" departPos="16.500""#
+        ),
+        "{routes}"
+    );
+    assert!(
+        routes.contains(r#"<vehicle id="v3" type="car""#),
+        "{routes}"
+    );
+    assert_eq!(count(&routes, r#"type="truck""#), 2);
+}
+
 #[test]
 fn a_grid_exports_its_arrivals_as_poisson_flows_on_shortest_paths() {
     let dir = scratch("sumo-grid");

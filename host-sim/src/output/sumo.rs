@@ -26,7 +26,7 @@
 
 use crate::world::at::At;
 use crate::world::network::{turned, Junction, Network, Segment};
-use crate::world::{Arrivals, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M};
+use crate::world::{Arrivals, Body, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M};
 use planner_core::intersection::{lane_movements, Movement};
 use std::fmt::Write as _;
 
@@ -341,20 +341,43 @@ fn edges_through(net: &Network, j: usize, h: u8, movements: &[Movement]) -> Vec<
     out
 }
 
-/// The routes file: the vehicle type, the vehicles at t = 0, the arrivals as flows.
+/// The SUMO vehicle type of `body`: `car` (Table I's), `truck`, or one named by its
+/// length and limit.
+fn type_of(body: Body) -> String {
+    if body == Body::CAR {
+        "car".into()
+    } else if body == Body::TRUCK {
+        "truck".into()
+    } else {
+        format!("body_{}_{}", body.length, body.brake)
+    }
+}
+
+/// The routes file: the vehicle types, the vehicles at t = 0, the arrivals as flows.
 fn routes(spec: &WorldSpec, notes: &mut Vec<String>) -> String {
     let lim = crate::monitor::Limits::table_i();
     let mut out = String::from("<routes>\n");
-    let _ = writeln!(
-        out,
-        r#"    <vType id="car" length="{LENGTH_M}" width="{}" accel="{}" decel="{}" emergencyDecel="{}" maxSpeed="{}" minGap="{}" speedDev="0"/>"#,
-        crate::world::WIDTH_M,
-        lim.a_max,
-        lim.brake,
-        lim.brake,
-        lim.v_max,
-        lim.d0,
-    );
+    // Table I's car (arrivals are cars), then every other body a vehicle has, each once.
+    let mut bodies = vec![Body::CAR];
+    for v in &spec.vehicles {
+        if !bodies.contains(&v.body) {
+            bodies.push(v.body);
+        }
+    }
+    for b in bodies {
+        let _ = writeln!(
+            out,
+            r#"    <vType id="{}" length="{}" width="{}" accel="{}" decel="{}" emergencyDecel="{}" maxSpeed="{}" minGap="{}" speedDev="0"/>"#,
+            type_of(b),
+            b.length,
+            crate::world::WIDTH_M,
+            lim.a_max,
+            b.brake,
+            b.brake,
+            lim.v_max,
+            lim.d0,
+        );
+    }
     let mut departures: Vec<(&VehicleSpec, Vec<String>, u8, f64)> = spec
         .vehicles
         .iter()
@@ -364,8 +387,9 @@ fn routes(spec: &WorldSpec, notes: &mut Vec<String>) -> String {
     for (v, edges, lane, pos) in departures {
         let _ = writeln!(
             out,
-            r#"    <vehicle id="v{}" type="car" depart="0" departLane="{lane}" departPos="{pos:.3}" departSpeed="{:.3}"><route edges="{}"/></vehicle>"#,
+            r#"    <vehicle id="v{}" type="{}" depart="0" departLane="{lane}" departPos="{pos:.3}" departSpeed="{:.3}"><route edges="{}"/></vehicle>"#,
             v.id,
+            type_of(v.body),
             v.v,
             edges.join(" ")
         );
@@ -393,7 +417,8 @@ fn departure(
     match v.at {
         At::Lane { seg, x, lane, .. } => {
             let edges = edges_from(net, seg, &v.trip.movements);
-            Some((edges, lane, (x + 0.5 * LENGTH_M).max(LENGTH_M)))
+            let l = v.body.length;
+            Some((edges, lane, (x + 0.5 * l).max(l)))
         }
         At::Crossing { junction, route, s } => {
             let jn = net.junctions.get(junction)?;
