@@ -91,4 +91,5 @@ fn the_viewer_plays_road_intersection_network_and_fleet_runs_in_chromium() {
     check("intersection-queues.toml", &[]);
     check("corridor.toml", &[]);
     check("intersection.toml", &["--bus", "can-hub"]);
+    check("trucks.toml", &[]);
 }

@@ -38,6 +38,8 @@ struct Sample {
 #[derive(Debug, Clone)]
 struct Track {
     id: u16,
+    /// Its vehicle's length (m): a truck is drawn as long as it is.
+    length: f64,
     k0: u64,
     samples: Vec<Sample>,
 }
@@ -131,6 +133,7 @@ impl Viewer {
             Some(t) if t.k0 + t.samples.len() as u64 == k => t.samples.push(s),
             _ => tracks.push(Track {
                 id: r.id,
+                length: r.length,
                 k0: k,
                 samples: vec![s],
             }),
@@ -170,12 +173,13 @@ impl Viewer {
             }
             let _ = write!(
                 meta,
-                "{}[{},{},{},{}]",
+                "{}[{},{},{},{},{}]",
                 if meta.len() > 1 { "," } else { "" },
                 t.id,
                 first / thin,
                 kept.len(),
-                bytes.len() / 16
+                bytes.len() / 16,
+                finite(t.length)
             );
             for s in kept {
                 bytes.extend_from_slice(&s.x.to_le_bytes());

@@ -104,8 +104,15 @@ def main(page_path, trace_path, shot=None, view=None):
                 c, s = math.cos(th), math.sin(th)
                 along = (cx + 0.3 * L * c * SCALE, cy - 0.3 * L * s * SCALE)
                 beside = (cx - 1.4 * W * s * SCALE, cy - 1.4 * W * c * SCALE)
-                for name, (px, py), inside in (("centre", (cx, cy), True), ("along", along, True),
-                                              ("beside", beside, False)):
+                points = [("centre", (cx, cy), True), ("along", along, True),
+                          ("beside", beside, False)]
+                # A long vehicle (a truck) is drawn as long as the trace says: 40 % of its
+                # length ahead of its centre is still it, where a car would have ended.
+                length = float(r.get("length") or L)
+                if length > 2 * L:
+                    far = (cx + 0.4 * length * c * SCALE, cy - 0.4 * length * s * SCALE)
+                    points.append(("far along", far, True))
+                for name, (px, py), inside in points:
                     pix = page.evaluate(f"window.viewer.pixel({px}, {py})")[:3]
                     if close(pix, colour) != inside:
                         fail(f"t = {t}: vehicle {vid} ({r['mode']}) {name} pixel {pix} "
