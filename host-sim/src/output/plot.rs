@@ -21,6 +21,8 @@ pub struct PlotData {
     pub end_x: Option<f64>,
     /// Only rows with t ≤ this are kept (all if `None`).
     pub until_s: Option<f64>,
+    /// Per vehicle: its length (m), as its rows say (a truck is drawn as long as it is).
+    pub lengths: BTreeMap<u16, f64>,
 }
 
 impl PlotData {
@@ -37,6 +39,11 @@ impl PlotData {
         }
     }
 
+    /// Vehicle `id`'s length: as its rows said, Table I's if it has none.
+    pub fn length_of(&self, id: u16) -> f64 {
+        self.lengths.get(&id).copied().unwrap_or(LENGTH_M)
+    }
+
     /// Samples a trace row (keeps one row every 0.1 s).
     pub fn add(&mut self, r: &TraceRow) {
         // Rows come every h = 0.01 s; t is a multiple of h.
@@ -45,6 +52,7 @@ impl PlotData {
                 .entry(r.id)
                 .or_default()
                 .push((r.t, r.x, r.y, r.theta, r.v));
+            self.lengths.insert(r.id, r.length);
         }
     }
 }
@@ -191,6 +199,7 @@ where
     let snapshots = 6.0;
     for (i, (id, s)) in data.series.iter().enumerate() {
         let c = palette(i);
+        let length = data.length_of(*id);
         xy.draw_series(LineSeries::new(s.iter().map(|p| (p.1, p.2)), c.mix(0.6)))
             .map_err(e)?
             .label(format!("vehicle {id}"))
@@ -201,7 +210,7 @@ where
                 .iter()
                 .min_by(|a, b| (a.0 - t_snap).abs().total_cmp(&(b.0 - t_snap).abs()))
             {
-                let pts = footprint(p);
+                let pts = footprint(p, length);
                 xy.draw_series(std::iter::once(Polygon::new(pts.clone(), c.mix(0.35))))
                     .map_err(e)?;
                 xy.draw_series(std::iter::once(PathElement::new(pts, c.stroke_width(1))))
@@ -221,10 +230,10 @@ where
     speed_panel(data, &bottom, t1, 30.0)
 }
 
-/// The closed outline of a vehicle's L × W rectangle at a sample's pose.
-fn footprint(p: &Sample) -> Vec<(f64, f64)> {
+/// The closed outline of a vehicle's L × W rectangle at a sample's pose, `length` long.
+fn footprint(p: &Sample, length: f64) -> Vec<(f64, f64)> {
     let (sn, cs) = p.3.sin_cos();
-    let (hl, hw) = (0.5 * LENGTH_M, 0.5 * WIDTH_M);
+    let (hl, hw) = (0.5 * length, 0.5 * WIDTH_M);
     [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw), (hl, hw)]
         .iter()
         .map(|&(u, w)| (p.1 + u * cs - w * sn, p.2 + u * sn + w * cs))
@@ -433,12 +442,13 @@ where
         .fold(0.0, f64::max);
     for (i, (id, s)) in data.series.iter().enumerate() {
         let col = palette(i);
+        let length = data.length_of(*id);
         xy.draw_series(LineSeries::new(s.iter().map(|p| (p.1, p.2)), col.mix(0.7)))
             .map_err(e)?
             .label(format!("vehicle {id}"))
             .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], col.filled()));
         for p in s.iter().step_by(20) {
-            let pts = footprint(p);
+            let pts = footprint(p, length);
             xy.draw_series(std::iter::once(Polygon::new(pts.clone(), col.mix(0.3))))
                 .map_err(e)?;
             xy.draw_series(std::iter::once(PathElement::new(pts, col)))
@@ -532,12 +542,13 @@ where
         .flatten()
         .map(|p| p.0)
         .fold(0.0, f64::max);
-    for (i, (_, s)) in data.series.iter().enumerate() {
+    for (i, (id, s)) in data.series.iter().enumerate() {
         let col = palette(i);
+        let length = data.length_of(*id);
         xy.draw_series(LineSeries::new(s.iter().map(|p| (p.1, p.2)), col.mix(0.6)))
             .map_err(e)?;
         for p in s.iter().step_by(50) {
-            let pts = footprint(p);
+            let pts = footprint(p, length);
             xy.draw_series(std::iter::once(Polygon::new(pts, col.mix(0.5))))
                 .map_err(e)?;
         }
