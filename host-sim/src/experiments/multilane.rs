@@ -11,7 +11,7 @@ use crate::scenario::road::{commitment_bound, Road, RoadScenario, RoadVehicle};
 use crate::scenario::DriverKind;
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::summary::Summary;
-use crate::world::{Body, SolverChoice, TraceRow, World, LENGTH_M, START_MARGIN_M};
+use crate::world::{Body, SolverChoice, TraceRow, World, START_MARGIN_M};
 use planner_core::Invariant;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -84,16 +84,12 @@ pub const EXPERIMENT_DURATION_S: f64 = 30.0;
 /// The smallest extent-adjusted spacing at which a follower at `v` keeps the invariant
 /// with the scenario start margin: L + d0 + dS(v) + margin (centre to centre).
 pub fn safe_spacing(v: f64) -> f64 {
-    let lim = Limits::table_i();
-    LENGTH_M + lim.d0 + lim.safe_distance(v) + START_MARGIN_M
+    spacing(v, Body::CAR, Body::CAR)
 }
 
 /// [`safe_spacing`] for a follower of `body` at `v` behind a leader of `lead`: half of
 /// each length, d0, dS at the follower's own limit, the margin.
 pub fn spacing(v: f64, lead: Body, body: Body) -> f64 {
-    if lead == Body::CAR && body == Body::CAR {
-        return safe_spacing(v);
-    }
     let lim = Limits::table_i();
     0.5 * (lead.length + body.length)
         + lim.d0

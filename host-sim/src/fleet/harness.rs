@@ -91,6 +91,7 @@ impl<const N: usize> Harness<N> {
     }
 
     pub(super) fn setup(&self) -> PlannerSetup {
+        let fleet = self.fleet();
         PlannerSetup {
             solver: self.solver,
             // Lock-step: every message of period k is heard in period k.
@@ -102,10 +103,10 @@ impl<const N: usize> Harness<N> {
             relevant_m: crate::world::heard::relevance_radius(
                 &self.spec.network,
                 self.lim.v_max,
-                self.fleet(),
+                fleet,
             ),
             invariant: self.spec.invariant,
-            fleet: self.fleet(),
+            fleet,
         }
     }
 

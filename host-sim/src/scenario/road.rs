@@ -290,25 +290,6 @@ impl RoadVehicle {
         }
     }
 
-    /// A planner-driven car of Table I (the sweeps' vehicles), `id` at `x` in `lane` at
-    /// `v`; the rest as a file that gives only these keys.
-    pub fn car(id: u16, x: f64, lane: u8, v: f64) -> Self {
-        Self {
-            id,
-            x,
-            lane,
-            v,
-            target_lane: None,
-            driver: DriverKind::Planner,
-            script: Vec::new(),
-            goal_x: None,
-            v_ref: None,
-            cooperative: None,
-            length: None,
-            brake: None,
-        }
-    }
-
     /// The world's vehicle: on segment 0 at (x, centre of its lane), straight.
     pub fn spec(&self, v_max: f64) -> crate::world::VehicleSpec {
         crate::world::VehicleSpec {

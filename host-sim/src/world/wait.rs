@@ -148,8 +148,13 @@ fn on_segment(v: &VehicleTruth, all: &[VehicleTruth], net: &Network, lim: &Limit
     let ahead = all
         .iter()
         .filter(|o| o.id != v.id && in_lane(o, lane))
-        .filter_map(|o| x_of(o).map(|ox| (o.id, ox - x - 0.5 * (o.body.length + v.body.length))))
-        .filter(|&(_, gap)| gap >= -v.body.length.max(LENGTH_M) && gap <= NEAR_M + lim.d0)
+        .filter_map(|o| {
+            let half = 0.5 * (o.body.length + v.body.length);
+            x_of(o).map(|ox| (o.id, ox - x - half, half))
+        })
+        // Its centre not behind mine (the gap is then at least minus both half-lengths).
+        .filter(|&(_, gap, half)| gap >= -half && gap <= NEAR_M + lim.d0)
+        .map(|(id, gap, _)| (id, gap))
         .min_by(|a, b| a.1.total_cmp(&b.1));
     if let Some((id, _)) = ahead {
         out.push(WaitsOn::Vehicle { id });

@@ -57,6 +57,29 @@ fn margins_are_what_their_docs_say() {
     assert!((pl.entry_allowance(v) - want).abs() < 1e-12);
 }
 
+/// On a one-lane road, the ego at x = 0 on its lane's centre, straight, at `v` (its
+/// reference too), among `others`.
+fn one_lane(v: f64, others: &[Other<f64>]) -> LaneObservation<'_, f64> {
+    LaneObservation {
+        pose: Pose {
+            x: 0.0,
+            y: 1.8,
+            theta: 0.0,
+        },
+        v_prev: v,
+        omega_prev: 0.0,
+        others,
+        road: Road {
+            lanes: 1,
+            lane_width: 3.6,
+            end_x: None,
+        },
+        target_lane: 0,
+        target: 0.0,
+        v_ref: v,
+    }
+}
+
 /// A follower at vmax, `gap` m of wall distance behind a leader at vmax, after its
 /// first steps (so nothing ahead is unheard of): its command under `invariant`.
 fn follow(invariant: Invariant, gap: f64, leader: impl Fn(&mut Other<f64>)) -> LaneCommand<f64> {
@@ -70,24 +93,7 @@ fn follow(invariant: Invariant, gap: f64, leader: impl Fn(&mut Other<f64>)) -> L
     c.brake = safety::BrakeLimit::from_mps2(p.brake());
     leader(&mut c);
     let others = [c];
-    let obs = LaneObservation {
-        pose: Pose {
-            x: 0.0,
-            y: 1.8,
-            theta: 0.0,
-        },
-        v_prev: v,
-        omega_prev: 0.0,
-        others: &others,
-        road: Road {
-            lanes: 1,
-            lane_width: 3.6,
-            end_x: None,
-        },
-        target_lane: 0,
-        target: 0.0,
-        v_ref: v,
-    };
+    let obs = one_lane(v, &others);
     pl.step(&obs).expect("a valid observation")
 }
 
@@ -163,24 +169,7 @@ fn the_credit_takes_the_leaders_speed_half_a_bus_step_lower() {
         ..Other::v2v(2, 40.0, v, p.length(), 0, 0.0)
     };
     let others = [leader];
-    let obs = LaneObservation {
-        pose: Pose {
-            x: 0.0,
-            y: 1.8,
-            theta: 0.0,
-        },
-        v_prev: v,
-        omega_prev: 0.0,
-        others: &others,
-        road: Road {
-            lanes: 1,
-            lane_width: 3.6,
-            end_x: None,
-        },
-        target_lane: 0,
-        target: 0.0,
-        v_ref: v,
-    };
+    let obs = one_lane(v, &others);
     let front = |invariant| {
         let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
         pl.set_bus_resolution(0.25, 0.125).expect("valid");
