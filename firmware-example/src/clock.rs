@@ -7,6 +7,7 @@
 //! Under QEMU with `-icount shift=3,sleep=off` one instruction is 8 ns of virtual time (a
 //! 125 MHz core, below the 168 MHz of common M4F parts) and a sleeping core jumps straight
 //! to the next timer deadline: timing is deterministic and idling costs no emulation time.
+//! SysTick's rate is the board's ([`crate::board::SYSTICK_HZ`]).
 
 use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
@@ -14,10 +15,16 @@ use cortex_m_rt::exception;
 use embedded_hal::delay::DelayNs;
 use planner_core::Instant;
 
-/// SysTick input clock: the MPS2 board's 25 MHz system clock.
-pub const TICKS_PER_SECOND: u64 = 25_000_000;
+/// SysTick input clock: the board's system clock.
+pub const TICKS_PER_SECOND: u64 = crate::board::SYSTICK_HZ as u64;
 /// SysTick reload period: 1 ms, the resolution of a sleeping delay.
-const TICKS_PER_MS: u32 = 25_000;
+const TICKS_PER_MS: u32 = crate::board::SYSTICK_HZ / 1_000;
+/// Ticks per microsecond, for the node's time.
+const TICKS_PER_US: u64 = TICKS_PER_SECOND / 1_000_000;
+
+// Whole ticks per microsecond and per millisecond (1 ms also fits SysTick's 24-bit reload):
+// the clock's arithmetic is exact only then.
+const _: () = assert!(TICKS_PER_SECOND.is_multiple_of(1_000_000) && TICKS_PER_MS <= 1 << 24);
 
 /// Milliseconds since [`Clock::start`], counted by the SysTick exception.
 static MILLIS: AtomicU32 = AtomicU32::new(0);
@@ -54,7 +61,7 @@ impl Clock {
 
     /// The node's time now: the start reading plus the ticks since, in microseconds.
     pub fn instant(&self) -> Instant {
-        let us = self.now() / (TICKS_PER_SECOND / 1_000_000);
+        let us = self.now() / TICKS_PER_US;
         self.0
             .saturating_add(planner_core::Duration::from_micros(us))
     }

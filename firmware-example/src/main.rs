@@ -1,4 +1,4 @@
-//! planner-core on a Cortex-M4F, in f32, as a control loop at h = 10 ms, logging with defmt
+//! planner-core on a Cortex-M4F, M7 or M33 ([`board`]), in f32, as a control loop at h = 10 ms, logging with defmt
 //! over semihosting (decode with `defmt-print -e <elf>`):
 //! (1) a single-lane approach to a stopped vehicle that the ego knows only from its V2V
 //! state messages, received as CAN frames through can-gateway from an `embedded-can`
@@ -11,20 +11,23 @@
 //! It also measures what the planner costs here: flash and static RAM (from the linker's
 //! symbols), peak stack (stack painting), and instructions per planner step (SysTick
 //! under QEMU's `-icount shift=3`, where one instruction is 8 ns of virtual time, so one
-//! 25 MHz SysTick tick is 5 instructions; the factor is calibrated on a loop of known
-//! length). The loop's deadlines are checked in that virtual time: a 125 MHz core.
-//! Build with `--features n50` for a horizon of 50.
+//! tick of a 25 MHz SysTick is 5 instructions and of a 20 MHz one 6.25; the factor is
+//! calibrated, in hundredths, on a loop of known length). The loop's deadlines are checked
+//! in that virtual time: a 125 MHz core.
+//! Build with `--features n50` for a horizon of 50; `run.sh BOARD N OUT` builds, runs and
+//! decodes it for a board.
 #![no_std]
 #![no_main]
 
+mod board;
 mod clock;
 mod scenarios;
 mod secured;
 
+use board::exit;
 use clock::Clock;
 use core::panic::PanicInfo;
 use cortex_m_rt::entry;
-use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 use embedded_hal::delay::DelayNs;
 use planner_core::{CostWeights, LanePlannerSlot, Params, PlannerSlot};
@@ -67,18 +70,8 @@ extern "C" {
     static __sbss: u32;
     static __ebss: u32;
     static __erodata: u32;
+    static __vector_table: u32;
     static _stack_start: u32;
-}
-
-fn exit(ok: bool) -> ! {
-    debug::exit(if ok {
-        debug::EXIT_SUCCESS
-    } else {
-        debug::EXIT_FAILURE
-    });
-    loop {
-        cortex_m::asm::wfi();
-    }
 }
 
 /// Paints the free stack from the end of static RAM up to 256 bytes below the current
@@ -118,10 +111,11 @@ fn repaint() -> usize {
     sp
 }
 
-/// Instructions per SysTick tick, measured: a loop of exactly 2 instructions per iteration
-/// (`subs`, `bne`) timed by the clock. Under `-icount shift=3` this is 5 (8 ns per
-/// instruction, 25 MHz SysTick); without `-icount` it is meaningless, and so are the
-/// instruction counts.
+/// Hundredths of an instruction per SysTick tick, measured: a loop of exactly 2
+/// instructions per iteration (`subs`, `bne`) timed by the clock. Under `-icount shift=3`
+/// (8 ns per instruction) this is 500 with a 25 MHz SysTick and 625 with a 20 MHz one;
+/// hundredths, because a whole number would be 6 % off on the second. Without `-icount`
+/// it is meaningless, and so are the instruction counts.
 fn calibrate(clock: &Clock) -> u32 {
     let t0 = clock.now();
     let mut n = CALIBRATION_ITERATIONS;
@@ -130,18 +124,22 @@ fn calibrate(clock: &Clock) -> u32 {
         core::arch::asm!("1:", "subs {0}, {0}, #1", "bne 1b", inout(reg) n, options(nomem, nostack));
     }
     let _ = n;
-    let ticks = u32::try_from(clock.now() - t0).unwrap_or(u32::MAX).max(1);
-    (2 * CALIBRATION_ITERATIONS + ticks / 2) / ticks
+    let ticks = (clock.now() - t0).max(1);
+    let hundredths = (200 * u64::from(CALIBRATION_ITERATIONS) + ticks / 2) / ticks;
+    u32::try_from(hundredths).unwrap_or(u32::MAX)
 }
 
-/// Median and maximum of the first `n` samples, in instructions.
-fn stats(n: usize, instr_per_tick: u32) -> (u32, u32) {
+/// Median and maximum of the first `n` samples, in instructions, at `per_tick` hundredths
+/// of an instruction per tick.
+fn stats(n: usize, per_tick: u32) -> (u32, u32) {
     let s = unsafe { &mut *core::ptr::addr_of_mut!(SAMPLES) };
     let s = &mut s[..n.min(STEPS)];
     s.sort_unstable();
+    let instructions =
+        |t: u32| u32::try_from(u64::from(t) * u64::from(per_tick) / 100).unwrap_or(u32::MAX);
     let med = s.get(s.len() / 2).copied().unwrap_or(0);
     let max = s.last().copied().unwrap_or(0);
-    (med * instr_per_tick, max * instr_per_tick)
+    (instructions(med), instructions(max))
 }
 
 fn record(i: usize, ticks: u32) {
@@ -171,7 +169,10 @@ fn main() -> ! {
     let clock = Clock::start(cp.SYST, scenarios::CLOCK_START);
     let per_tick = calibrate(&clock);
     defmt::info!(
-        "calibration: {=u32} instructions per SysTick tick",
+        "board: {=str} ({=str}), SysTick {=u32} Hz; calibration: {=u32} instructions per 100 SysTick ticks",
+        board::MACHINE,
+        board::CORE,
+        board::SYSTICK_HZ,
         per_tick
     );
 
@@ -374,12 +375,13 @@ fn main() -> ! {
         secoc_ok &= v.accepted == secured::MESSAGES as u32 && v.forged_accepted == 0;
     }
 
-    // Footprint, from the linker's symbols (vector table and code start at 0).
+    // Footprint, from the linker's symbols: flash from the vector table, which sits at the
+    // flash origin (0 on the AN386 and AN500, 0x1000_0000 on the AN505).
     let (flash, ram) = unsafe {
         let addr = |s: &u32| s as *const u32 as usize;
         let data = addr(&__edata) - addr(&__sdata);
         let bss = addr(&__ebss) - addr(&__sbss);
-        (addr(&__erodata) + data, data + bss)
+        (addr(&__erodata) - addr(&__vector_table) + data, data + bss)
     };
     let samples = core::mem::size_of::<[u32; STEPS]>();
     let peak = peak.max(peak_stack());

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Builds the firmware for one board and horizon, runs it in QEMU and decodes its log.
+#
+#   firmware-example/run.sh BOARD N OUT
+#
+# BOARD: an386 (Cortex-M4F), an500 (Cortex-M7) or an505 (Cortex-M33); N: 20 or 50.
+# OUT gets the decoded log (defmt-print, one line per message). The exit status is the
+# firmware's: 0 only if both scenarios met every check (src/main.rs), 2 for bad arguments.
+# Needs qemu-system-arm and defmt-print (`cargo install defmt-print`). FW_SECOC_KEY, if
+# set, is the node's key (build.rs). `-icount shift=3,sleep=off` makes the run
+# deterministic: one instruction is 8 ns of virtual time.
+set -euo pipefail
+
+usage() { echo "usage: $0 an386|an500|an505 20|50 OUT" >&2; exit 2; }
+[ $# = 3 ] || usage
+board=$1 n=$2 out=$3
+case "$board" in
+  an386) features="" target=thumbv7em-none-eabihf cpu=cortex-m4 ;;
+  an500) features="an500" target=thumbv7em-none-eabihf cpu=cortex-m7 ;;
+  an505) features="an505" target=thumbv8m.main-none-eabihf cpu=cortex-m33 ;;
+  *) usage ;;
+esac
+case "$n" in
+  20) ;;
+  50) features="$features n50" ;;
+  *) usage ;;
+esac
+# Refuse an output we could not write before spending a build on it.
+out_dir=$(dirname -- "$out")
+[ -d "$out_dir" ] && [ -w "$out_dir" ] || { echo "$0: cannot write to $out_dir" >&2; exit 2; }
+
+cd "$(dirname -- "$0")"
+# Cargo says where it builds (CARGO_TARGET_DIR may move it).
+target_dir=$(cargo metadata --format-version 1 --no-deps \
+  | python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+# shellcheck disable=SC2086
+cargo build --release --target "$target" ${features:+--features "${features# }"}
+elf="$target_dir/$target/release/firmware-example"
+raw=$(mktemp)
+trap 'rm -f "$raw"' EXIT
+status=0
+timeout 600 qemu-system-arm -machine "mps2-$board" -cpu "$cpu" -nographic \
+  -semihosting-config enable=on,target=native -icount shift=3,sleep=off \
+  -kernel "$elf" > "$raw" || status=$?
+defmt-print -e "$elf" --log-format '{s}' < "$raw" > "$out"
+exit "$status"
