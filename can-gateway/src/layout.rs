@@ -104,11 +104,17 @@ pub struct RequestFields {
     pub s: Field,
     /// When it entered A_C, ms (u32).
     pub arrival: Field,
+    /// Braking limit, 0.1 m/s² (u8, 0 = not declared; empty for [`REQUEST`]).
+    pub brake: Field,
+    /// Length, 0.1 m (u8, 0 = not declared; empty for [`REQUEST`]).
+    pub length: Field,
     /// Bytes the fields cover.
     pub len: usize,
 }
 
-/// A crossing request (kind 2): id, inlet, outlet, s | arrival, speed, CRC.
+/// A crossing request (kind 2): id, inlet, outlet, s | arrival, speed, CRC. Its two
+/// frames have no byte to spare: it declares neither length nor braking limit, and its
+/// receivers take the sender at the longest vehicle they expect, as a wall.
 pub const REQUEST: RequestFields = RequestFields {
     id: 0..2,
     junction: 0..0,
@@ -117,11 +123,15 @@ pub const REQUEST: RequestFields = RequestFields {
     s: 4..7,
     arrival: 7..11,
     speed: 11..13,
+    brake: 0..0,
+    length: 0..0,
     len: 13,
 };
 
 /// A crossing request at a junction (kind 8): id, junction, inlet, outlet, speed | s,
-/// arrival | reserved, CRC.
+/// arrival | braking limit, length, reserved, CRC. The braking limit and the length took
+/// frame 2's first reserved bytes: 0, as an older sender wrote them, reads "not
+/// declared".
 pub const JUNCTION_REQUEST: RequestFields = RequestFields {
     id: 0..2,
     junction: 2..3,
@@ -130,7 +140,9 @@ pub const JUNCTION_REQUEST: RequestFields = RequestFields {
     speed: 5..7,
     s: 7..10,
     arrival: 10..14,
-    len: 14,
+    brake: 14..15,
+    length: 15..16,
+    len: 16,
 };
 
 /// The fields of a message that names a vehicle and an instant: a grant (until), a
@@ -203,9 +215,9 @@ pub(crate) fn get<const K: usize>(b: &[u8], field: Field) -> [u8; K] {
     out
 }
 
-/// The byte at `field`'s start (0 if the payload is shorter).
+/// The byte at `field`'s start (0 if the field is empty or the payload shorter).
 pub(crate) fn byte(b: &[u8], field: Field) -> u8 {
-    b.get(field.start).copied().unwrap_or(0)
+    b.get(field).and_then(|f| f.first()).copied().unwrap_or(0)
 }
 
 #[cfg(test)]
@@ -259,7 +271,11 @@ mod tests {
                 (k, "arrival", r.arrival.clone()),
             ]);
             if k == K::JunctionRequest {
-                out.extend([(k, "junction", r.junction)]);
+                out.extend([
+                    (k, "junction", r.junction),
+                    (k, "brake", r.brake),
+                    (k, "length", r.length),
+                ]);
             }
         }
         for (k, r) in [(K::Grant, ID_TIME), (K::JunctionExit, JUNCTION_EXIT)] {
@@ -277,7 +293,7 @@ mod tests {
 
     #[test]
     fn no_field_straddles_a_frame_and_the_crc_stays_clear() {
-        assert_eq!(all().len(), 43);
+        assert_eq!(all().len(), 45);
         for (kind, name, f) in all() {
             assert!(!f.is_empty(), "{kind:?}.{name}");
             assert_eq!(

@@ -43,7 +43,7 @@
 //! [`Message::Sync`] from [`CLOCK_ADDRESS`] (period number u32, end flag u8), protected
 //! like every other message.
 
-use planner_core::{Instant, VehicleState};
+use planner_core::{BodyLength, BrakeLimit, Instant, VehicleState};
 
 /// J1939 priority of every frame.
 pub const PRIORITY: u32 = 6;
@@ -179,6 +179,12 @@ pub struct Request<F> {
     pub s: F,
     /// Its speed (m/s).
     pub v: F,
+    /// Its braking limit, if it declares one. Only [`Message::JunctionRequest`] carries
+    /// it; a [`Message::Request`] decodes to `None`.
+    pub brake: Option<BrakeLimit>,
+    /// Its length, if it declares one (else receivers take it at the longest vehicle
+    /// they expect). Only [`Message::JunctionRequest`] carries it.
+    pub length: Option<BodyLength>,
 }
 
 impl<F> Request<F> {
@@ -191,6 +197,8 @@ impl<F> Request<F> {
             arrival: self.arrival,
             s: f(self.s),
             v: f(self.v),
+            brake: self.brake,
+            length: self.length,
         }
     }
 }

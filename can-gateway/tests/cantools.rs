@@ -190,6 +190,8 @@ fn cantools_decodes_the_gateways_candump_log() {
         arrival: ms(3_500),
         s: 97.25,
         v: 13.9,
+        brake: None,
+        length: None,
     };
     let frames: Frames<F8> = encode(&Message::Request(req), 9, 5).expect("encodes");
     push(
@@ -297,10 +299,17 @@ fn cantools_decodes_the_gateways_candump_log() {
         &mut log,
         &mut expected,
     );
+    // A truck's request at a network's junction declares its body (a plain request
+    // cannot: its frames have no room, and cantools sees none there).
+    let truck = Request {
+        brake: BrakeLimit::from_mps2(4.5),
+        length: BodyLength::from_m(16.5),
+        ..req
+    };
     let frames: Frames<F8> = encode(
         &Message::JunctionRequest {
             junction: 2,
-            request: req,
+            request: truck,
         },
         9,
         8,
@@ -319,7 +328,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                 ("Speed", 13.9),
             ],
             vec![("PathPosition", 97.25), ("Arrival", 3.5)],
-            vec![("FrameIndex", 2.0)],
+            vec![("FrameIndex", 2.0), ("BrakeLimit", 4.5), ("Length", 16.5)],
         ],
         &mut log,
         &mut expected,

@@ -108,18 +108,33 @@ proptest! {
     }
 
     #[test]
-    fn request_round_trip(id in any::<u16>(), h in 0u8..4, l in 0u8..2, s in 0.0f64..1.0e5, v in 0.0f64..50.0, at_ms in 0u64..1u64 << 40) {
+    fn request_round_trip(id in any::<u16>(), h in 0u8..4, l in 0u8..2, s in 0.0f64..1.0e5, v in 0.0f64..50.0, at_ms in 0u64..1u64 << 40, (brake, length) in (any::<u8>(), any::<u8>()), junction in proptest::option::of(any::<u8>())) {
         let at = Instant::from_millis(at_ms);
-        let req = Request { id, inlet: TrackWire { heading: h, lane: l }, outlet: TrackWire { heading: (h + 1) % 4, lane: l }, arrival: at, s, v };
-        let frames: Frames<F8> = encode(&Message::Request(req), (id & 0xFF) as u8, 0).expect("in range");
+        let req = Request { id, inlet: TrackWire { heading: h, lane: l }, outlet: TrackWire { heading: (h + 1) % 4, lane: l }, arrival: at, s, v,
+            brake: BrakeLimit::from_tenths(brake), length: BodyLength::from_tenths(length) };
+        let msg = match junction {
+            Some(junction) => Message::JunctionRequest { junction, request: req },
+            None => Message::Request(req),
+        };
+        let frames: Frames<F8> = encode(&msg, (id & 0xFF) as u8, 0).expect("in range");
         let mut r = Reassembler::<2>::new();
         let mut got = None;
         for f in &frames {
             got = r.push::<f64, _>(f, at).expect("valid");
         }
-        let Some(Message::Request(d)) = got else { panic!("a request") };
+        let (d, declared) = match got {
+            Some(Message::Request(d)) => (d, (None, None)),
+            Some(Message::JunctionRequest { junction: j, request: d }) => {
+                prop_assert_eq!(Some(j), junction);
+                // A junction request's body arrives exactly; 0 is "not declared" both ways.
+                (d, (req.brake, req.length))
+            }
+            _ => panic!("a request"),
+        };
         prop_assert_eq!((d.id, d.inlet, d.outlet), (id, req.inlet, req.outlet));
         prop_assert!((d.s - s).abs() <= POS_RES / 2.0 + 1e-9 && (d.v - v).abs() <= SPEED_RES / 2.0 + 1e-9);
         prop_assert_eq!(d.arrival, at);
+        // The plain request has no room for a body: it declares none.
+        prop_assert_eq!((d.brake, d.length), declared);
     }
 }

@@ -83,8 +83,15 @@ fn fields() -> Vec<(MessageKind, &'static str, Field, &'static [&'static str])> 
             (k, p, f.s, &["PathPosition"][..]),
             (k, p, f.arrival, &["Arrival"][..]),
         ]);
-        if !f.junction.is_empty() {
-            out.push((k, p, f.junction, &["Junction"][..]));
+        let optional: [(Field, &'static [&'static str]); 3] = [
+            (f.junction, &["Junction"]),
+            (f.brake, &["BrakeLimit"]),
+            (f.length, &["Length"]),
+        ];
+        for (field, signals) in optional {
+            if !field.is_empty() {
+                out.push((k, p, field, signals));
+            }
         }
     }
     for (k, p, time) in [

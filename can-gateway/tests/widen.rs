@@ -39,6 +39,8 @@ fn every_kind() -> [Message<f32>; 9] {
         arrival: at,
         s: 31.25,
         v: 8.5,
+        brake: None,
+        length: None,
     };
     [
         Message::State(state(3)),

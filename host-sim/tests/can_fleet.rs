@@ -320,3 +320,25 @@ fn can_fd_carries_the_same_runs_in_one_frame_per_message() {
         assert_eq!(fd.can.messages_received, classic.can.messages_received);
     }
 }
+
+/// Cars and trucks at a single intersection over CAN frames
+/// (scenarios/trucks-intersection.toml): with trucks about, every request declares its
+/// sender's length and braking limit (kind 8), so the manager places each vehicle where it
+/// is; safe, every vehicle across under both invariants, every frame accepted.
+#[test]
+fn cars_and_trucks_cross_on_can_frames() {
+    for invariant in [
+        planner_core::Invariant::Paper,
+        planner_core::Invariant::LeaderAware,
+    ] {
+        let mut sc = scenario("trucks-intersection.toml");
+        sc.invariant = invariant;
+        let n = sc.vehicles.len() as u64;
+        let f = fleet::Fleet::new()
+            .run(sc, Medium::Hub, &mut |_| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        safe_and_complete(&f.run);
+        assert_eq!(f.run.crossed(), n, "{invariant:?}: {:?}", f.run);
+        assert!(f.can.rejected.is_empty(), "{:?}", f.can.rejected);
+    }
+}

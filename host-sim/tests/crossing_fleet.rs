@@ -10,7 +10,7 @@ use common::{assert_all_crossed_safely, builtin, Failing};
 use host_sim::bus::Message;
 use host_sim::fleet::can::{CanPort, Hub, HubPort, WireMap};
 use host_sim::fleet::{self, FleetError, FleetSummary, Medium, Node, TIMEOUT};
-use host_sim::world::{WorldSpec, LENGTH_M};
+use host_sim::world::{Body, Fleet, WorldSpec, LENGTH_M};
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::ROUTES;
 use std::io;
@@ -142,7 +142,38 @@ fn crossing_reports_map_onto_requests_and_back() {
         brake: None,
         ..bad_route
     };
+    // A plain request cannot say it is longer than the cars its receivers expect.
     assert!(map.to_wire(&report(long), common::secs(0.0)).is_err());
+    // In a fleet with trucks it goes as a junction request that declares its length.
+    let trucks = Fleet::of([Body::TRUCK]);
+    let wide = WireMap::new(&sc.network).for_fleet(trucks);
+    let Ok(wire::Message::JunctionRequest {
+        junction: 0,
+        request,
+    }) = wide.to_wire(&report(long), common::secs(0.0))
+    else {
+        panic!("a junction request");
+    };
+    assert_eq!(request.length.map(|l| l.m()), Some(LENGTH_M + 1.0));
+    let Some(Message::Crossing { report: back, .. }) = wide.from_wire(
+        &wire::Message::JunctionRequest {
+            junction: 0,
+            request,
+        },
+        7,
+    ) else {
+        panic!("a report back");
+    };
+    assert_eq!(back.length, LENGTH_M + 1.0);
+    // Undeclared (a plain request) in that fleet: taken at the truck's length.
+    let plain = wire::Message::Request(wire::Request {
+        length: None,
+        ..request
+    });
+    let Some(Message::Crossing { report: back, .. }) = wide.from_wire(&plain, 7) else {
+        panic!("a report back");
+    };
+    assert_eq!(back.length, Body::TRUCK.length);
     // A pair that is no route (straight on from the inner lane into the outer one).
     let mut q = wire::Request {
         id: 7,
@@ -157,6 +188,8 @@ fn crossing_reports_map_onto_requests_and_back() {
         arrival: common::secs(0.0),
         s: 1.0,
         v: 1.0,
+        brake: None,
+        length: None,
     };
     let route_of = |q: &wire::Request<f64>| match map.from_wire(&wire::Message::Request(*q), 7) {
         Some(Message::Crossing { report, .. }) => Some(report.route),

@@ -197,7 +197,27 @@ fn a_vehicle_changing_into_an_outlets_lane_is_on_the_crossing_followers_path() {
         "lane 0, staying there"
     );
     heard(&mut view, state(8, 0, Some(1)));
-    assert_eq!(on(&view).walls, [exit + 20.0], "changing into lane 1");
+    let wall = planner_core::crossing::PathVehicle {
+        s: exit + 20.0,
+        length: 4.5,
+    };
+    assert_eq!(on(&view).walls, [wall], "changing into lane 1");
+    // A truck changing in is a wall as long as it declared; one that declared nothing is
+    // taken at the longest expected.
+    let truck = VehicleState {
+        length: planner_core::BodyLength::from_m(16.5),
+        ..state(8, 0, Some(1))
+    };
+    let mut other = View::new(99, 1e9);
+    heard(&mut other, truck);
+    let walls = other.on_path(&net, (j, route), 25.0).walls;
+    assert_eq!(walls.len(), 1);
+    assert_eq!(
+        walls[0].length, 16.5,
+        "its declared length, not the longest expected"
+    );
+    let walls = view.on_path(&net, (j, route), 25.0).walls;
+    assert_eq!(walls[0].length, 25.0, "undeclared: the longest expected");
     heard(&mut view, state(9, 1, None));
     assert_eq!(on(&view).walls.len(), 2, "and one in lane 1");
     // One in lane 1 that declared its braking limit comes as a report on the route, so a

@@ -152,6 +152,19 @@ pub struct CrossingReport<F> {
     pub brake: Option<BrakeLimit>,
 }
 
+/// A vehicle on a crossing vehicle's path known other than by its report to this
+/// junction's manager: a sensor return, or a vehicle heard of on a road its path joins
+/// ([`CrossingPlanner::hear_sensed`], [`CrossingPlanner::hear_mapped`]). It is taken as a
+/// wall: a vehicle that may stop at once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PathVehicle<F> {
+    /// Its centre's distance along the path (m).
+    pub s: F,
+    /// Its length (m): its rear is half of it behind `s`.
+    pub length: F,
+}
+
 /// Why a report was not taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -1041,11 +1054,11 @@ pub struct CrossingPlanner<F, const N: usize, const CAP: usize> {
     /// A report could not be kept (`CAP` vehicles already known): until the reports are
     /// cleared, some vehicle may be unknown, and the path is taken as blocked.
     overflowed: bool,
-    /// Sensor returns of this step: positions along this vehicle's path.
-    sensed: Vec<F, CAP>,
+    /// Sensor returns of this step: vehicles on this vehicle's path, as measured.
+    sensed: Vec<PathVehicle<F>, CAP>,
     /// Vehicles heard of in other frames this step (on the roads its inlet and outlet lie
-    /// on): positions along this vehicle's path, as heard.
-    mapped: Vec<F, CAP>,
+    /// on): on this vehicle's path, as heard.
+    mapped: Vec<PathVehicle<F>, CAP>,
     obstacles: Vec<crate::planner::Vehicle<F>, CAP>,
 }
 
@@ -1098,30 +1111,39 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
     }
 
     /// This step's vehicles known from messages sent in other frames — a road carrying
-    /// this vehicle's inlet or outlet, or the next junction — as positions along this
-    /// vehicle's path (replacing the last step's). Positions only grow (v ≥ 0), so stale
-    /// ones are conservative and are used as they are. `Err(Full)` past `CAP`.
-    pub fn hear_mapped(&mut self, positions: &[F]) -> Result<(), ManagerError> {
-        self.mapped.clear();
-        for &x in positions {
-            if !x.is_finite() {
-                return Err(ManagerError::BadValue);
-            }
-            self.mapped.push(x).map_err(|_| ManagerError::Full)?;
-        }
-        Ok(())
+    /// this vehicle's inlet or outlet, or the next junction — on this vehicle's path
+    /// (replacing the last step's), each as long as it declared (or as the longest
+    /// vehicle expected, if it declared nothing). Positions only grow (v ≥ 0), so stale
+    /// ones are conservative and are used as they are. `Err(BadValue)` for a position
+    /// that is not finite or a length that is not positive and finite; `Err(Full)` past
+    /// `CAP`. A refused list leaves none heard.
+    pub fn hear_mapped(&mut self, vehicles: &[PathVehicle<F>]) -> Result<(), ManagerError> {
+        Self::hear_into(&mut self.mapped, vehicles)
     }
 
-    /// This step's sensor returns: the centre positions, along this vehicle's own path,
-    /// of the vehicles its forward sensor sees on that path (replacing the last step's).
-    /// Each is taken `position_error_m` closer than measured. `Err(Full)` past `CAP`.
-    pub fn hear_sensed(&mut self, positions: &[F]) -> Result<(), ManagerError> {
-        self.sensed.clear();
-        for &x in positions {
-            if !x.is_finite() {
+    /// This step's sensor returns: the vehicles its forward sensor sees on its own path
+    /// (replacing the last step's), each where its centre was measured and as long as it
+    /// was measured (a truck's rear is 8.25 m behind its centre, a car's 2.25 m). Each is
+    /// taken `position_error_m` closer than measured. Errors as for
+    /// [`CrossingPlanner::hear_mapped`].
+    pub fn hear_sensed(&mut self, vehicles: &[PathVehicle<F>]) -> Result<(), ManagerError> {
+        Self::hear_into(&mut self.sensed, vehicles)
+    }
+
+    fn hear_into(
+        into: &mut Vec<PathVehicle<F>, CAP>,
+        vehicles: &[PathVehicle<F>],
+    ) -> Result<(), ManagerError> {
+        into.clear();
+        for &v in vehicles {
+            if !(v.s.is_finite() && v.length.is_finite() && v.length > F::ZERO) {
+                into.clear();
                 return Err(ManagerError::BadValue);
             }
-            self.sensed.push(x).map_err(|_| ManagerError::Full)?;
+            if into.push(v).is_err() {
+                into.clear();
+                return Err(ManagerError::Full);
+            }
         }
         Ok(())
     }
@@ -1288,17 +1310,17 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         }
         // Sensor returns, each taken at its nearest; space beyond the forward range (or,
         // without sensors, all space until reports can have arrived) is not free.
-        for &x in self.mapped.iter() {
+        for v in self.mapped.iter() {
             let _ = self.obstacles.push(crate::planner::Vehicle::wall(
-                x,
-                self.length + self.position_step,
+                v.s,
+                v.length + self.position_step,
             ));
         }
         let e = self.sensing.map_or(F::ZERO, |x| x.position_error_m);
-        for &x in self.sensed.iter() {
+        for v in self.sensed.iter() {
             let _ = self
                 .obstacles
-                .push(crate::planner::Vehicle::wall(x - e, self.length));
+                .push(crate::planner::Vehicle::wall(v.s - e, v.length));
         }
         // Not yet heard of everyone (without sensors to see for itself), or a vehicle it
         // could not keep: nothing is known free.
@@ -1427,18 +1449,37 @@ mod tests {
     #[test]
     fn mapped_and_sensed_positions_replace_the_last_steps_and_refuse_bad_ones() {
         let mut c: Car = car(1, 0);
-        c.hear_mapped(&[1.0, 2.0]).expect("two fit");
-        assert_eq!(c.mapped.as_slice(), &[1.0, 2.0]);
-        c.hear_mapped(&[3.0]).expect("one");
-        assert_eq!(c.mapped.as_slice(), &[3.0]);
-        assert_eq!(c.hear_mapped(&[f64::NAN]), Err(ManagerError::BadValue));
-        assert_eq!(c.hear_mapped(&[1.0, 2.0, 3.0]), Err(ManagerError::Full));
-        c.hear_sensed(&[4.0, 5.0]).expect("two fit");
-        assert_eq!(c.sensed.as_slice(), &[4.0, 5.0]);
-        c.hear_sensed(&[6.0]).expect("one");
-        assert_eq!(c.sensed.as_slice(), &[6.0]);
-        assert_eq!(c.hear_sensed(&[f64::INFINITY]), Err(ManagerError::BadValue));
-        assert_eq!(c.hear_sensed(&[1.0, 2.0, 3.0]), Err(ManagerError::Full));
+        let car_at = |s: f64| PathVehicle { s, length: 4.5 };
+        c.hear_mapped(&[car_at(1.0), car_at(2.0)]).expect("two fit");
+        assert_eq!(c.mapped.as_slice(), &[car_at(1.0), car_at(2.0)]);
+        c.hear_mapped(&[car_at(3.0)]).expect("one");
+        assert_eq!(c.mapped.as_slice(), &[car_at(3.0)]);
+        assert_eq!(
+            c.hear_mapped(&[car_at(f64::NAN)]),
+            Err(ManagerError::BadValue)
+        );
+        assert!(c.mapped.is_empty(), "a refused list leaves none heard");
+        let no_length = PathVehicle {
+            s: 1.0,
+            length: 0.0,
+        };
+        assert_eq!(c.hear_mapped(&[no_length]), Err(ManagerError::BadValue));
+        let three = [car_at(1.0), car_at(2.0), car_at(3.0)];
+        assert_eq!(c.hear_mapped(&three), Err(ManagerError::Full));
+        assert!(c.mapped.is_empty());
+        c.hear_sensed(&[car_at(4.0), car_at(5.0)]).expect("two fit");
+        assert_eq!(c.sensed.as_slice(), &[car_at(4.0), car_at(5.0)]);
+        c.hear_sensed(&[car_at(6.0)]).expect("one");
+        assert_eq!(c.sensed.as_slice(), &[car_at(6.0)]);
+        assert_eq!(
+            c.hear_sensed(&[car_at(f64::INFINITY)]),
+            Err(ManagerError::BadValue)
+        );
+        let long = PathVehicle {
+            s: 1.0,
+            length: f64::INFINITY,
+        };
+        assert_eq!(c.hear_sensed(&[long]), Err(ManagerError::BadValue));
     }
 
     #[test]
@@ -1755,11 +1796,28 @@ mod tests {
                 .any(|o| (o.x - x).abs() < 1e-9 && (o.length - len).abs() < 1e-9)
         };
         let mut c = new(true);
-        c.hear_sensed(&[s + 30.0]).expect("one");
-        c.hear_mapped(&[s + 40.0]).expect("one");
+        let truck = |s| PathVehicle { s, length: 16.5 };
+        c.hear_sensed(&[
+            PathVehicle {
+                s: s + 30.0,
+                length: 4.5,
+            },
+            truck(s + 70.0),
+        ])
+        .expect("two");
+        c.hear_mapped(&[
+            PathVehicle {
+                s: s + 40.0,
+                length: 4.5,
+            },
+            truck(s + 90.0),
+        ])
+        .expect("two");
         c.step(&l, s, 5.0, at(0.0)).expect("step");
         assert!(has(&c, s + 30.0 - 0.1, 4.5), "sensed: its error closer");
+        assert!(has(&c, s + 70.0 - 0.1, 16.5), "sensed: as long as measured");
         assert!(has(&c, s + 40.0, 4.6), "mapped: one bus step longer");
+        assert!(has(&c, s + 90.0, 16.6), "mapped: as long as declared");
         assert!(
             has(&c, s + 2.25 + 150.0 + 2.25, 4.5),
             "beyond the radar's range"

@@ -125,8 +125,10 @@ impl<F: Real> Segment<F> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Path<F> {
-    /// The three pieces.
-    pub pieces: [Segment<F>; 3],
+    /// The five pieces: the inlet track; inside A_S, the straight run before the turn
+    /// ([`LayoutSpec::turn_inset`]; of length 0 without one), the manoeuvre and the
+    /// straight run after it; the outlet track.
+    pub pieces: [Segment<F>; 5],
 }
 
 impl<F: Real> Path<F> {
@@ -139,11 +141,11 @@ impl<F: Real> Path<F> {
     }
     /// Distance from the path start to where A_S ends (start of the outlet track).
     pub fn exit(&self) -> F {
-        self.piece_length(0) + self.piece_length(1)
+        self.piece_length(0) + self.piece_length(1) + self.piece_length(2) + self.piece_length(3)
     }
     /// Total length.
     pub fn length(&self) -> F {
-        self.exit() + self.piece_length(2)
+        self.exit() + self.piece_length(4)
     }
     /// Pose at `s` along the path (clamped).
     pub fn pose_at(&self, s: F) -> Pose<F> {
@@ -192,6 +194,13 @@ pub struct LayoutSpec<F> {
     pub v_limit: F,
     /// Inlet (and outlet) lanes per approach, 1 to [`MAX_LANES`].
     pub lanes: u8,
+    /// How far inside A_S the turns begin and end (m; 0 in SPEC §8): the turns are the
+    /// quarter circles of a square of half-size a − inset, each run straight for `inset`
+    /// from the stop line and to the outlet. A larger A_S around the same turns keeps a
+    /// long vehicle's swing inside it: a 16.5 m rectangle turning right on SPEC §8's
+    /// 6.6 m radius swings its rear 4 m sideways, into the next inlet lane, where
+    /// vehicles wait ([`LayoutError::SweepLeavesItsLanes`]).
+    pub turn_inset: F,
 }
 
 impl<F: Real> LayoutSpec<F> {
@@ -205,6 +214,7 @@ impl<F: Real> LayoutSpec<F> {
             lane_width: p.spec().lane_width,
             v_limit: F::HALF * p.v_max(),
             lanes: 2,
+            turn_inset: F::ZERO,
         }
     }
 }
@@ -244,6 +254,20 @@ pub enum LayoutError<F> {
         /// comm_margin + L (m).
         needed: F,
     },
+    /// The turn inset is negative or not finite, or leaves the lanes no room (n Wl must
+    /// fit in a − inset).
+    BadTurnInset,
+    /// A vehicle of the layout's length and width, its centre anywhere on `route`
+    /// between the stop line and the outlet, is partly outside both A_S and its own inlet
+    /// and outlet lanes (by up to `by` m): its swing reaches a lane where others wait or
+    /// drive, or the kerb. A larger A_S around the same turns
+    /// ([`LayoutSpec::turn_inset`]) keeps it inside.
+    SweepLeavesItsLanes {
+        /// The route (index).
+        route: usize,
+        /// How far outside (m).
+        by: F,
+    },
 }
 
 /// The first sentence of each variant's documentation (and its data).
@@ -256,6 +280,8 @@ impl<F: core::fmt::Debug> core::fmt::Display for LayoutError<F> {
             Self::NotSpacious { .. } => write!(f, "the Spaciousness Assumption (27) fails: ∂A_C is margin from A_S but must be at least dS(vImax) + vImax h = needed ({self:?})"),
             Self::InletShorterThanCommRegion => f.write_str("the inlet track does not reach back to ∂A_C (vehicles must arrive through A_C)"),
             Self::OutletShorterThanCommRegion { .. } => write!(f, "the outlet track does not reach a vehicle length beyond ∂A_C: a vehicle leaves the intersection (C^I_t (25)) once it is on its outlet outside A_C, so every outlet must take it there; a shorter one ends inside A_C, where vehicles could only pile up ({self:?})"),
+            Self::BadTurnInset => f.write_str("the turn inset is negative or not finite, or leaves the lanes no room (n Wl must fit in a − inset)"),
+            Self::SweepLeavesItsLanes { .. } => write!(f, "a vehicle of the layout's length and width, its centre anywhere on route between the stop line and the outlet, is partly outside both A_S and its own inlet and outlet lanes (by up to by m) ({self:?})"),
         }
     }
 }
@@ -342,6 +368,55 @@ fn corners<F: Real>(q: Pose<F>, hl: F, hw: F) -> [(F, F); 4] {
         .map(|(u, w)| (q.x + u * c - w * s, q.y + u * s + w * c))
 }
 
+/// How far (m) a rectangle of half-length `hl` and half-width `hw`, its centre at any
+/// point of `path` between the stop line and the outlet, reaches outside both A_S (the
+/// square of half-size `a`) and its own inlet and outlet lanes (`wl` wide), less a
+/// micrometre of rounding (a straight run's corners sit inside their lane only to float
+/// error); 0 if nowhere. The centre is taken at [`SWEEP_PATH_SAMPLES`] + 1 points
+/// spread evenly over the path through A_S (0.16 m apart on a 40 m path), each
+/// rectangle at [`SWEEP_EDGE_SAMPLES`] + 1 points along each edge.
+fn sweep_outside<F: Real>(path: &Path<F>, a: F, wl: F, (hl, hw): (F, F)) -> F {
+    let (entry, exit) = (path.entry(), path.exit());
+    let (inlet_end, outlet_start) = (path.pose_at(entry), path.pose_at(exit));
+    let outside = |(x, y): (F, F)| {
+        let in_square = (x.abs() - a).max(y.abs() - a);
+        // Signed distance outside a lane strip: behind the stop line (`ahead` −1) or past
+        // the outlet's start (+1), within half a lane of its centre line.
+        let strip = |q: Pose<F>, ahead: F| {
+            let (c, s) = (q.theta.cos(), q.theta.sin());
+            let (dx, dy) = (x - q.x, y - q.y);
+            let along = ahead * (dx * c + dy * s);
+            let across = (dy * c - dx * s).abs() - F::HALF * wl;
+            across.max(-along)
+        };
+        in_square
+            .min(strip(inlet_end, -F::ONE))
+            .min(strip(outlet_start, F::ONE))
+    };
+    let (n_path, n_edge) = (
+        F::from_usize(SWEEP_PATH_SAMPLES),
+        F::from_usize(SWEEP_EDGE_SAMPLES),
+    );
+    let mut worst = F::ZERO;
+    for k in 0..=SWEEP_PATH_SAMPLES {
+        let s = entry + (exit - entry) * F::from_usize(k) / n_path;
+        let c = corners(path.pose_at(s), hl, hw);
+        for (&(x0, y0), &(x1, y1)) in c.iter().zip(c.iter().cycle().skip(1)) {
+            for i in 0..=SWEEP_EDGE_SAMPLES {
+                let t = F::from_usize(i) / n_edge;
+                worst = worst.max(outside((x0 + t * (x1 - x0), y0 + t * (y1 - y0))));
+            }
+        }
+    }
+    (worst - F::from_f64(1e-6)).max(F::ZERO)
+}
+
+/// Centre positions along a path through A_S in [`sweep_outside`], less one.
+const SWEEP_PATH_SAMPLES: usize = 256;
+/// Points along each edge of a rectangle in [`sweep_outside`], less one (0.26 m apart on
+/// a truck's 16.5 m side).
+const SWEEP_EDGE_SAMPLES: usize = 64;
+
 /// Separating-axis test of two oriented rectangles (touching counts as overlap).
 pub fn rectangles_meet<F: Real>(a: Pose<F>, b: Pose<F>, hl: F, hw: F) -> bool {
     let reach = F::TWO * (hl + hw);
@@ -418,7 +493,11 @@ impl<F: Real> Layout<F> {
         if !(1..=MAX_LANES).contains(&spec.lanes) || !(n * wl <= a) {
             return Err(LayoutError::LanesDoNotFit);
         }
-        let r_right = a - (n - F::HALF) * wl;
+        let inset = spec.turn_inset;
+        if !(inset.is_finite() && inset >= F::ZERO && n * wl <= a - inset) {
+            return Err(LayoutError::BadTurnInset);
+        }
+        let r_right = a - inset - (n - F::HALF) * wl;
         if !(r_right >= p.rho_min()) {
             return Err(LayoutError::TurnTooTight { radius: r_right });
         }
@@ -439,24 +518,19 @@ impl<F: Real> Layout<F> {
                 needed,
             });
         }
+        let (hl, hw) = (F::HALF * p.length(), F::HALF * p.width());
         let mut routes: Vec<Route<F>, MAX_ROUTES> = Vec::new();
         for d in 0..4u8 {
             for lane in 0..spec.lanes {
                 for &movement in lane_movements(lane, spec.lanes) {
-                    let y = -(F::from_usize(usize::from(lane)) + F::HALF) * wl;
-                    let inlet = Segment::Line {
-                        start: Pose {
-                            x: -a - spec.inlet_length,
-                            y,
-                            theta: F::ZERO,
-                        },
-                        length: spec.inlet_length,
-                    };
-                    let (route, out_heading, end) = Self::turn(a, y, movement);
-                    let outlet = Segment::Line {
-                        start: end,
-                        length: spec.outlet_length,
-                    };
+                    let (path, out_heading) = Self::path_from_west(&spec, lane, movement);
+                    let by = sweep_outside(&path, a, wl, (hl, hw));
+                    if by > F::ZERO {
+                        return Err(LayoutError::SweepLeavesItsLanes {
+                            route: routes.len(),
+                            by,
+                        });
+                    }
                     let _ = routes.push(Route {
                         inlet: Track { heading: d, lane },
                         outlet: Track {
@@ -465,7 +539,7 @@ impl<F: Real> Layout<F> {
                         },
                         movement,
                         path: Path {
-                            pieces: [inlet, route, outlet].map(|s| rotate_segment(s, d)),
+                            pieces: path.pieces.map(|s| rotate_segment(s, d)),
                         },
                     });
                 }
@@ -479,6 +553,53 @@ impl<F: Real> Layout<F> {
         };
         layout.compute_conflicts(p);
         Ok(layout)
+    }
+
+    /// The path of `movement` from inlet lane `lane` of the approach from the west
+    /// (heading east; the other approaches are its rotations), and the outlet's heading
+    /// relative to the inlet's. A turn runs straight for the turn inset after the stop
+    /// line, turns on the quarter circle of the inner square (half-size a − inset), and
+    /// runs straight for the inset again to the edge of A_S; straight on crosses A_S.
+    fn path_from_west(spec: &LayoutSpec<F>, lane: u8, movement: Movement) -> (Path<F>, u8) {
+        let (a, wl, inset) = (spec.half_size, spec.lane_width, spec.turn_inset);
+        let y = -(F::from_usize(usize::from(lane)) + F::HALF) * wl;
+        let line = |start: Pose<F>, length: F| Segment::Line { start, length };
+        let inlet = line(
+            Pose {
+                x: -a - spec.inlet_length,
+                y,
+                theta: F::ZERO,
+            },
+            spec.inlet_length,
+        );
+        let at_stop_line = Pose {
+            x: -a,
+            y,
+            theta: F::ZERO,
+        };
+        let (before, route, out_heading, end, after) = if movement == Movement::Straight {
+            let (route, h, end) = Self::turn(a, y, movement);
+            (
+                line(at_stop_line, F::ZERO),
+                route,
+                h,
+                end,
+                line(end, F::ZERO),
+            )
+        } else {
+            // The turn of the inner square, entered after the straight run.
+            let (route, h, turned) = Self::turn(a - inset, y, movement);
+            let after = line(turned, inset);
+            let end = after.pose_at(inset);
+            (line(at_stop_line, inset), route, h, end, after)
+        };
+        let outlet = line(end, spec.outlet_length);
+        (
+            Path {
+                pieces: [inlet, before, route, after, outlet],
+            },
+            out_heading,
+        )
     }
 
     /// The piece through A_S of a manoeuvre entering at (−a, y) heading east: the piece,
@@ -731,5 +852,71 @@ mod tests {
         ));
         s.outlet_length = 54.5;
         assert!(Layout::new(&p, s).is_ok());
+    }
+
+    fn truck() -> Params<f64> {
+        let spec = crate::ParamsSpec {
+            length: 16.5,
+            a_min: -4.5,
+            ..crate::ParamsSpec::table_i()
+        };
+        Params::new(spec).expect("a truck's parameters are valid")
+    }
+
+    /// SPEC §8's right turn (6.6 m radius) swings a 16.5 m rectangle's rear into the next
+    /// inlet lane; A_S 8 m larger all round, around the same turns, keeps it inside.
+    #[test]
+    fn a_truck_needs_room_around_the_turns_a_car_does_not() {
+        let car = Params::<f64>::table_i();
+        assert!(Layout::new(&car, LayoutSpec::spec8(&car)).is_ok());
+        let t = truck();
+        let mut s = LayoutSpec::spec8(&t);
+        s.outlet_length = 70.0;
+        // The first route refused is the left turn from the inner lane (route 1, radius
+        // 13.8 m): its rear swings √(13.8² + 8.25²) − 13.8 = 2.28 m out, to the right, and
+        // its corner 1.17 m past the outer inlet lane's edge (the right turn's 4 m swing
+        // comes later, route 3).
+        let Err(LayoutError::SweepLeavesItsLanes { route, by }) = Layout::new(&t, s) else {
+            panic!("refused");
+        };
+        assert_eq!(route, 1);
+        assert!((by - 1.170_771_665).abs() < 1e-6, "{by}");
+        s.half_size = 20.0;
+        s.turn_inset = 8.0;
+        let l = Layout::new(&t, s).expect("room for the swing");
+        let right = l
+            .route(l.route_index(0, 1, Movement::Right).expect("right"))
+            .expect("r");
+        let Segment::Arc { radius, .. } = right.path.pieces[2] else {
+            panic!("a right turn turns");
+        };
+        assert!((radius - 6.6).abs() < 1e-12, "SPEC §8's turn: {radius}");
+        // Straight 8 m from the stop line, then the turn; the path reaches the outlet at
+        // A_S's edge.
+        let entry = right.path.pose_at(right.path.entry());
+        let turn = right.path.pose_at(right.path.entry() + 8.0);
+        let out = right.path.pose_at(right.path.exit());
+        assert!((entry.x + 20.0).abs() < 1e-9 && (turn.x + 12.0).abs() < 1e-9);
+        assert!((out.y + 20.0).abs() < 1e-9, "{out:?}");
+        // The same box without the inset turns too tightly for the truck's swing.
+        s.turn_inset = 0.0;
+        assert!(matches!(
+            Layout::new(&t, s),
+            Err(LayoutError::SweepLeavesItsLanes { .. })
+        ));
+    }
+
+    #[test]
+    fn a_turn_inset_must_leave_the_lanes_room() {
+        let p = Params::<f64>::table_i();
+        for inset in [-0.5, f64::NAN, f64::INFINITY, 4.9] {
+            let mut s = LayoutSpec::spec8(&p);
+            s.turn_inset = inset;
+            assert_eq!(
+                Layout::new(&p, s),
+                Err(LayoutError::BadTurnInset),
+                "{inset}"
+            );
+        }
     }
 }

@@ -180,6 +180,8 @@ fn crossing<F: Real>(start: Instant) -> Vec<u64> {
                 arrival: now,
                 s: s[i],
                 v: v[i],
+                brake: None,
+                length: None,
             };
             let f: Frames<PlainFrame> =
                 encode(&Message::Request(req), i as u8 + 1, (k % 16) as u8).expect("encodes");

@@ -7,7 +7,7 @@ use crate::layout::{self, byte, get};
 use crate::wire::{
     Message, MessageKind, Request, CLOCK_ADDRESS, MANAGER_ADDRESS, MANAGER_LAST, POS_RES,
 };
-use planner_core::{Instant, Real};
+use planner_core::{BodyLength, BrakeLimit, Instant, Real};
 
 /// Decodes a verified payload received at `now`, each field read from its place
 /// ([`crate::layout`]), and checks plausibility.
@@ -82,6 +82,9 @@ fn read_request<F: Real>(
         arrival: restore_millis(u32::from_le_bytes(get(b, f.arrival.clone())), now),
         s: F::from_f64(f64::from(s) * POS_RES),
         v: F::from_f64(speed(u16::from_le_bytes(get(b, f.speed.clone())))?),
+        // Empty fields in a kind 2 request: read as 0, not declared.
+        brake: BrakeLimit::from_tenths(byte(b, f.brake.clone())),
+        length: BodyLength::from_tenths(byte(b, f.length.clone())),
     })
 }
 

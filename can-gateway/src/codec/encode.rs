@@ -10,7 +10,7 @@ use crate::wire::{
 };
 use embedded_can::{ExtendedId, Frame, Id};
 use heapless::Vec;
-use planner_core::{Instant, Real};
+use planner_core::{BodyLength, BrakeLimit, Instant, Real};
 
 /// The payload bytes of a message (without CRC), and their length: each field written
 /// into its place ([`crate::layout`]).
@@ -63,6 +63,13 @@ fn write_request<F: Real>(
     // u24: the low three bytes.
     put(b, f.s.clone(), &path_position(r.s)?.to_le_bytes());
     put(b, f.arrival.clone(), &time(r.arrival).to_le_bytes());
+    // Empty fields in a kind 2 request: nothing is written.
+    put(b, f.brake.clone(), &[r.brake.map_or(0, BrakeLimit::tenths)]);
+    put(
+        b,
+        f.length.clone(),
+        &[r.length.map_or(0, BodyLength::tenths)],
+    );
     Ok(f.len)
 }
 

@@ -169,6 +169,8 @@ fn intersection_messages_round_trip() {
         arrival: secs(3.5),
         s: 97.25,
         v: 13.9,
+        brake: None,
+        length: None,
     };
     let mut r = Reassembler::<8>::new();
     for (m, sa) in [
@@ -259,6 +261,8 @@ fn request(id: u16) -> Request<f64> {
         arrival: secs(3.5),
         s: 97.25,
         v: 13.9,
+        brake: None,
+        length: None,
     }
 }
 
@@ -1007,6 +1011,8 @@ mod mutation_audit {
         req.s = 1000.25; // beyond 16 bits at 0.01 m: the third byte counts
         req.arrival = secs(123.456);
         req.v = 13.9;
+        req.brake = planner_core::BrakeLimit::from_mps2(4.5);
+        req.length = planner_core::BodyLength::from_m(16.5);
         let m = Message::JunctionRequest {
             junction: 2,
             request: req,
@@ -1026,11 +1032,22 @@ mod mutation_audit {
         assert!((got.s - req.s).abs() < 0.006, "{}", got.s);
         assert_eq!(got.arrival, req.arrival);
         assert!((got.v - req.v).abs() < 0.011, "{}", got.v);
-        // The plain request too.
+        assert_eq!((got.brake, got.length), (req.brake, req.length));
+        // CAN FD carries the same bytes.
+        let fd: crate::FdFrame = encode_fd(&m, 9, 3).unwrap();
+        let Ok(Some(Message::JunctionRequest {
+            request: fd_got, ..
+        })) = Reassembler::<8>::new().push::<f64, _>(&fd, NOW)
+        else {
+            panic!("a junction request over CAN FD");
+        };
+        assert_eq!((fd_got.brake, fd_got.length), (req.brake, req.length));
+        // The plain request too: its two frames declare no body.
         let Ok(Some(Message::Request(got))) = push_all(&mut r, &Message::Request(req), 9, 1) else {
             panic!("a request");
         };
         assert!((got.s - req.s).abs() < 0.006 && got.arrival == req.arrival);
+        assert_eq!((got.brake, got.length), (None, None));
         let exit = Message::JunctionExit {
             junction: 2,
             id: 9,

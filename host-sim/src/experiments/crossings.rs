@@ -16,7 +16,7 @@ use crate::monitor::Limits;
 use crate::reference::instances::rng;
 use crate::scenario::junction::{JunctionScenario, LayoutToml, Placement};
 use crate::verdict::{Judged, Verdict};
-use crate::world::{LENGTH_M, START_MARGIN_M};
+use crate::world::{Body, START_MARGIN_M};
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{lane_movements, Layout};
 use planner_core::Invariant;
@@ -30,6 +30,11 @@ pub struct Crossings {
     #[command(flatten)]
     #[serde(flatten)]
     pub sweep: CasesUnder,
+    /// Percent of the vehicles that are trucks (16.5 m, braking at 4.5 m/s²), drawn per
+    /// vehicle; 0 gives the cases as they always were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 impl Experiment for Crossings {
@@ -46,7 +51,7 @@ impl Experiment for Crossings {
         Ok(sweep_with(
             end - first,
             first,
-            s.sweep.seed,
+            (s.sweep.seed, self.trucks),
             threads,
             s.invariant,
         ))
@@ -109,11 +114,16 @@ pub struct CrossingsReport {
     pub wall_seconds: f64,
 }
 
-/// The vehicles of case `index` of the sweep seeded `seed` at `layout`.
-pub fn placements(seed: u64, index: u64, layout: &Layout<f64>) -> Vec<Placement> {
+/// The vehicles of case `index` of the sweep seeded `seed` at `layout`, `trucks_percent`
+/// of them trucks.
+pub fn placements(
+    (seed, trucks_percent): (u64, u8),
+    index: u64,
+    layout: &Layout<f64>,
+) -> Vec<Placement> {
     let mut rng = rng(case_seed(seed, index));
     let per_lane = [1usize, 2, 3, 5, 8, 16][rng.random_range(0..6)];
-    queue_placements(&mut rng, layout, per_lane)
+    queues_of(&mut rng, layout, (per_lane, trucks_percent))
 }
 
 /// Random queues at `layout`: on each inlet lane from none to `per_lane` vehicles (as
@@ -126,6 +136,18 @@ pub fn queue_placements(
     layout: &Layout<f64>,
     per_lane: usize,
 ) -> Vec<Placement> {
+    queues_of(rng, layout, (per_lane, 0))
+}
+
+/// [`queue_placements`] with `trucks_percent` of the vehicles trucks ([`Body::TRUCK`]),
+/// each drawn at random (with 0 nothing is drawn: the queues are
+/// [`queue_placements`]'), every follower its own braking distance behind the rear of
+/// the vehicle ahead.
+pub fn queues_of(
+    rng: &mut impl Rng,
+    layout: &Layout<f64>,
+    (per_lane, trucks_percent): (usize, u8),
+) -> Vec<Placement> {
     let lim = Limits::table_i();
     let v_limit = layout.spec.v_limit;
     let line = layout.spec.inlet_length;
@@ -133,7 +155,7 @@ pub fn queue_placements(
     for heading in 0..4u8 {
         for lane in 0..layout.spec.lanes {
             let k = rng.random_range(0..=per_lane);
-            let mut ahead: Option<f64> = None;
+            let mut ahead: Option<(f64, Body)> = None;
             for _ in 0..k {
                 if out.len() >= crate::world::junction::MANAGER_CAP {
                     break;
@@ -143,17 +165,20 @@ pub fn queue_placements(
                 } else {
                     rng.random_range(0.0..v_limit)
                 };
+                let truck = trucks_percent > 0 && rng.random_range(0..100u8) < trucks_percent;
+                let body = if truck { Body::TRUCK } else { Body::CAR };
+                let half = 0.5 * body.length;
                 let front = match ahead {
-                    None => line - 0.5 * LENGTH_M,
-                    Some(a) => a - LENGTH_M,
+                    None => line - half,
+                    Some((a, lead)) => a - 0.5 * (lead.length + body.length),
                 } - lim.d0
-                    - lim.safe_distance(v)
+                    - lim.safe_distance_at(v, body.brake)
                     - START_MARGIN_M
                     - 0.01;
-                if front < 0.5 * LENGTH_M {
+                if front < half {
                     break;
                 }
-                let s = (front - rng.random_range(0.0..20.0)).max(0.5 * LENGTH_M);
+                let s = (front - rng.random_range(0.0..20.0)).max(half);
                 let ms = lane_movements(lane, layout.spec.lanes);
                 let m = ms[rng.random_range(0..ms.len())];
                 let Some(route) = layout.route_index(heading, lane, m) else {
@@ -164,8 +189,9 @@ pub fn queue_placements(
                     route: route as u8,
                     s,
                     v,
+                    body,
                 });
-                ahead = Some(s);
+                ahead = Some((s, body));
             }
         }
     }
@@ -175,6 +201,7 @@ pub fn queue_placements(
             route: 1,
             s: 10.0,
             v: 5.0,
+            body: Body::CAR,
         });
     }
     out
@@ -182,20 +209,26 @@ pub fn queue_placements(
 
 /// Case `index` under `algorithm`, the vehicles keeping the paper's invariant.
 pub fn case(seed: u64, index: u64, algorithm: Algorithm) -> JunctionScenario {
-    case_with(seed, index, algorithm, Invariant::Paper)
+    case_with((seed, 0), index, algorithm, Invariant::Paper)
 }
 
-/// Case `index` under `algorithm`, the vehicles keeping `invariant`.
+/// Case `index` of the sweep seeded `seed` with `trucks_percent` of trucks, under
+/// `algorithm`, the vehicles keeping `invariant`. The queues are placed at the SPEC §8
+/// layout; the scenario's layout is built for its fleet (with a truck in it, every
+/// conflict is swept by the truck's rectangle).
 pub fn case_with(
-    seed: u64,
+    (seed, trucks_percent): (u64, u8),
     index: u64,
     algorithm: Algorithm,
     invariant: Invariant,
 ) -> JunctionScenario {
-    let lt = LayoutToml::default();
+    let mut lt = LayoutToml::default();
+    if trucks_percent > 0 {
+        lt = truck_layout(lt);
+    }
     let layout = crate::scenario::junction::build_layout(&lt)
         .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
-    let p = placements(seed, index, &layout);
+    let p = placements((seed, trucks_percent), index, &layout);
     let mut sc = JunctionScenario::new(
         format!("crossings-{seed}-{index}-{}", algorithm.name()),
         300.0,
@@ -204,22 +237,38 @@ pub fn case_with(
         lt,
         p,
     )
-    .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
+    .unwrap_or_else(|e| unreachable!("the SPEC §8 layout is valid for cars and trucks: {e}"));
     sc.header.invariant = invariant;
     sc
 }
 
+/// `lt` made to take trucks: A_S [`TRUCK_TURN_INSET_M`] larger all round around the same
+/// turns (a 16.5 m rectangle's swing stays inside it), and outlets that take a truck out
+/// of A_C (a vehicle leaves once it is on its outlet outside A_C: 50 m + 16.5 m; SPEC §8's
+/// 60 m takes a car).
+pub fn truck_layout(mut lt: LayoutToml) -> LayoutToml {
+    lt.half_size += TRUCK_TURN_INSET_M;
+    lt.turn_inset += TRUCK_TURN_INSET_M;
+    lt.outlet_length = lt.outlet_length.max(lt.comm_margin + Body::TRUCK.length);
+    lt
+}
+
+/// How much larger A_S is around SPEC §8's turns in the sweep with trucks (m): the least
+/// whole metre planner-core's swept-area check takes for a 16.5 m truck (7.5 m).
+pub const TRUCK_TURN_INSET_M: f64 = 8.0;
+
 /// Runs `cases` cases from index `first` of the sweep seeded `seed`, each under every
 /// algorithm, on `threads` threads, under the paper's invariant.
 pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> CrossingsReport {
-    sweep_with(cases, first, seed, threads, Invariant::Paper)
+    sweep_with(cases, first, (seed, 0), threads, Invariant::Paper)
 }
 
-/// [`sweep()`] with every vehicle keeping `invariant`.
+/// [`sweep()`] with its seed and `trucks` percent of trucks, every vehicle keeping
+/// `invariant`.
 pub fn sweep_with(
     cases: u64,
     first: u64,
-    seed: u64,
+    (seed, trucks): (u64, u8),
     threads: usize,
     invariant: Invariant,
 ) -> CrossingsReport {
@@ -229,7 +278,7 @@ pub fn sweep_with(
         .collect();
     let results: Vec<Case> = super::par::map_indexed(jobs.len(), threads, |j| {
         let (index, algorithm) = jobs[j];
-        let sc = case_with(seed, index, algorithm, invariant);
+        let sc = case_with((seed, trucks), index, algorithm, invariant);
         Case {
             index,
             seed: case_seed(seed, index),
@@ -274,5 +323,36 @@ mod tests {
             assert_eq!(sc.placements, case(3, i, Algorithm::Pipelined).placements);
         }
         assert!(most >= 30, "{most}");
+    }
+
+    /// With trucks: every case loads (its failing file reproduces it), a share of the
+    /// vehicles are trucks, each truck has its own braking distance behind the vehicle
+    /// ahead, and a small sweep under both invariants is safe and live (CI runs more).
+    #[test]
+    fn cases_with_trucks_load_and_a_small_sweep_is_clean() {
+        let (mut trucks, mut all) = (0, 0);
+        for i in 0..20 {
+            let sc = case_with((3, 30), i, Algorithm::Fifo, Invariant::LeaderAware);
+            let back = JunctionScenario::parse(&sc.to_toml(), Path::new("c.toml"))
+                .unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(back.placements, sc.placements, "case {i} round-trips");
+            all += sc.placements.len();
+            trucks += sc
+                .placements
+                .iter()
+                .filter(|p| p.body == Body::TRUCK)
+                .count();
+        }
+        assert!(
+            trucks * 100 > all * 20 && trucks * 100 < all * 40,
+            "{trucks} of {all}"
+        );
+        for invariant in [Invariant::Paper, Invariant::LeaderAware] {
+            let r = sweep_with(2, 0, (5, 30), 2, invariant);
+            let t = &r.totals;
+            let found = (t.collisions, t.invariant_violations, t.unpermitted_entries);
+            assert_eq!(found, (0, 0, 0), "{invariant:?}: {:?}", r.failing);
+            assert_eq!((t.unfinished, t.deadlocks), (0, 0), "{invariant:?}");
+        }
     }
 }

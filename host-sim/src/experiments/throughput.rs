@@ -105,6 +105,7 @@ pub fn fig8_placements(layout: &Layout<f64>, seed: u64) -> Vec<Placement> {
                 route,
                 s: 0.5 * LENGTH_M + rng.random_range(0.0..30.0),
                 v: layout.spec.v_limit,
+                body: crate::world::Body::CAR,
             });
         }
     }

@@ -19,7 +19,7 @@
 
 use crate::bus::{Bus, BusError, Clock, Message, Received};
 use crate::world::network::Network;
-use crate::world::LENGTH_M;
+use crate::world::{Fleet, LENGTH_M};
 use can_gateway::codec::{
     encode_fd_secured, encode_secured, DecodeError, EncodeError, SecuredFrames, Verifier,
 };
@@ -28,7 +28,7 @@ use can_gateway::wire::{self, CLOCK_ADDRESS};
 use can_gateway::{encode, encode_fd, FdFrame, Frames, PlainFrame, Reassembler};
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::Track;
-use planner_core::Instant;
+use planner_core::{BodyLength, Instant};
 use serde::Serialize;
 use socketcan::{
     CanAnyFrame, CanFdFrame, CanFdSocket, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions,
@@ -743,17 +743,27 @@ fn reason(e: DecodeError) -> String {
 pub struct WireMap<'a> {
     net: &'a Network,
     network: bool,
+    /// The longest vehicle expected (m): a request that declares no length is taken at it.
+    longest_m: f64,
 }
 
 impl<'a> WireMap<'a> {
-    /// The mapping for `net`.
+    /// The mapping for `net`, its vehicles Table I's cars.
     pub fn new(net: &'a Network) -> Self {
         let single_road = net.junctions.is_empty() && net.segments.len() <= 1;
         let single_junction = net.junctions.len() == 1 && net.segments.is_empty();
         Self {
             net,
             network: !(single_road || single_junction),
+            longest_m: LENGTH_M,
         }
+    }
+
+    /// The mapping for a world of `fleet`: a request that declares no length (a plain
+    /// request, kind 2, cannot) is taken at the fleet's longest vehicle.
+    pub fn for_fleet(mut self, fleet: Fleet) -> Self {
+        self.longest_m = fleet.longest_m;
+        self
     }
 
     /// `true` if the world is a network (the kinds with places are used).
@@ -768,9 +778,11 @@ impl<'a> WireMap<'a> {
 
     /// The simulator's message as can-gateway's; a crossing report carries the vehicle's
     /// `arrival` in A_C by its clock (the manager registers arrivals by its own clock
-    /// either way, so no vehicle can move itself up the queue). The length is not carried
-    /// (nor is it in a state message): every vehicle on this bus is of the class length
-    /// [`LENGTH_M`], and a report of another length is refused.
+    /// either way, so no vehicle can move itself up the queue), and its length and braking
+    /// limit where it travels as a junction request (kind 8: in a network, and at a single
+    /// junction whose fleet has vehicles longer than a car). A plain request (kind 2, a
+    /// single junction of cars) has no room for them: its receivers take the fleet's
+    /// longest vehicle, as a wall.
     pub fn to_wire(&self, msg: &Message, arrival: Instant) -> Result<wire::Message<f64>, CanError> {
         let junction = |j: usize| {
             u8::try_from(j).map_err(|_| CanError::Unmapped("a junction index above 255"))
@@ -788,11 +800,20 @@ impl<'a> WireMap<'a> {
                 ..
             } => {
                 let request = self.request(&report, arrival, j)?;
-                if self.network {
+                // With trucks about, every request declares its body (kind 8 at a single
+                // junction too): one taken at the longest would have its front 6 m into
+                // A_S, for the manager, while it waits at the line (a car at a truck's
+                // length stalled PIPE in trucks-intersection.toml over CAN).
+                if self.network || self.longest_m > LENGTH_M {
                     wire::Message::JunctionRequest {
                         junction: junction(j)?,
                         request,
                     }
+                } else if report.length > self.longest_m {
+                    // Its receivers would take it at the longest they expect: shorter.
+                    return Err(CanError::Unmapped(
+                        "a plain request for a vehicle longer than the fleet's longest",
+                    ));
                 } else {
                     wire::Message::Request(request)
                 }
@@ -836,11 +857,6 @@ impl<'a> WireMap<'a> {
         let route = layout
             .route(usize::from(r.route))
             .ok_or(CanError::Unmapped("a route the layout does not have"))?;
-        if r.length != LENGTH_M {
-            return Err(CanError::Unmapped(
-                "a vehicle length other than the class length",
-            ));
-        }
         let track = |t: Track| wire::TrackWire {
             heading: t.heading,
             lane: t.lane,
@@ -852,6 +868,8 @@ impl<'a> WireMap<'a> {
             arrival,
             s: r.s,
             v: r.v,
+            brake: r.brake,
+            length: BodyLength::from_m(r.length),
         })
     }
 
@@ -929,8 +947,8 @@ impl<'a> WireMap<'a> {
                 route: u8::try_from(route).ok()?,
                 s: q.s,
                 v: q.v,
-                length: LENGTH_M,
-                brake: None,
+                length: q.length.map_or(self.longest_m, BodyLength::m),
+                brake: q.brake,
             },
             stamp: q.arrival,
             junction: j,
@@ -954,6 +972,8 @@ pub struct CanBus<P> {
     net: Network,
     /// Every node's clock (the bus is driven in the world's time).
     clock: Clock,
+    /// The world's fleet (what an undeclared length is taken at).
+    fleet: Fleet,
 }
 
 impl<P: CanPort> CanBus<P> {
@@ -980,7 +1000,15 @@ impl<P: CanPort> CanBus<P> {
             nodes,
             net: net.clone(),
             clock,
+            fleet: Fleet::default(),
         })
+    }
+
+    /// The bus of a world of `fleet` (with trucks: a plain request, which declares no
+    /// length, is taken at the longest; [`WireMap::for_fleet`]).
+    pub fn for_fleet(mut self, fleet: Fleet) -> Self {
+        self.fleet = fleet;
+        self
     }
 
     /// Every node's traffic, summed.
@@ -995,7 +1023,7 @@ impl<P: CanPort> CanBus<P> {
 
 impl<P: CanPort> Bus for CanBus<P> {
     fn send(&mut self, from: u16, msg: &Message, now: f64) -> Result<(), BusError> {
-        let map = WireMap::new(&self.net);
+        let map = WireMap::new(&self.net).for_fleet(self.fleet);
         let at = self.clock.at_secs(now);
         let node = node_mut(&mut self.nodes, from)?;
         node.set_time(at);
@@ -1013,7 +1041,7 @@ impl<P: CanPort> Bus for CanBus<P> {
     }
 
     fn receive(&mut self, node: u16, now: f64, out: &mut Vec<Received>) -> Result<(), BusError> {
-        let map = WireMap::new(&self.net);
+        let map = WireMap::new(&self.net).for_fleet(self.fleet);
         let at = self.clock.at_secs(now);
         let node = node_mut(&mut self.nodes, node)?;
         node.set_time(at);

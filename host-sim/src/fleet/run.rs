@@ -29,7 +29,7 @@ impl<const N: usize> Harness<N> {
     ) -> Result<FleetSummary, FleetError> {
         let t0 = Instant::now();
         let net = self.spec.network.clone();
-        let map = WireMap::new(&net);
+        let map = WireMap::new(&net).for_fleet(self.setup().fleet);
         let vehicles: Vec<Vehicle<N>> = self
             .spec
             .vehicles

@@ -26,7 +26,7 @@
 
 use crate::world::at::At;
 use crate::world::network::{turned, Junction, Network, Segment};
-use crate::world::{Arrivals, Body, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M};
+use crate::world::{Arrivals, Body, VehicleSpec, WorldSpec, LANE_WIDTH_M};
 use planner_core::intersection::{lane_movements, Movement};
 use std::fmt::Write as _;
 
@@ -425,7 +425,8 @@ fn departure(
             let r = jn.layout.routes.get(usize::from(route))?;
             let (h, n) = (r.inlet.heading, jn.layout.spec.lanes);
             let inlet = jn.layout.spec.inlet_length;
-            let mut front = s + 0.5 * LENGTH_M;
+            let l = v.body.length;
+            let mut front = s + 0.5 * l;
             if front > inlet {
                 notes.push(format!(
                     "vehicle {} is inside A_S at t = 0: it departs at its inlet's end",
@@ -443,7 +444,7 @@ fn departure(
                 movements.push(r.movement);
             }
             let edges = edges_through(net, junction, h, &movements);
-            Some((edges, n - 1 - r.inlet.lane, (offset + front).max(LENGTH_M)))
+            Some((edges, n - 1 - r.inlet.lane, (offset + front).max(l)))
         }
     }
 }

@@ -11,7 +11,7 @@ use crate::world::junction::MANAGER_CAP;
 use crate::world::network::{Junction, Network};
 use crate::world::vehicle::Trip;
 use crate::world::{
-    Arrivals, Finish, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M,
+    Arrivals, Body, Finish, Fleet, VehicleSpec, WorldSpec, LANE_WIDTH_M, START_MARGIN_M,
 };
 use planner_core::crossing::Algorithm;
 use planner_core::intersection::{Layout, LayoutError, LayoutSpec, Movement};
@@ -43,6 +43,15 @@ pub struct LayoutToml {
     /// Inlet (and outlet) lanes per approach.
     #[serde(default = "d_lanes")]
     pub lanes: u8,
+    /// How far inside A_S the turns begin and end (m; default 0): the turns of a square
+    /// `turn_inset` smaller, run straight to and from A_S's edge — room for a long
+    /// vehicle's swing.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub turn_inset: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl Default for LayoutToml {
@@ -54,6 +63,7 @@ impl Default for LayoutToml {
             outlet_length: d_outlet(),
             v_limit: d_limit(),
             lanes: d_lanes(),
+            turn_inset: 0.0,
         }
     }
 }
@@ -213,6 +223,12 @@ pub struct JunctionVehicle {
     pub s: f64,
     /// Speed (m/s).
     pub v: f64,
+    /// Its length (m; default Table I's 4.5 m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length: Option<f64>,
+    /// Its braking limit |amin| (m/s²; default Table I's 7.9).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub brake: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -249,6 +265,8 @@ pub struct Placement {
     pub s: f64,
     /// Speed (m/s).
     pub v: f64,
+    /// Its body.
+    pub body: Body,
 }
 
 /// A validated intersection scenario.
@@ -308,6 +326,23 @@ pub fn layout_error_text(e: LayoutError<f64>, p: &Params<f64>) -> FieldError {
                  their outlet outside A_C, so it must be at least comm_margin + L = {needed:.2} m"
             ),
         ),
+        LayoutError::BadTurnInset => FieldError::new(
+            "turn_inset",
+            format!(
+                "must be finite, at least 0, and leave the lanes room: lanes × {LANE_WIDTH_M} m \
+                 within half_size − turn_inset"
+            ),
+        ),
+        LayoutError::SweepLeavesItsLanes { route, by } => FieldError::new(
+            "turn_inset",
+            format!(
+                "a {:.1} m vehicle swings {by:.2} m out of A_S and its own lanes on route {route} \
+                 (into a lane where others wait, or over the kerb): make A_S larger around the \
+                 same turns (raise half_size and turn_inset together; 8 m each takes a 16.5 m \
+                 truck at SPEC §8's turns)",
+                p.length()
+            ),
+        ),
         // A refusal planner-core learns later: its own words.
         other => FieldError::new("half_size", other.to_string()),
     }
@@ -315,6 +350,14 @@ pub fn layout_error_text(e: LayoutError<f64>, p: &Params<f64>) -> FieldError {
 
 /// The layout of `lt`, or which field is wrong and why.
 pub fn build_layout(lt: &LayoutToml) -> Result<Layout<f64>, FieldError> {
+    build_layout_for(lt, Fleet::default())
+}
+
+/// [`build_layout`] for a `fleet` with trucks: the routes' conflicts (γ_i ⊗ γ_j) are swept
+/// by the longest vehicle, whatever crosses (a conflict found for a car's rectangle is
+/// too small for a truck's), and Spaciousness (27) is checked at the weakest braking
+/// limit with the longest vehicle's half length.
+pub fn build_layout_for(lt: &LayoutToml, fleet: Fleet) -> Result<Layout<f64>, FieldError> {
     let p = Params::<f64>::table_i();
     if !(lt.v_limit > 0.0 && lt.v_limit <= p.v_max()) {
         return Err(FieldError::new(
@@ -354,14 +397,23 @@ pub fn build_layout(lt: &LayoutToml) -> Result<Layout<f64>, FieldError> {
         lane_width: LANE_WIDTH_M,
         v_limit: lt.v_limit,
         lanes: lt.lanes,
+        turn_inset: lt.turn_inset,
     };
-    let layout = Layout::new(&p, spec).map_err(|e| layout_error_text(e, &p))?;
+    let longest = Body {
+        length: fleet.longest_m,
+        brake: fleet.weakest_brake,
+    };
+    let fleet_p = crate::world::vehicle::params(p.v_max(), longest);
+    let layout = Layout::new(&fleet_p, spec).map_err(|e| layout_error_text(e, &fleet_p))?;
     // Spaciousness (27) with the vehicles' extent: a vehicle hands over to its crossing
     // planner once its centre is in A_C, and must then still be able to stop with its
     // front d0 before the line. A margin below that left vehicles waiting outside A_C
     // for ever (a red team's v_limit 1.0 with a 0.2 m margin).
     let lim = crate::monitor::Limits::table_i();
-    let handover = lim.safe_distance(lt.v_limit) + lt.v_limit * lim.h + 0.5 * LENGTH_M + lim.d0;
+    let handover = lim.safe_distance_at(lt.v_limit, fleet.weakest_brake)
+        + lt.v_limit * lim.h
+        + 0.5 * fleet.longest_m
+        + lim.d0;
     if !(lt.comm_margin >= handover) {
         return Err(FieldError::new(
             "comm_margin",
@@ -391,8 +443,19 @@ impl JunctionScenario {
         .validate(&e)?;
         let span = raw.intersection.span();
         let lt = raw.intersection.into_inner();
-        let layout =
-            build_layout(&lt).map_err(|m| e.field(Some(span.clone()), "intersection", &m))?;
+        let lim = Limits::table_i();
+        for sv in &raw.vehicles {
+            let v = sv.get_ref();
+            super::road::check_body((v.length, v.brake), &lim)
+                .map_err(|m| e.at(Some(sv.span()), format!("vehicle {}: {m}", v.id)))?;
+        }
+        let fleet = Fleet::of(
+            raw.vehicles
+                .iter()
+                .map(|v| super::road::body_of(v.get_ref().length, v.get_ref().brake)),
+        );
+        let layout = build_layout_for(&lt, fleet)
+            .map_err(|m| e.field(Some(span.clone()), "intersection", &m))?;
         let rate_vph = ArrivalsToml::rate(raw.arrivals.as_ref(), &e)?;
         let fewest = usize::from(rate_vph.is_none());
         if raw.vehicles.len() < fewest || raw.vehicles.len() > MANAGER_CAP {
@@ -453,7 +516,8 @@ impl JunctionScenario {
                 invariant: planner_core::Invariant::Paper,
             },
             algorithm,
-            layout: build_layout(&lt).map_err(|m| m.to_string())?,
+            layout: build_layout_for(&lt, Fleet::of(placements.iter().map(|p| p.body)))
+                .map_err(|m| m.to_string())?,
             layout_toml: lt,
             placements,
             rate_vph: None,
@@ -531,6 +595,8 @@ impl JunctionScenario {
                     movement: MovementToml::of(r.movement),
                     s: p.s,
                     v: p.v,
+                    length: super::road::body_fields(p.body).0,
+                    brake: super::road::body_fields(p.body).1,
                 })
             })
             .collect();
@@ -583,7 +649,7 @@ pub fn placed(layout: &Layout<f64>, p: &Placement) -> VehicleSpec {
         driver: super::DriverKind::Planner,
         script: Vec::new(),
         cooperative: true,
-        body: crate::world::Body::CAR,
+        body: p.body,
         trip: Trip {
             target_lane: r.map_or(0, |r| r.inlet.lane),
             goal_x: None,
@@ -613,7 +679,9 @@ fn place(v: &JunctionVehicle, layout: &Layout<f64>, lt: &LayoutToml) -> Result<P
             )
         })?;
     let entry = lt.inlet_length;
-    if !(v.s >= 0.5 * LENGTH_M && v.s + 0.5 * LENGTH_M + lim.d0 < entry) {
+    let body = super::road::body_of(v.length, v.brake);
+    let half = 0.5 * body.length;
+    if !(v.s >= half && v.s + half + lim.d0 < entry) {
         return Err(format!(
             "s must put the vehicle on its inlet before the stop line, got {}",
             v.s
@@ -622,11 +690,11 @@ fn place(v: &JunctionVehicle, layout: &Layout<f64>, lt: &LayoutToml) -> Result<P
     if !(v.v >= 0.0 && v.v <= lt.v_limit) {
         return Err(format!("v must be in [0, {}], got {}", lt.v_limit, v.v));
     }
-    let room = entry - v.s - 0.5 * LENGTH_M - lim.d0;
-    if !(room > lim.safe_distance(v.v) + START_MARGIN_M) {
+    let room = entry - v.s - half - lim.d0;
+    let d_s = lim.safe_distance_at(v.v, body.brake);
+    if !(room > d_s + START_MARGIN_M) {
         return Err(format!(
-            "cannot stop before the stop line: {room:.2} m of room, needs more than dS(v) = {:.2} m",
-            lim.safe_distance(v.v)
+            "cannot stop before the stop line: {room:.2} m of room, needs more than dS(v) = {d_s:.2} m"
         ));
     }
     Ok(Placement {
@@ -634,6 +702,7 @@ fn place(v: &JunctionVehicle, layout: &Layout<f64>, lt: &LayoutToml) -> Result<P
         route: route as u8,
         s: v.s,
         v: v.v,
+        body,
     })
 }
 
@@ -653,8 +722,8 @@ fn check_spacing(
                 continue;
             };
             if a.id != b.id && ra.inlet == rb.inlet && a.s <= b.s {
-                let gap = b.s - a.s - LENGTH_M;
-                if !(gap - lim.d0 > lim.safe_distance(a.v) + START_MARGIN_M) {
+                let gap = b.s - a.s - 0.5 * (a.body.length + b.body.length);
+                if !(gap - lim.d0 > lim.safe_distance_at(a.v, a.body.brake) + START_MARGIN_M) {
                     return Err(e.at(
                         Some(span.clone()),
                         format!(

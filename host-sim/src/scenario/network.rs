@@ -473,6 +473,7 @@ fn build(
             outlet_length: j.comm_margin + LENGTH_M,
             v_limit: j.v_limit,
             lanes: j.lanes,
+            turn_inset: 0.0,
         };
         let layout = build_layout(&lt)
             .map_err(|m| e.field(at(span), &format!("intersection {}", j.id), &m))?;

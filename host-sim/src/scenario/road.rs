@@ -284,10 +284,7 @@ impl RoadScenario {
 impl RoadVehicle {
     /// Its body: Table I's car unless `length` or `brake` say otherwise.
     pub fn body(&self) -> Body {
-        Body {
-            length: self.length.unwrap_or(Body::CAR.length),
-            brake: self.brake.unwrap_or(Body::CAR.brake),
-        }
+        body_of(self.length, self.brake)
     }
 
     /// The world's vehicle: on segment 0 at (x, centre of its lane), straight.
@@ -361,7 +358,7 @@ fn check_vehicle(v: &RoadVehicle, road: &Road) -> Result<(), String> {
     if !(v.v >= 0.0 && v.v <= lim.v_max) {
         return Err(format!("v must be in [0, {}], got {}", lim.v_max, v.v));
     }
-    check_body(v, &lim)?;
+    check_body((v.length, v.brake), &lim)?;
     if v.lane >= road.lanes {
         return Err(format!(
             "lane {} does not exist (road has {})",
@@ -402,20 +399,20 @@ fn check_vehicle(v: &RoadVehicle, road: &Road) -> Result<(), String> {
     Ok(())
 }
 
-/// A body within what the bus can say of it (a length of 25.5 m at most) and no
-/// stronger brakes than Table I's car (the fleet's bound on braking).
-fn check_body(v: &RoadVehicle, lim: &Limits) -> Result<(), String> {
-    if v.length
-        .is_some_and(|l| !(MIN_LENGTH_M..=MAX_LENGTH_M).contains(&l))
-    {
+/// A body, as a file writes it (`length`, `brake`), within what the bus can say of it (a
+/// length of 25.5 m at most) and no stronger brakes than Table I's car (the fleet's
+/// bound on braking).
+pub(super) fn check_body(
+    (length, brake): (Option<f64>, Option<f64>),
+    lim: &Limits,
+) -> Result<(), String> {
+    if length.is_some_and(|l| !(MIN_LENGTH_M..=MAX_LENGTH_M).contains(&l)) {
         return Err(format!(
             "length must be in [{MIN_LENGTH_M}, {MAX_LENGTH_M}] m (what a V2V state can \
              declare)"
         ));
     }
-    if v.brake
-        .is_some_and(|b| !(b >= MIN_BRAKE_MPS2 && b <= lim.brake))
-    {
+    if brake.is_some_and(|b| !(b >= MIN_BRAKE_MPS2 && b <= lim.brake)) {
         return Err(format!(
             "brake must be in [{MIN_BRAKE_MPS2}, {}] m/s² (no vehicle brakes harder than \
              Table I's car)",
@@ -423,6 +420,23 @@ fn check_body(v: &RoadVehicle, lim: &Limits) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The body a file's `length` and `brake` give: Table I's car where they are silent.
+pub(super) fn body_of(length: Option<f64>, brake: Option<f64>) -> Body {
+    Body {
+        length: length.unwrap_or(Body::CAR.length),
+        brake: brake.unwrap_or(Body::CAR.brake),
+    }
+}
+
+/// The body as a file writes it: silent where it is Table I's car.
+pub(super) fn body_fields(body: Body) -> (Option<f64>, Option<f64>) {
+    let car = Body::CAR;
+    (
+        (body.length != car.length).then_some(body.length),
+        (body.brake != car.brake).then_some(body.brake),
+    )
 }
 
 /// The shortest vehicle a scenario may have (m): shorter than a moped is an error.

@@ -8,7 +8,7 @@ use super::heard::{View, VIEW_CAP};
 use super::precision::{params32, sensing32, CrossingF32, LaneF32, Precision, CROSS_HORIZON};
 use super::{AnySolver, Body, Fleet, Phase, SolverChoice};
 use crate::reference::ClarabelSolver;
-use planner_core::crossing::{CrossingPlanner, CrossingReport};
+use planner_core::crossing::{CrossingPlanner, CrossingReport, PathVehicle};
 use planner_core::intersection::Layout;
 use planner_core::{
     Command, CostWeights, InputError, Instant, IpmSolver, LaneCommand, LaneInputError,
@@ -115,7 +115,7 @@ impl CrossingBrain {
         };
     }
 
-    pub(super) fn hear_paths(&mut self, sensed: &[f64], mapped: &[f64]) {
+    pub(super) fn hear_paths(&mut self, sensed: &[PathVehicle<f64>], mapped: &[PathVehicle<f64>]) {
         // Past the view's capacity the planner takes its path as blocked.
         let _ = match self {
             Self::F64(c) => c.hear_sensed(sensed).and(c.hear_mapped(mapped)),

@@ -4,7 +4,7 @@
 use super::at::At;
 use super::network::{End, Network};
 use super::vehicle::Vehicle;
-use super::{Arrivals, World, LENGTH_M};
+use super::{Arrivals, World};
 use crate::bus::{Bus, BusError, Message};
 use planner_core::intersection::Movement;
 use rand::Rng;
@@ -81,7 +81,7 @@ pub(super) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now:
             if inside_ac && v.log.arrived_at.is_none() {
                 v.log.arrived_at = Some(now);
             }
-            if s - 0.5 * LENGTH_M >= r.path.exit() && v.log.left_as_at.is_none() {
+            if s - 0.5 * v.body.length >= r.path.exit() && v.log.left_as_at.is_none() {
                 v.log.left_as_at = Some(now);
             }
             let (Some(a), Some(_)) = (v.log.arrived_at, v.log.left_as_at) else {

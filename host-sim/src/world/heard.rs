@@ -36,7 +36,7 @@
 use super::network::Network;
 use super::plausible::{Bounds, Implausible};
 use crate::bus::Message;
-use planner_core::crossing::CrossingReport;
+use planner_core::crossing::{CrossingReport, PathVehicle};
 use planner_core::{BodyLength, Instant, Other, VehicleState};
 
 /// Vehicles one view holds: more than fit near one vehicle at any density (within
@@ -541,23 +541,28 @@ impl View {
                     // the change itself (the grid at 500 veh/h: a follower
                     // leaving a junction closed in on a vehicle changing into its lane).
                     let lane = net.on_route(segment, state.x, state.lane, j, route);
+                    let declared = state.length.map_or(length, BodyLength::m);
                     let report = |s| CrossingReport {
                         id: state.id,
                         route,
                         s,
                         v: state.v,
-                        length: state.length.map_or(length, BodyLength::m),
+                        length: declared,
                         brake: state.brake,
+                    };
+                    let wall = |s| PathVehicle {
+                        s,
+                        length: declared,
                     };
                     match (lane, state.brake) {
                         (Some(s), Some(_)) => out.leaders.push((report(s), state.stamp)),
-                        (Some(s), None) => out.walls.push(s),
+                        (Some(s), None) => out.walls.push(wall(s)),
                         (None, _) => {}
                     }
                     let entering = state
                         .alpha
                         .and_then(|a| net.on_route(segment, state.x, a, j, route));
-                    out.walls.extend(entering);
+                    out.walls.extend(entering.map(wall));
                 }
                 Record::Crossing {
                     report,
@@ -574,7 +579,10 @@ impl View {
                         Some(_) => out
                             .leaders
                             .push((CrossingReport { route, s, ..report }, stamp)),
-                        None => out.walls.push(s),
+                        None => out.walls.push(PathVehicle {
+                            s,
+                            length: report.length,
+                        }),
                     }
                 }
                 Record::Crossing { .. } => {}
@@ -588,8 +596,9 @@ impl View {
 /// ([`View::on_path`]).
 #[derive(Debug, Default)]
 pub struct OnPath {
-    /// Positions along the path of vehicles taken as walls.
-    pub walls: Vec<f64>,
+    /// Vehicles taken as walls: where along the path, and as long as they declared (or
+    /// the longest expected).
+    pub walls: Vec<PathVehicle<f64>>,
     /// Vehicles whose braking limit is known, as reports on the path, with their stamps.
     pub leaders: Vec<(CrossingReport<f64>, Instant)>,
 }

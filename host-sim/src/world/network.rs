@@ -313,9 +313,15 @@ impl Network {
 
     /// The free-flow time (s) of a trip from segment `seg` at centre `x` through
     /// `movements` to its exit: the length of road its centre covers until its rear is
-    /// past the exit, each segment driven at its speed limit and each junction at its
-    /// vImax, with no stop. `None` if the movements do not lead out of the network.
-    pub fn free_flow_s(&self, mut seg: usize, mut x: f64, movements: &[Movement]) -> Option<f64> {
+    /// past the exit (a vehicle `length` long), each segment driven at its speed limit and
+    /// each junction at its vImax, with no stop. `None` if the movements do not lead out
+    /// of the network.
+    pub fn free_flow_s(
+        &self,
+        (mut seg, mut x): (usize, f64),
+        movements: &[Movement],
+        length: f64,
+    ) -> Option<f64> {
         let mut t = 0.0;
         for &m in movements {
             let sg = self.segments.get(seg)?;
@@ -335,7 +341,7 @@ impl Network {
         let End::Exit(end) = sg.end else {
             return None;
         };
-        Some(t + (end + 0.5 * crate::world::LENGTH_M - x).max(0.0) / sg.v_max)
+        Some(t + (end + 0.5 * length - x).max(0.0) / sg.v_max)
     }
 
     /// The movements of a shortest path (by length of road) from segment `from` to

@@ -8,7 +8,7 @@
 //! would be flashed with). On a CAN bus the codec runs in `f32` too
 //! ([`crate::fleet::can::CanNode::with_precision`]).
 
-use planner_core::crossing::{CrossingPlanner, CrossingReport, Manager, ManagerError};
+use planner_core::crossing::{CrossingPlanner, CrossingReport, Manager, ManagerError, PathVehicle};
 use planner_core::intersection::{Layout, LayoutSpec, Path, Route, Segment};
 use planner_core::lane_change::StartBlock;
 use planner_core::{
@@ -38,6 +38,14 @@ impl Precision {
             Precision::F64 => "f64",
             Precision::F32 => "f32",
         }
+    }
+}
+
+/// A vehicle on the path in `f32`.
+fn path_vehicle32(v: &PathVehicle<f64>) -> PathVehicle<f32> {
+    PathVehicle {
+        s: r(v.s),
+        length: r(v.length),
     }
 }
 
@@ -105,6 +113,7 @@ pub fn layout32(l: &Layout<f64>) -> Layout<f32> {
             lane_width: r(s.lane_width),
             v_limit: r(s.v_limit),
             lanes: s.lanes,
+            turn_inset: r(s.turn_inset),
         },
         routes,
         conflicts: l.conflicts,
@@ -238,7 +247,7 @@ impl<const N: usize> LaneF32<N> {
 pub struct CrossingF32 {
     planner: CrossingPlanner<f32, CROSS_HORIZON, { super::heard::VIEW_CAP }>,
     layout: Box<Layout<f32>>,
-    buf: Vec<f32>,
+    buf: Vec<PathVehicle<f32>>,
 }
 
 impl CrossingF32 {
@@ -269,16 +278,16 @@ impl CrossingF32 {
     }
 
     /// This step's sensor returns along its path.
-    pub fn hear_sensed(&mut self, xs: &[f64]) -> Result<(), ManagerError> {
+    pub fn hear_sensed(&mut self, vs: &[PathVehicle<f64>]) -> Result<(), ManagerError> {
         self.buf.clear();
-        self.buf.extend(xs.iter().map(|&x| r(x)));
+        self.buf.extend(vs.iter().map(path_vehicle32));
         self.planner.hear_sensed(&self.buf)
     }
 
     /// This step's vehicles heard of in other frames, along its path.
-    pub fn hear_mapped(&mut self, xs: &[f64]) -> Result<(), ManagerError> {
+    pub fn hear_mapped(&mut self, vs: &[PathVehicle<f64>]) -> Result<(), ManagerError> {
         self.buf.clear();
-        self.buf.extend(xs.iter().map(|&x| r(x)));
+        self.buf.extend(vs.iter().map(path_vehicle32));
         self.planner.hear_mapped(&self.buf)
     }
 

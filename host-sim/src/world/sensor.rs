@@ -17,7 +17,8 @@
 
 use super::at::At;
 use super::network::Network;
-use super::{LANE_WIDTH_M, LENGTH_M, WIDTH_M};
+use super::{LANE_WIDTH_M, WIDTH_M};
+use planner_core::crossing::PathVehicle;
 use planner_core::{Other, Sensing};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -27,8 +28,8 @@ use rand_chacha::ChaCha8Rng;
 pub struct Sensed {
     /// On a segment: the vehicles seen, as the multi-lane planner takes them.
     pub others: Vec<Other<f64>>,
-    /// In a junction: positions along its path of the vehicles seen on it.
-    pub on_path: Vec<f64>,
+    /// In a junction: the vehicles seen on its path, where along it and how long.
+    pub on_path: Vec<PathVehicle<f64>>,
     /// A scripted driver: the bumper gap to the nearest vehicle in its lane ahead.
     pub gap_ahead: Option<f64>,
 }
@@ -125,7 +126,7 @@ pub fn sense(
             }
         }
         (At::Crossing { junction, route, s }, Some(sn)) => {
-            out.on_path = path_returns(net, junction, route, s, all, me.id, sn, rng);
+            out.on_path = path_returns(net, (junction, route, s), all, me, sn, rng);
         }
         (At::Lane { seg, x, lane, .. }, None) => {
             let lanes = net.segments.get(seg).map_or(1, |g| g.lanes);
@@ -145,67 +146,69 @@ pub fn sense(
     out
 }
 
-/// The vehicles physically on junction `j`'s route `route` ahead of position `s` within
-/// the forward range: positions along that path, measured.
-#[allow(clippy::too_many_arguments)]
+/// The vehicles physically on junction `j`'s route `route` ahead of `me` (at position
+/// `s`) within the forward range: where along that path, measured, and how long.
 fn path_returns(
     net: &Network,
-    j: usize,
-    route: u8,
-    s: f64,
+    (j, route, s): (usize, u8, f64),
     all: &[Seen],
-    me: u16,
+    me: &Seen,
     sn: &Sensing<f64>,
     rng: &mut ChaCha8Rng,
-) -> Vec<f64> {
-    let Some(jn) = net.junctions.get(j) else {
-        return Vec::new();
-    };
-    let Some(mine) = jn.layout.route(usize::from(route)) else {
-        return Vec::new();
-    };
-    let exit = mine.path.exit();
+) -> Vec<PathVehicle<f64>> {
     let mut out = Vec::new();
-    for c in all.iter().filter(|c| c.id != me) {
-        let along = match c.at {
-            At::Crossing {
-                junction,
-                route: r,
-                s: cs,
-            } if junction == j => {
-                let Some(other) = jn.layout.route(usize::from(r)) else {
-                    continue;
-                };
-                let (oe, ox) = (other.path.entry(), other.path.exit());
-                if r == route || (other.inlet == mine.inlet && cs - 0.5 * LENGTH_M < oe) {
-                    Some(cs)
-                } else if other.outlet == mine.outlet && cs + 0.5 * LENGTH_M > ox {
-                    Some(exit + (cs - ox))
-                } else {
-                    None
-                }
-            }
-            At::Crossing {
-                junction,
-                route: r,
-                s: cs,
-            } => net
-                .on_segment(junction, r, cs)
-                .and_then(|(sg, x, lane)| net.on_route(sg, x, lane, j, route)),
-            At::Lane { seg, x, lane, .. } => net.on_route(seg, x, lane, j, route),
+    for c in all.iter().filter(|c| c.id != me.id) {
+        let Some(p) = along_route(net, (j, route), c) else {
+            continue;
         };
-        if let Some(p) = along.filter(|&p| p > s && p - s - LENGTH_M <= sn.ahead_m) {
+        if p > s && p - s - 0.5 * (c.length + me.length) <= sn.ahead_m {
             let e = sn.position_error_m;
-            out.push(
-                p + if e > 0.0 {
-                    rng.random_range(-e..=e)
-                } else {
-                    0.0
-                },
-            );
+            let measured = p + if e > 0.0 {
+                rng.random_range(-e..=e)
+            } else {
+                0.0
+            };
+            out.push(PathVehicle {
+                s: measured,
+                length: c.length,
+            });
         }
     }
     out
+}
+
+/// Where `c` is along junction `j`'s route `route`, if it is on that route's path: on
+/// the route itself, on its inlet before the stop line or its outlet past A_S (through
+/// another route sharing them, by any part of its body), or on a road the path joins.
+fn along_route(net: &Network, (j, route): (usize, u8), c: &Seen) -> Option<f64> {
+    let jn = net.junctions.get(j)?;
+    let mine = jn.layout.route(usize::from(route))?;
+    match c.at {
+        At::Crossing {
+            junction,
+            route: r,
+            s: cs,
+        } if junction == j => {
+            let other = jn.layout.route(usize::from(r))?;
+            let (oe, ox) = (other.path.entry(), other.path.exit());
+            let half = 0.5 * c.length;
+            if r == route || (other.inlet == mine.inlet && cs - half < oe) {
+                Some(cs)
+            } else if other.outlet == mine.outlet && cs + half > ox {
+                Some(mine.path.exit() + (cs - ox))
+            } else {
+                None
+            }
+        }
+        At::Crossing {
+            junction,
+            route: r,
+            s: cs,
+        } => net
+            .on_segment(junction, r, cs)
+            .and_then(|(sg, x, lane)| net.on_route(sg, x, lane, j, route)),
+        At::Lane { seg, x, lane, .. } => net.on_route(seg, x, lane, j, route),
+    }
 }
 
 /// Mixed into a run's seed for the roadside sensors' noise (a stream of its own, drawn the
@@ -246,6 +249,7 @@ pub fn roadside(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::world::LENGTH_M;
 
     #[test]
     fn straddling_rectangles_are_in_both_lanes() {

@@ -302,8 +302,9 @@ impl<const N: usize, B: Bus> World<N, B> {
         }
     }
 
-    /// The room (bumper gap − d0, m) ahead of a vehicle entering at `e`, to the nearest
-    /// vehicle on the same inlet track or lane (∞ if none).
+    /// The room (bumper gap − d0, m) ahead of a vehicle entering at `e` (arrivals are
+    /// Table I's cars), to the nearest vehicle on the same inlet track or lane (∞ if
+    /// none), as long as that one is.
     pub(super) fn room(&self, e: &Entry) -> f64 {
         let start = 0.5 * LENGTH_M;
         let mut room = f64::INFINITY;
@@ -328,7 +329,7 @@ impl<const N: usize, B: Bus> World<N, B> {
                         .and_then(|jn| jn.layout.route(usize::from(route)))
                         .filter(|r| r.inlet.heading == heading && r.inlet.lane == lane);
                     match same {
-                        Some(r) if s < r.path.entry() + 0.5 * LENGTH_M => Some(s),
+                        Some(r) if s < r.path.entry() + 0.5 * v.body.length => Some(s),
                         _ => None,
                     }
                 }
@@ -347,7 +348,8 @@ impl<const N: usize, B: Bus> World<N, B> {
                 _ => None,
             };
             if let Some(x) = ahead {
-                room = room.min(x - start - LENGTH_M - self.lim.d0);
+                let half_lengths = 0.5 * (v.body.length + LENGTH_M);
+                room = room.min(x - start - half_lengths - self.lim.d0);
             }
         }
         room

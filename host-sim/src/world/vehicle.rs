@@ -321,7 +321,8 @@ impl<const N: usize> Vehicle<N> {
     /// Notes its trip's free-flow time from where it is now (at its entry).
     pub fn note_free_flow(&mut self, net: &Network) {
         if let At::Lane { seg, x, .. } = self.at() {
-            self.log.free_flow_s = net.free_flow_s(seg, x, &self.trip.movements);
+            self.log.free_flow_s =
+                net.free_flow_s((seg, x), &self.trip.movements, self.body.length);
         }
     }
 

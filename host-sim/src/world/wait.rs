@@ -5,7 +5,6 @@ use super::at::At;
 use super::junction::ManagerNode;
 use super::network::{End, Network};
 use super::vehicle::VehicleTruth;
-use super::LENGTH_M;
 use crate::monitor::liveness::{Deadlock, DeadlockDetector, Status, WaitsOn, MOVING_MPS};
 use crate::monitor::Limits;
 
@@ -223,20 +222,23 @@ fn at_junction(
                 s: os,
             } if j == junction => {
                 let other = jn.layout.route(usize::from(r))?;
+                let half = 0.5 * o.body.length;
                 let on_mine = r == route
-                    || (other.inlet == mine.inlet && os - 0.5 * LENGTH_M < other.path.entry())
-                    || (other.outlet == mine.outlet && os + 0.5 * LENGTH_M > other.path.exit());
-                on_mine.then_some((o.id, os))
+                    || (other.inlet == mine.inlet && os - half < other.path.entry())
+                    || (other.outlet == mine.outlet && os + half > other.path.exit());
+                // Ahead (its centre past mine), and its rear within reach of my front.
+                let rear = os - half;
+                (on_mine && os > s && rear - (s + 0.5 * v.body.length) <= NEAR_M + 1.0)
+                    .then_some((o.id, rear))
             }
             _ => None,
         })
-        .filter(|&(_, os)| os > s && os - s - LENGTH_M <= NEAR_M + 1.0)
         .min_by(|a, b| a.1.total_cmp(&b.1));
     let mut out = Vec::new();
     if let Some((id, _)) = ahead {
         out.push(WaitsOn::Vehicle { id });
     }
-    let at_line = mine.path.entry() - (s + 0.5 * LENGTH_M) <= NEAR_M;
+    let at_line = mine.path.entry() - (s + 0.5 * v.body.length) <= NEAR_M;
     if !permitted && at_line && ahead.is_none() {
         let holders = held
             .iter()
