@@ -377,22 +377,8 @@ fn corners<F: Real>(q: Pose<F>, hl: F, hw: F) -> [(F, F); 4] {
 /// rectangle at [`SWEEP_EDGE_SAMPLES`] + 1 points along each edge.
 fn sweep_outside<F: Real>(path: &Path<F>, a: F, wl: F, (hl, hw): (F, F)) -> F {
     let (entry, exit) = (path.entry(), path.exit());
-    let (inlet_end, outlet_start) = (path.pose_at(entry), path.pose_at(exit));
-    let outside = |(x, y): (F, F)| {
-        let in_square = (x.abs() - a).max(y.abs() - a);
-        // Signed distance outside a lane strip: behind the stop line (`ahead` −1) or past
-        // the outlet's start (+1), within half a lane of its centre line.
-        let strip = |q: Pose<F>, ahead: F| {
-            let (c, s) = (q.theta.cos(), q.theta.sin());
-            let (dx, dy) = (x - q.x, y - q.y);
-            let along = ahead * (dx * c + dy * s);
-            let across = (dy * c - dx * s).abs() - F::HALF * wl;
-            across.max(-along)
-        };
-        in_square
-            .min(strip(inlet_end, -F::ONE))
-            .min(strip(outlet_start, F::ONE))
-    };
+    let lanes = (path.pose_at(entry), path.pose_at(exit));
+    let outside = |p: (F, F)| outside_lanes(p, a, wl, lanes);
     let (n_path, n_edge) = (
         F::from_usize(SWEEP_PATH_SAMPLES),
         F::from_usize(SWEEP_EDGE_SAMPLES),
@@ -409,6 +395,30 @@ fn sweep_outside<F: Real>(path: &Path<F>, a: F, wl: F, (hl, hw): (F, F)) -> F {
         }
     }
     (worst - F::from_f64(1e-6)).max(F::ZERO)
+}
+
+/// How far (m) point `(x, y)` is outside A_S (the square of half-size `a`) and both lane
+/// strips `wl` wide — the inlet's behind the stop line at `inlet_end`, the outlet's past
+/// its start at `outlet_start` — at its nearest; negative inside one of them.
+fn outside_lanes<F: Real>(
+    (x, y): (F, F),
+    a: F,
+    wl: F,
+    (inlet_end, outlet_start): (Pose<F>, Pose<F>),
+) -> F {
+    let in_square = (x.abs() - a).max(y.abs() - a);
+    // Signed distance outside a lane strip: behind the line (`ahead` −1) or past the
+    // outlet's start (+1), within half a lane of its centre line.
+    let strip = |q: Pose<F>, ahead: F| {
+        let (c, s) = (q.theta.cos(), q.theta.sin());
+        let (dx, dy) = (x - q.x, y - q.y);
+        let along = ahead * (dx * c + dy * s);
+        let across = (dy * c - dx * s).abs() - F::HALF * wl;
+        across.max(-along)
+    };
+    in_square
+        .min(strip(inlet_end, -F::ONE))
+        .min(strip(outlet_start, F::ONE))
 }
 
 /// Centre positions along a path through A_S in [`sweep_outside`], less one.
@@ -898,12 +908,82 @@ mod tests {
         let out = right.path.pose_at(right.path.exit());
         assert!((entry.x + 20.0).abs() < 1e-9 && (turn.x + 12.0).abs() < 1e-9);
         assert!((out.y + 20.0).abs() < 1e-9, "{out:?}");
+        // Its whole length: the inlet, 8 m, the quarter circle, 8 m, the outlet.
+        let quarter = 6.6 * core::f64::consts::FRAC_PI_2;
+        let whole = 100.0 + 8.0 + quarter + 8.0 + 70.0;
+        assert!(
+            (right.path.length() - whole).abs() < 1e-9,
+            "{}",
+            right.path.length()
+        );
+        assert!((right.path.exit() - (whole - 70.0)).abs() < 1e-9);
         // The same box without the inset turns too tightly for the truck's swing.
         s.turn_inset = 0.0;
         assert!(matches!(
             Layout::new(&t, s),
             Err(LayoutError::SweepLeavesItsLanes { .. })
         ));
+    }
+
+    /// Distances outside A_S and the lane strips, at points whose answers are known: in
+    /// the inlet lane behind the line, in its band's extension beyond A_S (outside: the
+    /// strip ends at the line), in the next lane, inside A_S, in an oblique outlet lane.
+    #[test]
+    fn points_outside_a_s_and_the_lanes_are_measured() {
+        let east = |x: f64, y: f64, theta: f64| Pose { x, y, theta };
+        let lanes = (
+            east(-12.0, -1.8, 0.0),
+            east(-1.8, -12.0, -core::f64::consts::FRAC_PI_2),
+        );
+        let at = |x, y| outside_lanes((x, y), 12.0, 3.6, lanes);
+        let close = |got: f64, want: f64| (got - want).abs() < 1e-12;
+        assert!(close(at(-22.0, -1.8), -1.8), "{}", at(-22.0, -1.8));
+        assert!(close(at(-22.0, -3.0), -0.6));
+        assert!(
+            close(at(-22.0, -5.4), 1.8),
+            "the next lane: {}",
+            at(-22.0, -5.4)
+        );
+        assert!(
+            close(at(22.0, -1.8), 10.0),
+            "beyond A_S: {}",
+            at(22.0, -1.8)
+        );
+        assert!(close(at(0.0, 0.0), -12.0), "inside A_S");
+        assert!(close(at(-1.8, -20.0), -1.8), "in the outlet lane");
+        assert!(
+            close(at(-1.8, 20.0), 8.0),
+            "behind the outlet's start: {}",
+            at(-1.8, 20.0)
+        );
+        // An oblique lane (θ = 0.3): across its centre line by 2 m.
+        let oblique = (east(-12.0, -1.8, 0.3), east(-12.0, -1.8, 0.3));
+        let (s, c) = 0.3f64.sin_cos();
+        let p = (-12.0 - 5.0 * c - 2.0 * s, -1.8 - 5.0 * s + 2.0 * c);
+        let got = outside_lanes(p, 12.0, 3.6, oblique);
+        assert!(close(got, 0.2), "{got}");
+    }
+
+    /// Each refusal says what is wrong, in the words of its documentation.
+    #[test]
+    fn refusals_say_why() {
+        use core::fmt::Write;
+        let text = |e: LayoutError<f64>| {
+            let mut s: heapless::String<512> = heapless::String::new();
+            write!(s, "{e}").expect("fits");
+            s
+        };
+        let sweep = text(LayoutError::SweepLeavesItsLanes { route: 3, by: 4.0 });
+        assert!(
+            sweep.starts_with("a vehicle of the layout's length and width"),
+            "{sweep}"
+        );
+        assert!(
+            sweep.contains("route: 3") && sweep.contains("by: 4.0"),
+            "{sweep}"
+        );
+        let inset = text(LayoutError::BadTurnInset);
+        assert!(inset.starts_with("the turn inset is negative"), "{inset}");
     }
 
     #[test]
