@@ -113,6 +113,43 @@ fn trucks_export_as_their_own_vehicle_type() {
         "{routes}"
     );
     assert_eq!(count(&routes, r#"type="truck""#), 2);
+    // Arrivals with a share of trucks: beside each cars' flow a trucks' flow, the rate
+    // split as the share says (trucks-grid: 20 %).
+    let dir = scratch("sumo-trucks-grid");
+    let (code, err) = export(&root().join("scenarios/trucks-grid.toml"), &dir, &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let routes = read(&dir, "trucks-grid.rou.xml");
+    assert!(
+        routes.contains(r#"<vType id="truck" length="16.5""#),
+        "{routes}"
+    );
+    let (cars, trucks) = (
+        count(&routes, r#"type="car""#),
+        count(&routes, r#"type="truck""#),
+    );
+    assert!(
+        cars > 0 && cars == trucks,
+        "{cars} car flows, {trucks} truck flows"
+    );
+    let period = |line: &str| -> f64 {
+        let start = line.find("period=\"exp(").expect("a Poisson flow") + 12;
+        line[start..]
+            .split(')')
+            .next()
+            .expect("closed")
+            .parse()
+            .expect("a rate")
+    };
+    let first = |suffix: &str| {
+        routes
+            .lines()
+            .find(|l| l.contains(&format!(r#"<flow id="f0_0{suffix}""#)))
+            .map(period)
+            .expect("flow f0_0")
+    };
+    let (car, truck) = (first(""), first("t"));
+    // (The rates are written to six decimals.)
+    assert!((truck / (car + truck) - 0.2).abs() < 1e-3, "{car} {truck}");
 }
 
 #[test]

@@ -9,6 +9,7 @@ use common::lane_state;
 use host_sim::bus::Message;
 use host_sim::world::heard::{reach, slack, Here, Record, View, VIEW_CAP};
 use host_sim::world::network::Network;
+use host_sim::world::{Body, Fleet};
 
 fn net() -> Network {
     Network::road(2, None, 27.8)
@@ -42,14 +43,21 @@ fn ids(view: &View) -> Vec<u16> {
 }
 
 /// The reach of Table I's vehicle: 77.0 m at vmax, 4.75 m standing (a second from rest
-/// at amax, and the safe distance at the speed reached).
+/// at amax, and the safe distance at the speed reached). With trucks in the fleet: dS at
+/// their 4.5 m/s² and half their extra 12 m, 120.0 m at vmax.
 #[test]
 fn reach_is_a_second_and_a_safe_distance_at_the_speed_within_reach() {
+    let cars = Fleet::default();
+    let reach = |v| reach(v, cars);
+    let slack = |d, v, w| slack(d, (v, w), cars);
     assert!((reach(27.8) - 76.99).abs() < 0.01, "{}", reach(27.8));
     assert!((reach(0.0) - 4.752).abs() < 0.01, "{}", reach(0.0));
     assert!(reach(10.0) > reach(5.0));
     assert_eq!(slack(29.51, 0.0, 0.0).signum(), 1.0);
     assert_eq!(slack(29.49, 0.0, 0.0).signum(), -1.0);
+    let trucks = Fleet::of([Body::TRUCK]);
+    let truck = host_sim::world::heard::reach(27.8, trucks);
+    assert!((truck - 119.95).abs() < 0.01, "{truck}");
 }
 
 /// 1,000 vehicles standing 6 m apart on both lanes, the receiver standing among them:
@@ -65,7 +73,7 @@ fn a_jam_fills_no_view() {
         let id = k + 1;
         let _ = view.take(&state(id, x, lane, 0.0), &net, me);
         let dy = 3.6 * f64::from(lane);
-        if slack((x * x + dy * dy).sqrt(), 0.0, 0.0) <= 0.0 {
+        if slack((x * x + dy * dy).sqrt(), (0.0, 0.0), Fleet::default()) <= 0.0 {
             near.push(id);
         }
     }
@@ -87,7 +95,7 @@ fn a_fast_vehicle_displaces_standing_ones_that_cannot_matter() {
         let _ = view.take(&state(k + 1, 40.0 + 6.0 * f64::from(k), 0, 0.0), &net, me);
     }
     assert_eq!(view.records().len(), VIEW_CAP);
-    assert!(slack(90.0, 0.0, 27.8) < 0.0);
+    assert!(slack(90.0, (0.0, 27.8), Fleet::default()) < 0.0);
     assert_eq!(view.take(&state(999, -90.0, 1, 27.8), &net, me), Ok(()));
     assert!(ids(&view).contains(&999));
     assert!(
@@ -95,6 +103,28 @@ fn a_fast_vehicle_displaces_standing_ones_that_cannot_matter() {
         "the farthest went"
     );
     assert!(!view.take_overflow(), "what went could not matter");
+}
+
+/// With trucks in the world a record matters from farther: a full view of vehicles at
+/// vmax 106 to 150 m away, beyond every car's reach but within a truck's, gives one up for
+/// a standing vehicle close by — without loss among cars, and, in a fleet with trucks,
+/// saying that what went may have mattered.
+#[test]
+fn with_trucks_about_a_view_keeps_vehicles_from_farther() {
+    let trucks = Fleet::of([Body::TRUCK]);
+    assert!(slack(106.0, (0.0, 27.8), Fleet::default()) > 0.0);
+    assert!(slack(150.0, (0.0, 27.8), trucks) < 0.0);
+    for (fleet, lost) in [(Fleet::default(), false), (trucks, true)] {
+        let (net, me) = (net(), receiver(0.0));
+        let mut view = View::new(0, RADIUS_M).for_fleet(fleet);
+        for k in 0..VIEW_CAP as u16 {
+            let x = 106.0 + 44.0 * f64::from(k) / f64::from(VIEW_CAP as u16 - 1);
+            let _ = view.take(&state(k + 1, x, 0, 27.8), &net, me);
+        }
+        assert!(!view.take_overflow());
+        assert_eq!(view.take(&state(999, 10.0, 1, 0.0), &net, me), Ok(()));
+        assert_eq!(view.take_overflow(), lost, "{fleet:?}");
+    }
 }
 
 /// Where more vehicles may matter than a view holds — 300 at vmax within 150 m — the view

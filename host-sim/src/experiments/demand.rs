@@ -251,7 +251,10 @@ impl Plan {
 pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> WorldSpec {
     let lt = LayoutToml::default();
     let layout = build_layout(&lt).unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
-    let arrivals = crate::scenario::junction::stub_arrivals(&layout, rate);
+    let arrivals = crate::scenario::junction::stub_arrivals(
+        &layout,
+        crate::scenario::common::ArrivalsToml::cars(rate),
+    );
     WorldSpec {
         name: format!("demand-{}-{rate}-{seed}", algorithm.name()),
         duration_s: duration,

@@ -87,7 +87,7 @@ impl<const N: usize> Harness<N> {
 
     /// What its planners assume of vehicles that do not say.
     fn fleet(&self) -> crate::world::Fleet {
-        crate::world::Fleet::of(self.spec.vehicles.iter().map(|v| v.body))
+        self.spec.fleet()
     }
 
     pub(super) fn setup(&self) -> PlannerSetup {

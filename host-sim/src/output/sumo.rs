@@ -357,11 +357,19 @@ fn type_of(body: Body) -> String {
 fn routes(spec: &WorldSpec, notes: &mut Vec<String>) -> String {
     let lim = crate::monitor::Limits::table_i();
     let mut out = String::from("<routes>\n");
-    // Table I's car (arrivals are cars), then every other body a vehicle has, each once.
+    // Table I's car (arrivals' cars), the truck if arrivals bring trucks, then every other
+    // body a vehicle has, each once.
     let mut bodies = vec![Body::CAR];
-    for v in &spec.vehicles {
-        if !bodies.contains(&v.body) {
-            bodies.push(v.body);
+    let arriving = match &spec.arrivals {
+        Arrivals::Poisson(p) if p.trucks_percent > 0 => Some(Body::TRUCK),
+        _ => None,
+    };
+    for b in arriving
+        .into_iter()
+        .chain(spec.vehicles.iter().map(|v| v.body))
+    {
+        if !bodies.contains(&b) {
+            bodies.push(b);
         }
     }
     for b in bodies {
@@ -394,8 +402,8 @@ fn routes(spec: &WorldSpec, notes: &mut Vec<String>) -> String {
             edges.join(" ")
         );
     }
-    if let Arrivals::Poisson(entries) = &spec.arrivals {
-        flows(&spec.network, entries, spec.duration_s, &mut out);
+    if let Arrivals::Poisson(p) = &spec.arrivals {
+        flows(&spec.network, p, spec.duration_s, &mut out);
     }
     if spec.arrivals == Arrivals::Closed {
         notes.push(
@@ -452,14 +460,13 @@ fn departure(
 /// One Poisson flow per route an arrival at each entry may draw (the entry's rate split
 /// evenly, as host-sim draws it: a movement its lane serves at a junction's own inlet, a
 /// shortest path to one of the exits it leads to on a boundary segment).
-fn flows(
-    net: &Network,
-    entries: &[(crate::world::spawn::Entry, f64)],
-    duration_s: f64,
-    out: &mut String,
-) {
+fn flows(net: &Network, p: &crate::world::Poisson, duration_s: f64, out: &mut String) {
     use crate::world::spawn::{trip_choices, Entry};
-    for (k, (entry, rate_vph)) in entries.iter().enumerate() {
+    // Trucks as a flow of their own beside the cars', each a thinned Poisson process
+    // (a share of a Poisson process is one).
+    let truck = f64::from(p.trucks_percent) / 100.0;
+    let kinds = [(Body::CAR, 1.0 - truck), (Body::TRUCK, truck)];
+    for (k, (entry, rate_vph)) in p.entries.iter().enumerate() {
         let trips = trip_choices(net, entry);
         let (routes, lane): (Vec<Vec<String>>, u8) = match *entry {
             Entry::Stub {
@@ -484,13 +491,16 @@ fn flows(
                 (rs, lane)
             }
         };
-        let share = rate_vph / 3600.0 / routes.len().max(1) as f64;
-        for (i, edges) in routes.iter().enumerate() {
-            let _ = writeln!(
-                out,
-                r#"    <flow id="f{k}_{i}" type="car" begin="0" end="{duration_s}" period="exp({share:.6})" departLane="{lane}" departSpeed="max" departPos="base"><route edges="{}"/></flow>"#,
-                edges.join(" ")
-            );
+        for (body, part) in kinds.into_iter().filter(|&(_, part)| part > 0.0) {
+            let share = part * rate_vph / 3600.0 / routes.len().max(1) as f64;
+            let (kind, suffix) = (type_of(body), if body == Body::CAR { "" } else { "t" });
+            for (i, edges) in routes.iter().enumerate() {
+                let _ = writeln!(
+                    out,
+                    r#"    <flow id="f{k}_{i}{suffix}" type="{kind}" begin="0" end="{duration_s}" period="exp({share:.6})" departLane="{lane}" departSpeed="max" departPos="base"><route edges="{}"/></flow>"#,
+                    edges.join(" ")
+                );
+            }
         }
     }
 }

@@ -286,9 +286,9 @@ pub struct JunctionScenario {
     pub layout: Layout<f64>,
     /// Vehicles.
     pub placements: Vec<Placement>,
-    /// Poisson arrivals at every inlet lane (vehicles per hour per lane), if any: the
-    /// open system of `experiment demand`, as a file.
-    pub rate_vph: Option<f64>,
+    /// Poisson arrivals at every inlet lane, if any: the open system of `experiment
+    /// demand`, as a file.
+    pub arrivals: Option<ArrivalsToml>,
 }
 
 /// Why a layout is refused: the field at fault and what is wrong, in words.
@@ -449,15 +449,17 @@ impl JunctionScenario {
             super::road::check_body((v.length, v.brake), &lim)
                 .map_err(|m| e.at(Some(sv.span()), format!("vehicle {}: {m}", v.id)))?;
         }
+        let arrivals = ArrivalsToml::checked(raw.arrivals.as_ref(), &e)?;
+        let arriving = arrivals.filter(|a| a.trucks > 0).map(|_| Body::TRUCK);
         let fleet = Fleet::of(
             raw.vehicles
                 .iter()
-                .map(|v| super::road::body_of(v.get_ref().length, v.get_ref().brake)),
+                .map(|v| super::road::body_of(v.get_ref().length, v.get_ref().brake))
+                .chain(arriving),
         );
         let layout = build_layout_for(&lt, fleet)
             .map_err(|m| e.field(Some(span.clone()), "intersection", &m))?;
-        let rate_vph = ArrivalsToml::rate(raw.arrivals.as_ref(), &e)?;
-        let fewest = usize::from(rate_vph.is_none());
+        let fewest = usize::from(arrivals.is_none());
         if raw.vehicles.len() < fewest || raw.vehicles.len() > MANAGER_CAP {
             // The first vehicle too many, or the intersection none is at.
             let at = raw.vehicles.get(MANAGER_CAP).map_or(span, Spanned::span);
@@ -489,7 +491,7 @@ impl JunctionScenario {
             layout_toml: lt,
             layout,
             placements: placements.into_iter().map(|(p, _)| p).collect(),
-            rate_vph,
+            arrivals,
         })
     }
 
@@ -520,7 +522,7 @@ impl JunctionScenario {
                 .map_err(|m| m.to_string())?,
             layout_toml: lt,
             placements,
-            rate_vph: None,
+            arrivals: None,
         })
     }
 
@@ -553,8 +555,8 @@ impl JunctionScenario {
             faults: self.header.faults,
             sensing: self.header.sensing,
             arrivals: self
-                .rate_vph
-                .map_or(Arrivals::None, |r| stub_arrivals(&self.layout, r)),
+                .arrivals
+                .map_or(Arrivals::None, |a| stub_arrivals(&self.layout, a)),
             deadlock_window_s: self.header.deadlock_window_s,
             finish: Finish::Duration,
             clock_start: planner_core::Instant::EPOCH,
@@ -610,29 +612,33 @@ impl JunctionScenario {
             intersection: self.layout_toml,
             faults: self.header.faults,
             sensing: Some(SensingToml::of(self.header.sensing)),
-            arrivals: self.rate_vph.map(|rate_vph| ArrivalsToml { rate_vph }),
+            arrivals: self.arrivals,
             vehicles,
         };
         toml::to_string(&file).unwrap_or_else(|e| format!("# cannot write: {e}"))
     }
 }
 
-/// Poisson arrivals at `rate_vph` at the start of every inlet lane of junction 0.
-pub fn stub_arrivals(layout: &Layout<f64>, rate_vph: f64) -> Arrivals {
-    Arrivals::Poisson(
-        (0..4u8)
-            .flat_map(|heading| {
-                (0..layout.spec.lanes).map(move |lane| {
-                    let entry = crate::world::spawn::Entry::Stub {
-                        junction: 0,
-                        heading,
-                        lane,
-                    };
-                    (entry, rate_vph)
-                })
+/// Poisson arrivals as `a` says (its rate, its share of trucks) at the start of every
+/// inlet lane of junction 0.
+pub fn stub_arrivals(layout: &Layout<f64>, a: ArrivalsToml) -> Arrivals {
+    let rate_vph = a.rate_vph;
+    let entries = (0..4u8)
+        .flat_map(|heading| {
+            (0..layout.spec.lanes).map(move |lane| {
+                let entry = crate::world::spawn::Entry::Stub {
+                    junction: 0,
+                    heading,
+                    lane,
+                };
+                (entry, rate_vph)
             })
-            .collect(),
-    )
+        })
+        .collect();
+    Arrivals::Poisson(crate::world::Poisson {
+        entries,
+        trucks_percent: a.trucks,
+    })
 }
 
 /// The world's vehicle of a placement at junction 0.

@@ -46,7 +46,7 @@
 pub use super::common::ArrivalsToml;
 use super::common::{coord_ok, Header, RawHeader, SensingToml, MAX_COORD_M};
 use super::error::{Errors, ScenarioError};
-use super::junction::{build_layout, AlgorithmToml, Heading, LayoutToml, MovementToml};
+use super::junction::{build_layout_for, AlgorithmToml, Heading, LayoutToml, MovementToml};
 use crate::bus::Faults;
 use crate::monitor::Limits;
 use crate::world::at::At;
@@ -54,7 +54,8 @@ use crate::world::network::{rotate, End, Junction, Network, Segment};
 use crate::world::spawn::Entry;
 use crate::world::vehicle::Trip;
 use crate::world::{
-    Arrivals, Finish, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M, START_MARGIN_M,
+    Arrivals, Body, Finish, Fleet, Poisson, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M,
+    START_MARGIN_M,
 };
 use planner_core::intersection::Movement;
 use serde::Deserialize;
@@ -83,6 +84,10 @@ pub struct GridToml {
     /// Length of the entry and exit segments on the outer sides (m; default block_m).
     #[serde(default)]
     pub boundary_m: Option<f64>,
+    /// Every intersection's turn inset (m; default 0): A_S this much larger around the
+    /// same turns, room for a truck's swing (see `[[intersection]]`).
+    #[serde(default)]
+    pub turn_inset: f64,
 }
 
 fn two() -> u8 {
@@ -115,6 +120,10 @@ pub struct IntersectionToml {
     /// Its manager's algorithm (default: the file's).
     #[serde(default)]
     pub algorithm: Option<AlgorithmToml>,
+    /// How far inside A_S the turns begin and end (m; default 0); the default half-size
+    /// grows by as much, so the turns stay those of the least half-size.
+    #[serde(default)]
+    pub turn_inset: f64,
 }
 
 fn comm() -> f64 {
@@ -164,6 +173,12 @@ pub struct NetVehicleToml {
     /// An exit segment, reached by the shortest path.
     #[serde(default)]
     pub destination: Option<u16>,
+    /// Its length (m; default Table I's 4.5 m).
+    #[serde(default)]
+    pub length: Option<f64>,
+    /// Its braking limit |amin| (m/s²; default Table I's 7.9).
+    #[serde(default)]
+    pub brake: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -214,8 +229,8 @@ pub struct NetworkScenario {
     pub network: Network,
     /// Vehicles at t = 0.
     pub vehicles: Vec<VehicleSpec>,
-    /// Arrivals per entry lane (veh/h), if an open system.
-    pub rate_vph: Option<f64>,
+    /// Arrivals at every entry lane, if an open system.
+    pub arrivals: Option<ArrivalsToml>,
 }
 
 impl NetworkScenario {
@@ -256,7 +271,8 @@ impl NetworkScenario {
         };
         // What a grid stands for was not written: its problems are the [grid] table's.
         let grid_span = raw.grid.as_ref().map(Spanned::span);
-        let network = build(&juncs, &segs, (raw.algorithm, grid_span.clone()), &e)?;
+        let (arrivals, fleet) = fleet_of(&raw, &e)?;
+        let network = build(&juncs, &segs, (raw.algorithm, grid_span.clone()), fleet, &e)?;
         let junction_span = |j: usize| {
             juncs
                 .get(j)
@@ -271,7 +287,7 @@ impl NetworkScenario {
         check_apart(&network).map_err(|(j, m)| e.at(junction_span(j), m))?;
         check_clear(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
         check_blocks(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
-        check_ends(&network).map_err(|(k, m)| e.at(segment_span(k), m))?;
+        check_ends(&network, fleet).map_err(|(k, m)| e.at(segment_span(k), m))?;
         let mut vehicles = Vec::new();
         for sv in &raw.vehicles {
             let v = sv.get_ref();
@@ -288,8 +304,7 @@ impl NetworkScenario {
         }
         check_spacing(&vehicles, &network)
             .map_err(|(i, m)| e.at(raw.vehicles.get(i).map(Spanned::span), m))?;
-        let rate_vph = ArrivalsToml::rate(raw.arrivals.as_ref(), &e)?;
-        if vehicles.is_empty() && rate_vph.is_none() {
+        if vehicles.is_empty() && arrivals.is_none() {
             return Err(e.at(
                 Some(raw.duration_s.span()),
                 "a network needs [[vehicle]]s or [arrivals]",
@@ -301,24 +316,26 @@ impl NetworkScenario {
             header,
             network,
             vehicles,
-            rate_vph,
+            arrivals,
         })
     }
 
     /// The world it describes.
     pub fn world(&self) -> WorldSpec {
-        let arrivals = match self.rate_vph {
+        let arrivals = match self.arrivals {
             None => Arrivals::None,
-            Some(r) => Arrivals::Poisson(
-                self.network
+            Some(a) => Arrivals::Poisson(Poisson {
+                entries: self
+                    .network
                     .entries()
                     .into_iter()
                     .flat_map(|seg| {
                         let lanes = self.network.segments.get(seg).map_or(0, |s| s.lanes);
-                        (0..lanes).map(move |lane| (Entry::Segment { seg, lane }, r))
+                        (0..lanes).map(move |lane| (Entry::Segment { seg, lane }, a.rate_vph))
                     })
                     .collect(),
-            ),
+                trucks_percent: a.trucks,
+            }),
         };
         WorldSpec {
             name: self.name.clone(),
@@ -369,6 +386,7 @@ fn grid(g: &GridToml) -> Result<Tables, String> {
                     comm_margin: comm(),
                     v_limit: limit(),
                     algorithm: None,
+                    turn_inset: g.turn_inset,
                 },
                 None,
             ));
@@ -422,6 +440,25 @@ fn grid(g: &GridToml) -> Result<Tables, String> {
     Ok((juncs, segs))
 }
 
+/// `[arrivals]` checked, and the fleet the file's planners expect: its vehicles' bodies
+/// (each checked, refused at its table) and a truck's if arrivals bring trucks.
+fn fleet_of(
+    raw: &RawNetwork,
+    e: &Errors<'_>,
+) -> Result<(Option<ArrivalsToml>, Fleet), ScenarioError> {
+    let arrivals = ArrivalsToml::checked(raw.arrivals.as_ref(), e)?;
+    let lim = Limits::table_i();
+    let mut bodies = Vec::new();
+    for sv in &raw.vehicles {
+        let v = sv.get_ref();
+        super::road::check_body((v.length, v.brake), &lim)
+            .map_err(|m| e.at(Some(sv.span()), format!("vehicle {}: {m}", v.id)))?;
+        bodies.push(super::road::body_of(v.length, v.brake));
+    }
+    let arriving = arrivals.filter(|a| a.trucks > 0).map(|_| Body::TRUCK);
+    Ok((arrivals, Fleet::of(bodies.into_iter().chain(arriving))))
+}
+
 /// The shortest `block_m` a `[grid]` of `lanes` lanes at the default communication
 /// margin and speed limit takes (what `check_blocks` requires between junctions).
 pub fn min_block_m(lanes: u8) -> f64 {
@@ -447,6 +484,7 @@ fn build(
     juncs: &[(IntersectionToml, Spans)],
     segs: &[(SegmentToml, Spans)],
     (default, fallback): (AlgorithmToml, Spans),
+    fleet: Fleet,
     e: &Errors<'_>,
 ) -> Result<Network, ScenarioError> {
     // A grid's generated tables were not written: their problems are the [grid] table's.
@@ -466,16 +504,19 @@ fn build(
                 format!("intersection {}: x, y within ±{MAX_COORD_M} m", j.id),
             ));
         }
+        // The outlet track takes the longest vehicle out of A_C.
         let lt = LayoutToml {
-            half_size: j.half_size.unwrap_or_else(|| half_size_for(j.lanes)),
+            half_size: j
+                .half_size
+                .unwrap_or_else(|| half_size_for(j.lanes) + j.turn_inset),
             comm_margin: j.comm_margin,
             inlet_length: j.comm_margin,
-            outlet_length: j.comm_margin + LENGTH_M,
+            outlet_length: j.comm_margin + fleet.longest_m,
             v_limit: j.v_limit,
             lanes: j.lanes,
-            turn_inset: 0.0,
+            turn_inset: j.turn_inset,
         };
-        let layout = build_layout(&lt)
+        let layout = build_layout_for(&lt, fleet)
             .map_err(|m| e.field(at(span), &format!("intersection {}", j.id), &m))?;
         net.junctions.push(Junction {
             id: j.id,
@@ -758,7 +799,8 @@ fn check_blocks(net: &Network) -> Result<(), (usize, String)> {
 ///   must reach a vehicle length beyond that (a shorter one ended the run with a bus error).
 /// - Every entry leads to an exit: arrivals draw their destinations among the exits they
 ///   can reach, and one that can reach none would wait forever.
-fn check_ends(net: &Network) -> Result<(), (usize, String)> {
+fn check_ends(net: &Network, fleet: Fleet) -> Result<(), (usize, String)> {
+    let longest = fleet.longest_m;
     let lim = Limits::table_i();
     let exits = net.exits();
     for (k, s) in net.segments.iter().enumerate() {
@@ -767,7 +809,7 @@ fn check_ends(net: &Network) -> Result<(), (usize, String)> {
             let jn = net.junctions.get(j).map(|j| &j.layout.spec);
             let margin = jn.map_or(0.0, |l| l.comm_margin);
             let changes = s.lanes.saturating_sub(1);
-            let need = margin + LENGTH_M + lim.d0 + f64::from(changes) * change_distance(s.v_max);
+            let need = margin + longest + lim.d0 + f64::from(changes) * change_distance(s.v_max);
             if !(length >= need) {
                 return Err((
                     k,
@@ -777,7 +819,7 @@ fn check_ends(net: &Network) -> Result<(), (usize, String)> {
                          change(s) they may need ({:.1} m at the commitment distance (23)); it \
                          needs {need:.1} m",
                         s.id,
-                        LENGTH_M + lim.d0,
+                        longest + lim.d0,
                         f64::from(changes) * change_distance(s.v_max)
                     ),
                 ));
@@ -794,14 +836,14 @@ fn check_ends(net: &Network) -> Result<(), (usize, String)> {
                 .junctions
                 .get(a)
                 .map_or(0.0, |j| j.layout.spec.outlet_length);
-            if !(length >= outlet + LENGTH_M) {
+            if !(length >= outlet + longest) {
                 return Err((
                     k,
                     format!(
                         "segment {}: an exit of {length:.1} m must reach a vehicle length \
                          beyond the outlet track ({outlet:.1} m): at least {:.1} m",
                         s.id,
-                        outlet + LENGTH_M
+                        outlet + longest
                     ),
                 ));
             }
@@ -880,7 +922,9 @@ fn vehicle(
             .and_then(|j| net.junctions.get(j))
             .map_or(0.0, |j| j.layout.spec.comm_margin);
     let lim = Limits::table_i();
-    if !(v.x - 0.5 * LENGTH_M >= start && v.x + 0.5 * LENGTH_M + lim.d0 < end && coord_ok(v.x)) {
+    let body = super::road::body_of(v.length, v.brake);
+    let half = 0.5 * body.length;
+    if !(v.x - half >= start && v.x + half + lim.d0 < end && coord_ok(v.x)) {
         return Err(format!(
             "x must be between the end of the outlet track ({start:.1} m) and the edge of the \
              next communication region ({end:.1} m)"
@@ -901,7 +945,7 @@ fn vehicle(
         driver: crate::scenario::DriverKind::Planner,
         script: Vec::new(),
         cooperative: true,
-        body: crate::world::Body::CAR,
+        body,
         trip: Trip {
             target_lane: v.lane,
             goal_x: None,
@@ -920,7 +964,7 @@ fn vehicle(
              region; the commitment distance (23) is {need:.1} m"
         ));
     }
-    if !(end - v.x - 0.5 * LENGTH_M - lim.d0 > lim.safe_distance(v.v) + START_MARGIN_M) {
+    if !(end - v.x - half - lim.d0 > lim.safe_distance_at(v.v, body.brake) + START_MARGIN_M) {
         return Err("cannot stop before the communication region".into());
     }
     Ok(spec)
@@ -959,8 +1003,8 @@ fn check_spacing(vehicles: &[VehicleSpec], _net: &Network) -> Result<(), (usize,
                 continue;
             };
             if a.id != b.id && seg == s2 && lane == l2 && x <= x2 {
-                let gap = x2 - x - LENGTH_M;
-                if !(gap - lim.d0 > lim.safe_distance(a.v) + START_MARGIN_M) {
+                let gap = x2 - x - 0.5 * (a.body.length + b.body.length);
+                if !(gap - lim.d0 > lim.safe_distance_at(a.v, a.body.brake) + START_MARGIN_M) {
                     return Err((
                         i,
                         format!(

@@ -190,7 +190,7 @@ impl<const N: usize> Brain<N> {
         Self {
             lane: None,
             crossing: None,
-            view: View::new(id, setup.relevant_m),
+            view: View::new(id, setup.relevant_m).for_fleet(setup.fleet),
             others: Box::new(heapless::Vec::new()),
             setup,
             body,

@@ -161,18 +161,21 @@ pub struct Here {
 /// and its safe distance dS (8), both at the speed it may reach within that second
 /// (v + amax·1 s, at most vmax; Table I). A multi-lane plan looks no further, ahead or
 /// behind (a follower in the target lane must keep dS toward it); a crossing planner
-/// takes only the vehicles on its own path. At vmax it is 77.0 m; standing, 4.75 m.
-pub fn reach(v: f64) -> f64 {
+/// takes only the vehicles on its own path. At vmax it is 77.0 m; standing, 4.75 m. In a
+/// `fleet` with trucks dS is at the weakest braking limit and half the longest vehicle's
+/// extra length is added (centres are measured, and a truck's front is 6 m further from
+/// its centre than a car's): a truck at vmax, 109.6 m.
+pub fn reach(v: f64, fleet: super::Fleet) -> f64 {
     let lim = crate::monitor::Limits::table_i();
     let v = (v.max(0.0) + lim.a_max).min(lim.v_max);
-    lim.safe_distance(v) + v
+    lim.safe_distance_at(v, fleet.weakest_brake) + v + 0.5 * (fleet.longest_m - super::LENGTH_M)
 }
 
 /// How far apart (m) two vehicles `d` apart at speeds `v` and `w` are beyond what can
-/// matter between them: `d` less both reaches and [`SPARE_M`]. At most 0: either may
-/// matter to the other's plan.
-pub fn slack(d: f64, v: f64, w: f64) -> f64 {
-    d - reach(v) - reach(w) - SPARE_M
+/// matter between them in `fleet`: `d` less both reaches and [`SPARE_M`]. At most 0:
+/// either may matter to the other's plan.
+pub fn slack(d: f64, (v, w): (f64, f64), fleet: super::Fleet) -> f64 {
+    d - reach(v, fleet) - reach(w, fleet) - SPARE_M
 }
 
 /// The distance (m) beyond which no vehicle can matter to a vehicle's plan this period on
@@ -240,6 +243,8 @@ pub struct View {
     /// A record that may matter was displaced or refused since the last
     /// [`View::take_overflow`].
     overflowed: bool,
+    /// The world's fleet: how far a record can matter ([`slack`]).
+    fleet: super::Fleet,
 }
 
 impl View {
@@ -256,7 +261,15 @@ impl View {
             suspects: Vec::new(),
             relevant_m,
             overflowed: false,
+            fleet: super::Fleet::default(),
         }
+    }
+
+    /// The view of a vehicle in a world of `fleet`: with trucks, a record matters from
+    /// farther ([`reach`]).
+    pub fn for_fleet(mut self, fleet: super::Fleet) -> Self {
+        self.fleet = fleet;
+        self
     }
 
     /// Forgets the records of vehicles that fell silent beyond the relevance radius: a
@@ -377,7 +390,7 @@ impl View {
             return Err(Reject::Implausible(why));
         }
         let from = distance(where_is(&rec, net), me.at);
-        let slack = slack(from, me.v, rec.speed());
+        let slack = slack(from, (me.v, rec.speed()), self.fleet);
         match held {
             Some(i) => {
                 self.put(i, rec, from, slack);

@@ -403,8 +403,39 @@ pub enum Arrivals {
     /// A closed system (Fig. 9): a vehicle leaving the world comes back at the start of a
     /// junction's inlet with a random route.
     Closed,
-    /// Open: arrivals at each entry at its rate (veh/h), each with a trip drawn at random.
-    Poisson(Vec<(spawn::Entry, f64)>),
+    /// Open: arrivals at each entry at its rate, each with a trip drawn at random.
+    Poisson(Poisson),
+}
+
+/// Open arrivals: Poisson processes, one per entry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Poisson {
+    /// Each entry and its rate (veh/h).
+    pub entries: Vec<(spawn::Entry, f64)>,
+    /// Percent of the arrivals that are trucks ([`Body::TRUCK`]), each drawn at random.
+    pub trucks_percent: u8,
+}
+
+impl Poisson {
+    /// Cars arriving at `entries`.
+    pub fn cars(entries: Vec<(spawn::Entry, f64)>) -> Self {
+        Self {
+            entries,
+            trucks_percent: 0,
+        }
+    }
+}
+
+impl WorldSpec {
+    /// The fleet the world's planners expect: its vehicles' bodies, and a truck's if
+    /// arrivals may bring one.
+    pub fn fleet(&self) -> Fleet {
+        let trucks = match &self.arrivals {
+            Arrivals::Poisson(p) if p.trucks_percent > 0 => Some(Body::TRUCK),
+            _ => None,
+        };
+        Fleet::of(self.vehicles.iter().map(|v| v.body).chain(trucks))
+    }
 }
 
 /// A running world with multi-lane horizon `N` over bus `B`, in SUMO's parts: the
@@ -471,6 +502,9 @@ struct Tally {
     messages_sent: u64,
 }
 
+/// Mixed into a run's seed for the draws of which arrivals are trucks.
+const BODIES_SEED: u64 = 0x07b0_d1e5;
+
 /// The world's random streams, each its own so that one kind of draw does not move
 /// another's.
 struct Draws {
@@ -478,6 +512,8 @@ struct Draws {
     rng: Box<ChaCha8Rng>,
     /// The roadside sensors' noise.
     roadside: Box<ChaCha8Rng>,
+    /// Which arrivals are trucks.
+    bodies: Box<ChaCha8Rng>,
 }
 
 impl<const N: usize> World<N, InProcessBus> {
@@ -490,8 +526,7 @@ impl<const N: usize> World<N, InProcessBus> {
         let mut bus = InProcessBus::with_faults(&nodes, spec.faults, seed, lim.h);
         // A radio that reaches every vehicle that can matter before a message from it
         // can arrive ([`InProcessBus::set_range`]).
-        let fleet = Fleet::of(spec.vehicles.iter().map(|v| v.body));
-        let relevant = heard::relevance_radius(&spec.network, lim.v_max, fleet);
+        let relevant = heard::relevance_radius(&spec.network, lim.v_max, spec.fleet());
         let notify = spec.faults.notify_bound(lim.h);
         bus.set_range(Some(relevant + 2.0 * lim.v_max * (notify + lim.h)));
         Self::with_bus(spec, solver, Some(seed), bus)
@@ -503,7 +538,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     pub fn with_bus(spec: WorldSpec, solver: SolverChoice, seed: Option<u64>, bus: B) -> Self {
         let lim = Limits::table_i();
         let seed = seed.unwrap_or(spec.seed);
-        let fleet = Fleet::of(spec.vehicles.iter().map(|v| v.body));
+        let fleet = spec.fleet();
         let setup = PlannerSetup {
             solver,
             notify: spec.faults.notify_bound(lim.h),
@@ -539,9 +574,10 @@ impl<const N: usize, B: Bus> World<N, B> {
         }
         let mut rng = Box::new(crate::reference::instances::rng(seed ^ 0x1c));
         let streams = match &spec.arrivals {
-            Arrivals::Poisson(entries) => entries
+            Arrivals::Poisson(p) => p
+                .entries
                 .iter()
-                .map(|&(e, rate)| Stream::new(e, rate, &mut rng))
+                .map(|&(e, rate)| Stream::new(e, (rate, p.trucks_percent), &mut rng))
                 .collect(),
             _ => Vec::new(),
         };
@@ -577,6 +613,7 @@ impl<const N: usize, B: Bus> World<N, B> {
                 roadside: Box::new(crate::reference::instances::rng(
                     seed ^ sensor::ROADSIDE_SEED,
                 )),
+                bodies: Box::new(crate::reference::instances::rng(seed ^ BODIES_SEED)),
             },
             tally: Tally {
                 counters: Counters::default(),

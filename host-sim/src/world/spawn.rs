@@ -9,7 +9,7 @@ use super::network::Network;
 use super::vehicle::{Brain, Role, Trip, Vehicle};
 use super::watch::segment_truth;
 use super::START_MARGIN_M;
-use super::{Body, World, LENGTH_M};
+use super::{Body, World};
 use crate::bus::{Bus, BusError};
 use crate::monitor::Limits;
 use planner_core::intersection::Movement;
@@ -86,6 +86,8 @@ pub struct Arrival {
     pub movements: Vec<Movement>,
     /// At a stub entry: its route at that junction.
     pub route: Option<u8>,
+    /// Its body.
+    pub body: Body,
 }
 
 /// Arrivals at one entry: a Poisson process of `rate_vph` vehicles per hour.
@@ -101,17 +103,21 @@ pub struct Stream {
     pub queue: VecDeque<Arrival>,
     /// The longest queue seen.
     pub max_queue: usize,
+    /// Percent of the arrivals that are trucks ([`Body::TRUCK`]).
+    pub trucks_percent: u8,
 }
 
 impl Stream {
-    /// A stream of `rate_vph` at `entry`, its first arrival drawn from `rng`.
-    pub fn new(entry: Entry, rate_vph: f64, rng: &mut ChaCha8Rng) -> Self {
+    /// A stream of `rate_vph` at `entry`, `trucks_percent` of it trucks, its first arrival
+    /// drawn from `rng`.
+    pub fn new(entry: Entry, (rate_vph, trucks_percent): (f64, u8), rng: &mut ChaCha8Rng) -> Self {
         let mut s = Self {
             entry,
             rate_vph,
             next_at: 0.0,
             queue: VecDeque::new(),
             max_queue: 0,
+            trucks_percent,
         };
         s.next_at = s.gap(rng);
         s
@@ -126,14 +132,24 @@ impl Stream {
         -u.ln() * 3600.0 / self.rate_vph
     }
 
-    /// Queues every arrival up to `t`, each with a trip from `trip`.
-    pub fn arrive(&mut self, t: f64, rng: &mut ChaCha8Rng, trip: &mut DrawTrip<'_>) {
+    /// Queues every arrival up to `t`, each with a trip from `trip` and its body drawn
+    /// from `bodies` (a stream of its own, so that trucks move no other draw; nothing is
+    /// drawn without trucks).
+    pub fn arrive(
+        &mut self,
+        t: f64,
+        (rng, bodies): (&mut ChaCha8Rng, &mut ChaCha8Rng),
+        trip: &mut DrawTrip<'_>,
+    ) {
         while self.next_at <= t {
             let (movements, route) = trip(&self.entry, rng);
+            let p = self.trucks_percent;
+            let truck = p > 0 && bodies.random_range(0..100u8) < p;
             self.queue.push_back(Arrival {
                 since: self.next_at,
                 movements,
                 route,
+                body: if truck { Body::TRUCK } else { Body::CAR },
             });
             self.next_at += self.gap(rng);
             self.max_queue = self.max_queue.max(self.queue.len());
@@ -141,19 +157,19 @@ impl Stream {
     }
 }
 
-/// The speed (m/s) at which a vehicle may enter `room` metres (bumper gap minus d0)
-/// behind the vehicle ahead and keep the invariant with the start margin, at most
-/// `v_max`; `None` if there is not room even standing.
-pub fn entry_speed(lim: &Limits, room: f64, v_max: f64) -> Option<f64> {
+/// The speed (m/s) at which a vehicle braking at `brake` may enter `room` metres (bumper
+/// gap minus d0) behind the vehicle ahead and keep the invariant with the start margin, at
+/// most `v_max`; `None` if there is not room even standing.
+pub fn entry_speed(lim: &Limits, room: f64, (v_max, brake): (f64, f64)) -> Option<f64> {
     if room.is_infinite() {
         return Some(v_max);
     }
     let r = room - START_MARGIN_M;
-    if !(r > lim.safe_distance(0.0)) {
+    if !(r > lim.safe_distance_at(0.0, brake)) {
         return None;
     }
     // dS(v) = (v + |amin| h)² / (2|amin|) < r, with a thousandth to spare.
-    let v = (2.0 * lim.brake * r).sqrt() - lim.brake * lim.h - 1e-3;
+    let v = (2.0 * brake * r).sqrt() - brake * lim.h - 1e-3;
     Some(v.clamp(0.0, v_max))
 }
 
@@ -222,10 +238,12 @@ impl<const N: usize, B: Bus> World<N, B> {
             let entry = self.stub_of(0, route);
             let v_max = self.entry_limit(&entry);
             // The paper's closed system spawns at vImax where the invariant allows it.
-            match self.room(&entry) {
-                r if entry_speed(&self.lim, r, v_max).is_some_and(|s| s >= v_max) => {
+            let car = Body::CAR;
+            match self.room(&entry, car) {
+                r if entry_speed(&self.lim, r, (v_max, car.brake)).is_some_and(|s| s >= v_max) => {
                     self.insertion.departing.retain(|&(d, _, _)| d != id);
-                    self.enter(id, &entry, Some(route), Vec::new(), v_max, now)?;
+                    let trip = (Some(route), Vec::new());
+                    self.enter((id, car), &entry, trip, (v_max, now))?;
                 }
                 _ => still.push((id, route)),
             }
@@ -234,21 +252,21 @@ impl<const N: usize, B: Bus> World<N, B> {
         let mut streams = std::mem::take(&mut self.insertion.streams);
         for s in &mut streams {
             let net = &self.net;
-            s.arrive(now, &mut self.draws.rng, &mut |e, rng| {
-                draw_trip(net, e, rng)
-            });
+            let draws = (&mut *self.draws.rng, &mut *self.draws.bodies);
+            s.arrive(now, draws, &mut |e, rng| draw_trip(net, e, rng));
             let Some(head) = s.queue.front() else {
                 continue;
             };
-            let v_max = self.entry_limit(&s.entry);
-            if let Some(v) = entry_speed(&self.lim, self.room(&s.entry), v_max) {
+            let (v_max, body) = (self.entry_limit(&s.entry), head.body);
+            let room = self.room(&s.entry, body);
+            if let Some(v) = entry_speed(&self.lim, room, (v_max, body.brake)) {
                 let Some(id) = self.free_id() else {
                     continue;
                 };
-                let (route, movements) = (head.route, head.movements.clone());
+                let trip = (head.route, head.movements.clone());
                 let since = head.since;
                 s.queue.pop_front();
-                self.enter(id, &s.entry, route, movements, v, since)?;
+                self.enter((id, body), &s.entry, trip, (v, since))?;
             }
         }
         self.insertion.streams = streams;
@@ -302,11 +320,10 @@ impl<const N: usize, B: Bus> World<N, B> {
         }
     }
 
-    /// The room (bumper gap − d0, m) ahead of a vehicle entering at `e` (arrivals are
-    /// Table I's cars), to the nearest vehicle on the same inlet track or lane (∞ if
-    /// none), as long as that one is.
-    pub(super) fn room(&self, e: &Entry) -> f64 {
-        let start = 0.5 * LENGTH_M;
+    /// The room (bumper gap − d0, m) ahead of a vehicle of `body` entering at `e`, to the
+    /// nearest vehicle on the same inlet track or lane (∞ if none), as long as that one is.
+    pub(super) fn room(&self, e: &Entry, body: Body) -> f64 {
+        let start = 0.5 * body.length;
         let mut room = f64::INFINITY;
         for v in &self.vehicles {
             let ahead = match (*e, v.at()) {
@@ -348,24 +365,23 @@ impl<const N: usize, B: Bus> World<N, B> {
                 _ => None,
             };
             if let Some(x) = ahead {
-                let half_lengths = 0.5 * (v.body.length + LENGTH_M);
+                let half_lengths = 0.5 * (v.body.length + body.length);
                 room = room.min(x - start - half_lengths - self.lim.d0);
             }
         }
         room
     }
 
-    /// A vehicle `id` enters at `e` at speed `v` (it has waited since `since`).
+    /// Vehicle `id` of `body` enters at `e` on its trip (`route` at a stub entry,
+    /// `movements`) at speed `v` (it has waited since `since`).
     pub(super) fn enter(
         &mut self,
-        id: u16,
+        (id, body): (u16, Body),
         e: &Entry,
-        route: Option<u8>,
-        movements: Vec<Movement>,
-        v: f64,
-        since: f64,
+        (route, movements): (Option<u8>, Vec<Movement>),
+        (v, since): (f64, f64),
     ) -> Result<(), BusError> {
-        let at = start_at(e, route, 0.5 * LENGTH_M);
+        let at = start_at(e, route, 0.5 * body.length);
         let movements = match (route, *e) {
             (Some(r), Entry::Stub { junction, .. }) => self
                 .net
@@ -381,8 +397,9 @@ impl<const N: usize, B: Bus> World<N, B> {
             v_ref: None,
             movements,
         };
-        let role = Role::planner(at, Box::new(Brain::new(id, self.setup, Body::CAR)));
+        let role = Role::planner(at, Box::new(Brain::new(id, self.setup, body)));
         let mut car = Vehicle::new(id, role, v, trip, since);
+        car.body = body;
         car.note_free_flow(&self.net);
         car.retarget(&self.net);
         self.bus.attach(id)?;
@@ -415,22 +432,55 @@ mod tests {
     #[test]
     fn entry_speed_keeps_the_invariant() {
         let lim = Limits::table_i();
-        assert_eq!(entry_speed(&lim, f64::INFINITY, 13.9), Some(13.9));
-        assert_eq!(entry_speed(&lim, 0.02, 13.9), None);
-        let v = entry_speed(&lim, 5.0, 13.9).unwrap();
+        let car = (13.9, lim.brake);
+        assert_eq!(entry_speed(&lim, f64::INFINITY, car), Some(13.9));
+        assert_eq!(entry_speed(&lim, 0.02, car), None);
+        let v = entry_speed(&lim, 5.0, car).unwrap();
         assert!(v > 0.0 && lim.safe_distance(v) + START_MARGIN_M < 5.0);
-        assert_eq!(entry_speed(&lim, 100.0, 13.9), Some(13.9));
+        assert_eq!(entry_speed(&lim, 100.0, car), Some(13.9));
     }
 
     #[test]
     fn arrivals_come_at_about_the_rate() {
         let mut rng = crate::reference::instances::rng(3);
-        let mut s = Stream::new(Entry::Segment { seg: 0, lane: 0 }, 600.0, &mut rng);
-        s.arrive(3600.0, &mut rng, &mut |_, _| (Vec::new(), None));
+        let mut bodies = crate::reference::instances::rng(4);
+        let mut s = Stream::new(Entry::Segment { seg: 0, lane: 0 }, (600.0, 0), &mut rng);
+        s.arrive(3600.0, (&mut rng, &mut bodies), &mut |_, _| {
+            (Vec::new(), None)
+        });
         let n = s.queue.len() as f64;
         assert!(
             (n - 600.0).abs() < 4.0 * 600f64.sqrt(),
             "{n} arrivals in an hour"
+        );
+        assert!(s.queue.iter().all(|a| a.body == Body::CAR));
+        // Without trucks nothing was drawn for the bodies.
+        assert_eq!(bodies, crate::reference::instances::rng(4));
+    }
+
+    /// A share of trucks comes at about its rate, from the bodies' own stream: the same
+    /// arrival times and trips as without trucks.
+    #[test]
+    fn a_share_of_the_arrivals_are_trucks() {
+        let entry = Entry::Segment { seg: 0, lane: 0 };
+        let run = |trucks| {
+            let mut rng = crate::reference::instances::rng(3);
+            let mut bodies = crate::reference::instances::rng(4);
+            let mut s = Stream::new(entry, (600.0, trucks), &mut rng);
+            s.arrive(3600.0, (&mut rng, &mut bodies), &mut |_, _| {
+                (Vec::new(), None)
+            });
+            s.queue
+        };
+        let (cars, mixed, all) = (run(0), run(30), run(100));
+        let times = |q: &VecDeque<Arrival>| q.iter().map(|a| a.since).collect::<Vec<_>>();
+        assert_eq!(times(&cars), times(&mixed));
+        assert!(all.iter().all(|a| a.body == Body::TRUCK));
+        let n = mixed.len() as f64;
+        let t = mixed.iter().filter(|a| a.body == Body::TRUCK).count() as f64;
+        assert!(
+            (t - 0.3 * n).abs() < 4.0 * (0.21 * n).sqrt(),
+            "{t} trucks of {n}"
         );
     }
 
