@@ -8,8 +8,10 @@ holds exactly the tables those outputs give, else print what it should hold and 
 (CI runs it so: the figures change with the code, and the docs must follow). With
 --write: put the tables into DOC.md."""
 import os
-import re
 import sys
+
+# The same matching and number format as the M4F resource table's.
+from resources import matched, n
 
 BOARDS = [
     ("an386", "Cortex-M4F", "thumbv7em-none-eabihf"),
@@ -33,19 +35,8 @@ PATTERNS = {
 }
 
 
-def n(x):
-    return f"{int(x):,}"
-
-
 def figures(path):
-    text = open(path).read()
-    got = {}
-    for key, pat in PATTERNS.items():
-        m = re.search(pat, text)
-        if not m:
-            sys.exit(f"{path}: no line matching {pat!r}")
-        got[key] = m.groups()
-    return got
+    return matched(open(path).read(), PATTERNS, path)
 
 
 def on_time(loop):

@@ -25,13 +25,19 @@ def n(x):
     return f"{int(x):,}"
 
 
-def row(text):
+def matched(text, patterns, where):
+    """Each pattern's groups in `text`; exits naming `where` if one has no line."""
     got = {}
-    for key, pat in PATTERNS.items():
+    for key, pat in patterns.items():
         m = re.search(pat, text)
         if not m:
-            sys.exit(f"the firmware output has no line matching {pat!r}")
+            sys.exit(f"{where} has no line matching {pat!r}")
         got[key] = m.groups()
+    return got
+
+
+def row(text):
+    got = matched(text, PATTERNS, "the firmware output")
     horizon, planner, lane = got["sizes"]
     return (
         f"//! | {horizon} | {n(planner)} B | {n(lane)} B | {n(got['stack'][0])} B | "

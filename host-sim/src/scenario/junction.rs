@@ -590,6 +590,7 @@ impl JunctionScenario {
             .iter()
             .filter_map(|p| {
                 let r = self.layout.route(usize::from(p.route))?;
+                let (length, brake) = super::road::body_fields(p.body);
                 Some(JunctionVehicle {
                     id: p.id,
                     heading: Heading::of(r.inlet.heading),
@@ -597,8 +598,8 @@ impl JunctionScenario {
                     movement: MovementToml::of(r.movement),
                     s: p.s,
                     v: p.v,
-                    length: super::road::body_fields(p.body).0,
-                    brake: super::road::body_fields(p.body).1,
+                    length,
+                    brake,
                 })
             })
             .collect();
