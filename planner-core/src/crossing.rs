@@ -247,9 +247,12 @@ pub struct Entry<F> {
     pub committed: bool,
     /// When its last report was accepted (the manager's clock).
     pub heard_at: Instant,
-    /// It sent a physically impossible report: its record is frozen at its last trusted
-    /// report, it is never granted again, and if it held a permission or was committed
-    /// then, it holds its zones for good ([`Manager::observe`]).
+    /// It sent a physically impossible report (or one its roadside measurement belies):
+    /// nothing it reports is taken any more, and if it held a permission or was committed
+    /// then, it holds its zones until the roadside sensor measures it gone (for good,
+    /// without one). Without a roadside sensor its record is frozen at its last trusted
+    /// report and it is never granted again; with one, its record follows the sensor
+    /// and it is granted as any vehicle ([`Manager::measure`], [`Entry::managed`]).
     pub suspect: bool,
     /// Its centre's distance past the A_S entry as the manager's roadside sensor last
     /// measured it ([`Manager::measure`]), if it has one and has seen it.
@@ -306,6 +309,18 @@ impl<F> Entry<F> {
     pub fn holds(&self) -> bool {
         self.permitted || self.committed
     }
+
+    /// The manager knows where it is, and may grant it: it is no suspect, or a suspect
+    /// its roadside sensor has measured ([`Manager::measure`]).
+    ///
+    /// Why a measured suspect may be granted: what the manager needs of a holder is where
+    /// it surely is (to free the zones behind it, `Manager::released` (private), and to
+    /// take it off the list), and a measurement gives that whatever the vehicle says.
+    /// Without one, a suspect granted would hold its route for good, since its word that
+    /// it left is not taken — and one that is never granted costs only itself.
+    pub fn managed(&self) -> bool {
+        !self.suspect || self.measured.is_some()
+    }
 }
 
 /// The intersection manager for up to `CAP` vehicles.
@@ -360,10 +375,12 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
 
     /// Gives the manager a roadside sensor that measures every vehicle in A_C within
     /// ± `error` m ([`Manager::measure`]); `None` (the default): the paper's manager, which
-    /// knows the vehicles from their reports alone. A non-finite or negative error is
-    /// refused.
+    /// knows the vehicles from their reports alone. An error that is not finite, negative,
+    /// or over 1 m (about the onboard sensors' bound, [`crate::Sensing::validate`]) is
+    /// refused: two vehicles of one lane are L + d0 apart, more than twice that, and the
+    /// manager orders a suspect among them by its measurement (`follow`, private).
     pub fn set_roadside_sensor(&mut self, error: Option<F>) -> Result<(), ConfigError> {
-        if error.is_some_and(|e| !(e.is_finite() && e >= F::ZERO)) {
+        if error.is_some_and(|e| !(e.is_finite() && e >= F::ZERO && e <= F::ONE)) {
             return Err(ConfigError::InvalidSensing);
         }
         self.roadside = error;
@@ -405,6 +422,10 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         };
         let measured = s - entry;
         e.measured = Some(measured);
+        if e.suspect {
+            // Its word is not taken: its record follows the sensor (Entry::managed).
+            follow(e, measured, err);
+        }
         // A report is older than the measurement (by up to the notification bound), and
         // positions only grow: a vehicle may be measured ahead of its last report by what
         // vmax covers in that time, never behind it.
@@ -676,14 +697,27 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         if !as_written {
             self.revoke_blocked();
         }
+        if let Some(err) = self.roadside {
+            // A measured suspect reports nothing: the sensor says when it stands at its line.
+            for e in self.entries.iter_mut() {
+                if e.suspect
+                    && e.measured.is_some()
+                    && e.stopped_at.is_none()
+                    && at_line(e.to_line, err)
+                {
+                    e.stopped_at = Some(now);
+                }
+            }
+        }
         match self.algorithm {
             Algorithm::Fifo | Algorithm::AllWayStopSingle => {
                 if self.entries.iter().any(Entry::holds) {
                     return;
                 }
                 let order = self.priority(false);
-                // A suspect is never granted, and holds back no one by waiting.
-                let suspect = |i: &&usize| self.entries.get(**i).is_none_or(|e| e.suspect);
+                // A suspect not measured is never granted, and holds back no one by
+                // waiting.
+                let suspect = |i: &&usize| self.entries.get(**i).is_none_or(|e| !e.managed());
                 let first = if self.algorithm == Algorithm::AllWayStopSingle {
                     // Served in the order they stopped (only a lane's first vehicle can
                     // stop at its line); ties in priority order.
@@ -726,7 +760,7 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
             let Some(c) = self.entries.get(i) else {
                 continue;
             };
-            if c.holds() || c.suspect {
+            if c.holds() || !c.managed() {
                 continue;
             }
             if self.algorithm.pipelined()
@@ -978,6 +1012,37 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
         true
     }
+}
+
+/// A suspect's record moved to where the roadside sensor measured its centre (`measured`
+/// past the A_S entry): its progress, and its front's distance to the stop line — its
+/// half-length is what its last trusted report made of the two (`to_line` = −(progress +
+/// L/2), [`Manager::observe`]).
+///
+/// The zones behind it are freed by the measurement's nearest bound, not by this record
+/// (`Manager::released`); the record serves the order and the request distance. It is
+/// committed — it holds its zones with a permission or without — while its front is
+/// surely past its line (by more than the sensor's error `err`): a vehicle that keeps
+/// the protocol and lies only in words stands before its line until granted, and one
+/// granted keeps its permission until measured gone or withdrawn while queued behind an
+/// unpermitted vehicle on its lane, which it cannot pass (`Manager::revoke_blocked`:
+/// two vehicles of one lane are L + d0 apart, more than twice any error the sensor may
+/// have, so the measured order is the true one). Frozen as it was when it lied, the
+/// record held a permission given on a lie for good: a liar claiming to be 29.5 m
+/// further on was granted ahead of the vehicle in front of it, and both waited forever
+/// (`host-sim liars`, case 18).
+fn follow<F: Real>(e: &mut Entry<F>, measured: F, err: F) {
+    let half = -(e.to_line + e.progress);
+    e.progress = measured;
+    e.to_line = -(measured + half);
+    e.committed = e.to_line < -err;
+}
+
+/// `true` if a suspect measured `to_line` from its stop line (its front) may be standing
+/// at it, the sensor's error `err` either way: All-Way STOP then counts it as stopped
+/// (only the order of service depends on it; every grant is checked against the holders).
+fn at_line<F: Real>(to_line: F, err: F) -> bool {
+    to_line >= -err && to_line <= F::from_f64(STOP_LINE_ZONE_M) + err
 }
 
 /// Whether a report of progress `progress` past the A_S entry at speed `v`, heard at

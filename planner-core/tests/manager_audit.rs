@@ -864,3 +864,154 @@ fn a_suspect_heads_no_platoon() {
     m.update(secs(0.6));
     assert!(entry(&m, 1).suspect && !m.permitted(3));
 }
+
+/// A suspect measured by the roadside sensor is managed by its measurements: its record
+/// follows the sensor, it is granted as any vehicle, a permission it won by a lie is
+/// withdrawn once the sensor puts it behind an unpermitted vehicle on its lane, it holds
+/// its zones while surely past its line, and it leaves the list when measured gone.
+/// Without a sensor a suspect is never granted (its word that it left would never be
+/// taken).
+#[test]
+fn a_suspect_the_roadside_sensor_measures_is_managed_by_its_measurements() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let (start, exit) = {
+        let p = &l.route(a).unwrap().path;
+        (p.entry(), p.exit())
+    };
+    let centre = |to_line: f64| start - HALF - to_line;
+    let err = 0.1;
+    // Vehicle 1 claims to stand 0.5 m before its line; it stands 20 m before it.
+    let lying = |sensor: bool| {
+        let mut m = manager(&l, Algorithm::Fifo);
+        if sensor {
+            m.set_roadside_sensor(Some(err)).unwrap();
+        }
+        m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+        m
+    };
+    let mut m = lying(true);
+    assert_eq!(
+        m.measure(1, centre(20.0)),
+        Err(planner_core::crossing::ManagerError::Implausible)
+    );
+    m.measure(1, centre(20.0)).unwrap();
+    let e = entry(&m, 1);
+    assert!(e.suspect && e.managed() && !e.committed);
+    assert!(
+        (e.to_line - 20.0).abs() < 1e-9,
+        "follows the sensor: {}",
+        e.to_line
+    );
+    m.update(secs(0.1));
+    assert!(m.permitted(1), "granted on its measurements");
+    // Surely past its line (by more than the error): committed; just within it: not.
+    m.measure(1, centre(-err + 0.01)).unwrap();
+    assert!(!entry(&m, 1).committed);
+    m.measure(1, centre(-err - 0.01)).unwrap();
+    assert!(entry(&m, 1).committed);
+    // Its report that it left changes nothing; the sensor's does.
+    let gone = CrossingReport {
+        s: exit + HALF + 1.0,
+        ..at(&l, 1, a, 0.0, 5.0)
+    };
+    assert!(m.observe(&gone, secs(0.2)).is_err());
+    assert!(m.holds(1));
+    m.measure(1, exit + HALF + err - 0.01).unwrap();
+    assert!(m.holds(1), "its rear may still be in A_S");
+    m.measure(1, exit + HALF + err + 0.01).unwrap();
+    assert!(m.entries().is_empty(), "measured gone");
+
+    // Without a sensor the same lie, once caught, is never granted.
+    let mut m = lying(false);
+    let jump = CrossingReport {
+        s: centre(0.5) + 30.0,
+        ..at(&l, 1, a, 0.5, 0.0)
+    };
+    assert!(m.observe(&jump, secs(0.1)).is_err());
+    m.update(secs(0.2));
+    assert!(entry(&m, 1).suspect && !entry(&m, 1).managed());
+    assert!(!m.permitted(1));
+
+    // A permission won by a lie: vehicle 1 claims to be first at the line and is granted;
+    // the sensor puts it behind vehicle 2, which waits unpermitted on the same lane.
+    let mut m = lying(true);
+    m.update(secs(0.0));
+    assert!(m.permitted(1));
+    m.observe(&at(&l, 2, a, 1.0, 0.0), secs(0.0)).unwrap();
+    assert!(m.measure(1, centre(12.0)).is_err());
+    assert!(entry(&m, 1).committed, "flagged holding a permission");
+    m.measure(1, centre(12.0)).unwrap();
+    m.update(secs(0.1));
+    assert!(!m.permitted(1), "withdrawn: it cannot pass vehicle 2");
+    m.update(secs(0.2));
+    assert!(m.permitted(2), "the vehicle ahead goes first");
+
+    // The roadside sensor's error is bounded as the onboard sensors' is.
+    let mut m = manager(&l, Algorithm::Fifo);
+    assert!(m.set_roadside_sensor(Some(1.01)).is_err());
+    assert!(m.set_roadside_sensor(Some(1.0)).is_ok());
+}
+
+/// All-Way STOP serves only vehicles that stopped at their line. A measured suspect
+/// reports nothing, so the sensor says when it stands there: its front within the stop
+/// zone, widened by the sensor's error either way — and not beyond.
+#[test]
+fn a_measured_suspect_stops_at_its_line_by_the_sensor() {
+    use planner_core::crossing::STOP_LINE_ZONE_M;
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let start = l.route(a).unwrap().path.entry();
+    let centre = |to_line: f64| start - HALF - to_line;
+    let err = 0.1;
+    let served = |to_line: f64| {
+        let mut m = manager(&l, Algorithm::AllWayStop);
+        m.set_roadside_sensor(Some(err)).unwrap();
+        // It claims to stand 40 m back (not stopped at its line); the sensor disagrees.
+        m.observe(&at(&l, 1, a, 40.0, 0.0), secs(0.0)).unwrap();
+        assert!(m.measure(1, centre(to_line)).is_err());
+        m.measure(1, centre(to_line)).unwrap();
+        m.update(secs(0.1));
+        (entry(&m, 1).stopped_at.is_some(), m.permitted(1))
+    };
+    for to_line in [
+        -err + 0.01,
+        0.0,
+        STOP_LINE_ZONE_M,
+        STOP_LINE_ZONE_M + err - 0.01,
+    ] {
+        assert_eq!(
+            served(to_line),
+            (true, true),
+            "front {to_line} m before its line"
+        );
+    }
+    for to_line in [STOP_LINE_ZONE_M + err + 0.01, 20.0] {
+        assert_eq!(
+            served(to_line),
+            (false, false),
+            "front {to_line} m before its line"
+        );
+    }
+    // Surely past its line: committed, not stopped there.
+    assert_eq!(served(-err - 0.01), (false, false));
+}
+
+/// A measured suspect is committed only while its front is *surely* past its line: a
+/// measurement that puts it exactly the sensor's error past it may be of a vehicle
+/// standing at the line (values chosen exact in binary).
+#[test]
+fn a_measured_suspect_exactly_its_error_past_its_line_is_not_committed() {
+    let l = layout();
+    let a = route(&l, 0, Movement::Straight);
+    let start = l.route(a).unwrap().path.entry();
+    let err = 0.25;
+    let mut m = manager(&l, Algorithm::Fifo);
+    m.set_roadside_sensor(Some(err)).unwrap();
+    m.observe(&at(&l, 1, a, 40.0, 0.0), secs(0.0)).unwrap();
+    let centre = start - HALF + err;
+    assert!(m.measure(1, centre).is_err(), "a suspect");
+    m.measure(1, centre).unwrap();
+    assert_eq!(entry(&m, 1).to_line, -err);
+    assert!(!entry(&m, 1).committed);
+}
