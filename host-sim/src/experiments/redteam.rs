@@ -14,8 +14,10 @@
 //!   reports, and is no case for this world. The other half have onboard sensors and the
 //!   junction's roadside sensor, and any lie: ±0.2 to ±40 m, from the first report on (a
 //!   third of them) or from a random moment. A case fails on any collision, violation or
-//!   unpermitted entry; what the lie costs in liveness (the liar, once refused, and the
-//!   vehicles its frozen record holds back) is reported, not judged.
+//!   unpermitted entry; what the lie costs in liveness is reported, not judged, with
+//!   sensors apart (`with_sensors`): without them no manager or vehicle that only hears
+//!   reports can keep every vehicle live (docs/spec.md §9), and with them a few kinds of
+//!   lie still cost liveness (docs/redteam.md).
 //! - **ids**: a row of 1 to 3 intersections with open Poisson arrivals (600 to 1,800
 //!   vehicles per hour per entry lane) whose ids start just below the managers' bus nodes
 //!   (0xFF00 − 1 to 8), so that the ids given out run through them. A case fails on any
@@ -126,7 +128,7 @@ junction_sweep!(Outages, Kind::Outages);
 junction_sweep!(Liars, Kind::Liars);
 
 impl Judged for JunctionFaultsReport {
-    /// Over every run; live ([`JunctionFaultsReport::live`]) judged for outages only.
+    /// Over every run; live as [`JunctionFaultsReport::live`] judges.
     fn verdict(&self) -> Verdict {
         Verdict::new(self.totals.safety(), self.live())
     }
@@ -199,6 +201,9 @@ pub struct JunctionFaultsReport {
     pub runs: u64,
     /// Per algorithm.
     pub algorithms: Vec<AlgorithmRow>,
+    /// Liveness of the live algorithms in the cases with onboard and roadside sensors
+    /// (liars; none for outages), apart from the paper's world's.
+    pub with_sensors: Liveness,
     /// The sweep's seed.
     pub seed: u64,
     /// Failing runs (at most 20), each as a scenario file.
@@ -207,14 +212,25 @@ pub struct JunctionFaultsReport {
     pub wall_seconds: f64,
 }
 
+/// What some runs of the live algorithms left undone.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Liveness {
+    /// Runs.
+    pub runs: u64,
+    /// Vehicles not across at the end.
+    pub unfinished: u64,
+    /// Runs that ended in a deadlock.
+    pub deadlocks: u64,
+}
+
 impl JunctionFaultsReport {
     /// No collision, violation or unpermitted entry.
     pub fn safe(&self) -> bool {
         self.totals.safety().is_safe()
     }
 
-    /// Every vehicle crossed and nothing deadlocked (judged for outages only: a liar
-    /// costs liveness by design).
+    /// Every vehicle crossed and nothing deadlocked (judged for outages only: what a liar
+    /// costs is reported, with sensors apart — `with_sensors` — and without).
     pub fn live(&self) -> bool {
         self.sweep == Kind::Liars.name() || self.totals.unfinished + self.totals.deadlocks == 0
     }
@@ -339,19 +355,28 @@ pub fn junction_faults(
     totals.deadlocks = live.deadlocks;
     // Cases drawn (each run under every algorithm: `runs`), as the other sweeps count.
     totals.cases = cases;
+    let live = |c: &Case| c.label != Algorithm::Concurrent.name();
     let failed = |c: &&Case| {
         let s = &c.summary;
-        let not_live = c.label != Algorithm::Concurrent.name()
-            && kind == Kind::Outages
-            && (c.unfinished() > 0 || s.deadlock.is_some());
+        let not_live =
+            live(c) && kind == Kind::Outages && (c.unfinished() > 0 || s.deadlock.is_some());
         s.unsafe_events() > 0 || not_live
     };
+    let with_sensors = results
+        .iter()
+        .filter(|c| kind == Kind::Liars && live(c) && sensed(seed, c.index))
+        .fold(Liveness::default(), |w, c| Liveness {
+            runs: w.runs + 1,
+            unfinished: w.unfinished + c.unfinished(),
+            deadlocks: w.deadlocks + u64::from(c.summary.deadlock.is_some()),
+        });
     let failing: Vec<&Case> = results.iter().filter(failed).collect();
     JunctionFaultsReport {
         sweep: kind.name().into(),
         totals,
         runs: results.len() as u64,
         algorithms: ALGORITHMS.iter().map(|&a| row(a)).collect(),
+        with_sensors,
         seed,
         failing: sweep::failing(failing.into_iter(), sweep::KEEP_FAILING),
         wall_seconds: t0.elapsed().as_secs_f64(),

@@ -33,11 +33,19 @@
 //! bounded by relevance at all, any message that found no place was an overflow, so a
 //! world of more than 257 vehicles froze: every vehicle heard more than its view held.)
 
+use super::at::At;
 use super::network::Network;
 use super::plausible::{Bounds, Implausible};
+use super::sensor::{seen_at, Seen, Sensed};
 use crate::bus::Message;
 use planner_core::crossing::{CrossingReport, PathVehicle};
-use planner_core::{BodyLength, Instant, Other, VehicleState};
+use planner_core::{BodyLength, Instant, Other, Sensing, VehicleState};
+
+/// Beyond the claim's own reach and the sensors' error, the margin (m) by which a claim
+/// must be inside the sensors' cover, or away from its return, to be belied
+/// ([`View::belied`]): the plausibility checks' position slack, and as much again for a
+/// lane the claim may leave sideways.
+pub const BELIED_SLACK_M: f64 = 1.0;
 
 /// Vehicles one view holds: more than fit near one vehicle at any density (within
 /// 100 m of road in every direction a few lanes hold fewer than 200).
@@ -104,6 +112,39 @@ impl Record {
             state.cooperative = false;
         }
         self
+    }
+
+    /// What it claims, as sensors would see its vehicle (`longest`: its length if it
+    /// declared none).
+    fn seen(&self, longest: f64) -> Seen {
+        match *self {
+            Record::Lane { state, segment } => Seen {
+                id: state.id,
+                at: At::Lane {
+                    seg: segment,
+                    x: state.x,
+                    y: state.y,
+                    theta: state.theta,
+                    lane: state.lane,
+                    alpha: state.alpha,
+                    beta: state.beta,
+                },
+                v: state.v,
+                length: state.length.map_or(longest, BodyLength::m),
+            },
+            Record::Crossing {
+                report, junction, ..
+            } => Seen {
+                id: report.id,
+                at: At::Crossing {
+                    junction,
+                    route: report.route,
+                    s: report.s,
+                },
+                v: report.v,
+                length: report.length,
+            },
+        }
     }
 
     /// Its vehicle's speed (m/s).
@@ -245,6 +286,9 @@ pub struct View {
     overflowed: bool,
     /// The world's fleet: how far a record can matter ([`slack`]).
     fleet: super::Fleet,
+    /// Its vehicle has onboard range sensors: a suspect's record is dropped, not kept
+    /// ([`View::take`]).
+    sees: bool,
 }
 
 impl View {
@@ -262,7 +306,14 @@ impl View {
             relevant_m,
             overflowed: false,
             fleet: super::Fleet::default(),
+            sees: false,
         }
+    }
+
+    /// Tells it whether its vehicle has onboard range sensors (see [`View::take`] for what
+    /// that changes).
+    pub fn set_seeing(&mut self, sees: bool) {
+        self.sees = sees;
     }
 
     /// The view of a vehicle in a world of `fleet`: with trucks, a record matters from
@@ -328,8 +379,15 @@ impl View {
     /// there: a vehicle ahead no further on than its ghost from that position (v ≥ 0 and
     /// its declared limit; the credit a leader-aware follower gave it stays), one behind
     /// inflated at amax for the age, and no lane change starting in front of it (stale
-    /// data). Safety never rests on its word again; what that costs in liveness, the
-    /// attack experiment reports.
+    /// data). Safety never rests on its word again.
+    ///
+    /// A vehicle with onboard range sensors drops the suspect's record instead. Its
+    /// planners take every vehicle within the sensors' cover from the returns, each at its
+    /// worst case within the error bounds and never credited, and the space beyond the
+    /// cover as blocked (planner-core's `sensing`): the record can only add a constraint
+    /// the returns already impose or one they show false. Kept, it stood still for good:
+    /// a follower stopped behind the ghost of a liar that had long crossed and left
+    /// (`host-sim liars`, case 23 under PIPE, 10 s still before the deadlock report).
     pub fn take(&mut self, msg: &Message, net: &Network, me: Here) -> Result<(), Reject> {
         if !matches!(msg, Message::Grant { .. }) && self.suspects.contains(&msg.sender()) {
             return Err(Reject::Distrusted);
@@ -407,6 +465,47 @@ impl View {
         }
     }
 
+    /// Checks every record against what the vehicle's own sensors `sn`, on it as `me`,
+    /// returned this period (`returns`, [`Sensed::ids`]) at `now`, and makes a suspect of
+    /// each vehicle whose claim they belie; returns how many.
+    ///
+    /// A claim is belied where it puts its vehicle inside the sensors' cover by more than
+    /// the vehicle can have moved since its stamp at `v_max`, and twice the sensors'
+    /// error, and the sensors returned it nowhere, or farther from the claim than that.
+    /// Why: a lie that stays within the physical bounds from the first report on cannot
+    /// be told from the truth by the reports (`plausible`), and it held honest vehicles
+    /// for good — a vehicle inside A_S stopped behind a liar's claim 5 m ahead of it
+    /// while the liar stood 24 m behind it (`host-sim liars`, case 24). Safety never
+    /// rested on the claim: a vehicle with sensors plans on their returns and takes the
+    /// space beyond their cover as blocked, so a record made a suspect, and dropped
+    /// ([`View::take`]), removes no constraint the returns do not impose themselves.
+    pub fn belied(
+        &mut self,
+        net: &Network,
+        (me, sn): (&Seen, &Sensing<f64>),
+        returns: &Sensed,
+        (now, v_max): (Instant, f64),
+    ) -> usize {
+        let err = sn.position_error_m;
+        let belied: Vec<u16> = self
+            .records
+            .iter()
+            .filter_map(|r| {
+                let (id, stamp) = r.id_stamp();
+                let margin = v_max * now.since(stamp).as_secs::<f64>() + 2.0 * err + BELIED_SLACK_M;
+                let claimed = seen_at(net, me, &r.seen(self.fleet.longest_m), sn, margin)?;
+                let returned = returns.ids.iter().find(|&&(i, _)| i == id);
+                returned
+                    .is_none_or(|&(_, at)| (at - claimed).abs() > margin)
+                    .then_some(id)
+            })
+            .collect();
+        for &id in &belied {
+            self.suspect(id);
+        }
+        belied.len()
+    }
+
     /// Makes `id` a suspect: its record held now says it does not cooperate (it may
     /// accelerate at amax and ignores intentions, planner-core's conservative reading),
     /// and nothing it sends is taken from now on.
@@ -416,6 +515,10 @@ impl View {
                 self.suspects.remove(0);
             }
             self.suspects.push(id);
+        }
+        if self.sees {
+            self.retain_where(|r, _| r.id_stamp().0 != id);
+            return;
         }
         for r in self.records.iter_mut().filter(|r| r.id_stamp().0 == id) {
             *r = r.distrusted();

@@ -32,6 +32,10 @@ pub struct Sensed {
     pub on_path: Vec<PathVehicle<f64>>,
     /// A scripted driver: the bumper gap to the nearest vehicle in its lane ahead.
     pub gap_ahead: Option<f64>,
+    /// A planner: every vehicle returned, by id, and where its sensors measured it in its
+    /// own frame (x on its segment, or s along its path) — what [`seen_at`] says of a
+    /// vehicle's claim, to check one against the other.
+    pub ids: Vec<(u16, f64)>,
 }
 
 /// Ground truth of one vehicle, as the sensors see it.
@@ -91,42 +95,33 @@ pub fn sense(
     let mut out = Sensed::default();
     match (me.at, sensing) {
         (At::Lane { seg, x, lane, .. }, Some(s)) => {
-            let lanes = net.segments.get(seg).map_or(1, |g| g.lanes);
             for c in all.iter().filter(|c| c.id != me.id) {
-                let Some((cx, cy, cth)) = on_segment(net, seg, c) else {
+                let Some(cover) = lane_cover(net, (seg, x, lane), me.length, c, (s, 0.0)) else {
                     continue;
                 };
-                let (lo, hi) = lanes_overlapped((cy, cth), c.length, lanes);
-                let near_lane = hi + 1 >= lane && lo <= lane + 1;
-                let half = 0.5 * (c.length + me.length);
-                let ahead = cx - half - x <= s.ahead_m && cx >= x;
-                let behind = x - half - cx <= s.behind_m && cx < x;
-                if near_lane && (ahead || behind) {
-                    let e = s.position_error_m;
-                    let ev = s.speed_error_mps;
-                    let mx = cx
-                        + if e > 0.0 {
-                            rng.random_range(-e..=e)
-                        } else {
-                            0.0
-                        };
-                    let mv = c.v
-                        + if ev > 0.0 {
-                            rng.random_range(-ev..=ev)
-                        } else {
-                            0.0
-                        };
-                    out.others.push(Other {
-                        alpha: (hi != lo).then_some(hi),
-                        cooperative: false,
-                        sensed: true,
-                        ..Other::v2v(c.id, mx, mv.max(0.0), c.length, lo, 0.0)
-                    });
-                }
+                let (e, ev) = (s.position_error_m, s.speed_error_mps);
+                let mx = cover.x + noise(rng, e);
+                let mv = c.v + noise(rng, ev);
+                out.ids.push((c.id, mx));
+                out.others.push(Other {
+                    alpha: (cover.hi != cover.lo).then_some(cover.hi),
+                    cooperative: false,
+                    sensed: true,
+                    ..Other::v2v(c.id, mx, mv.max(0.0), c.length, cover.lo, 0.0)
+                });
             }
         }
         (At::Crossing { junction, route, s }, Some(sn)) => {
-            out.on_path = path_returns(net, (junction, route, s), all, me, sn, rng);
+            for c in all.iter().filter(|c| c.id != me.id) {
+                if let Some(p) = path_cover(net, (junction, route, s), me.length, c, (sn, 0.0)) {
+                    let measured = p + noise(rng, sn.position_error_m);
+                    out.ids.push((c.id, measured));
+                    out.on_path.push(PathVehicle {
+                        s: measured,
+                        length: c.length,
+                    });
+                }
+            }
         }
         (At::Lane { seg, x, lane, .. }, None) => {
             let lanes = net.segments.get(seg).map_or(1, |g| g.lanes);
@@ -146,41 +141,85 @@ pub fn sense(
     out
 }
 
-/// The vehicles physically on junction `j`'s route `route` ahead of `me` (at position
-/// `s`) within the forward range: where along that path, measured, and how long.
-fn path_returns(
+/// A uniform draw within ± `e` (nothing drawn for an exact sensor).
+fn noise(rng: &mut ChaCha8Rng, e: f64) -> f64 {
+    if e > 0.0 {
+        rng.random_range(-e..=e)
+    } else {
+        0.0
+    }
+}
+
+/// Where a vehicle in a segment's cover is: its x in the frame and the lanes it overlaps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LaneCover {
+    x: f64,
+    lo: u8,
+    hi: u8,
+}
+
+/// Where `c` is in the cover of sensors `sn` mounted on a vehicle `length` long at `x`
+/// in lane `lane` of segment `seg`, if it is `margin` m inside it (0: the cover itself):
+/// overlapping that lane or one next to it (by more than `margin` sideways), ahead within
+/// the forward range of the front bumper or behind within the rear range of the rear one.
+fn lane_cover(
+    net: &Network,
+    (seg, x, lane): (usize, f64, u8),
+    length: f64,
+    c: &Seen,
+    (sn, margin): (&Sensing<f64>, f64),
+) -> Option<LaneCover> {
+    let lanes = net.segments.get(seg).map_or(1, |g| g.lanes);
+    let (cx, cy, cth) = on_segment(net, seg, c)?;
+    let (lo, hi) = lanes_overlapped((cy, cth), c.length, lanes);
+    let near_lane = if margin > 0.0 {
+        // Wholly within the covered lanes, so that no sideways move of the claim's age
+        // takes it out of them.
+        lo + 1 >= lane && hi <= lane + 1
+    } else {
+        hi + 1 >= lane && lo <= lane + 1
+    };
+    let half = 0.5 * (c.length + length);
+    let ahead = cx - half - x <= sn.ahead_m - margin && cx >= x + margin;
+    let behind = x - half - cx <= sn.behind_m - margin && cx < x - margin;
+    (near_lane && (ahead || behind)).then_some(LaneCover { x: cx, lo, hi })
+}
+
+/// Where `c` is along junction `j`'s route `route` if it is in the forward cover of
+/// sensors `sn` on a vehicle `length` long at `s` on that path, `margin` m inside it.
+fn path_cover(
     net: &Network,
     (j, route, s): (usize, u8, f64),
-    all: &[Seen],
-    me: &Seen,
-    sn: &Sensing<f64>,
-    rng: &mut ChaCha8Rng,
-) -> Vec<PathVehicle<f64>> {
-    let mut out = Vec::new();
-    for c in all.iter().filter(|c| c.id != me.id) {
-        let Some(p) = along_route(net, (j, route), c) else {
-            continue;
-        };
-        if p > s && p - s - 0.5 * (c.length + me.length) <= sn.ahead_m {
-            let e = sn.position_error_m;
-            let measured = p + if e > 0.0 {
-                rng.random_range(-e..=e)
-            } else {
-                0.0
-            };
-            out.push(PathVehicle {
-                s: measured,
-                length: c.length,
-            });
+    length: f64,
+    c: &Seen,
+    (sn, margin): (&Sensing<f64>, f64),
+) -> Option<f64> {
+    let p = along_route(net, (j, route), c, margin)?;
+    (p > s + margin && p - s - 0.5 * (c.length + length) <= sn.ahead_m - margin).then_some(p)
+}
+
+/// Where the sensors `sn` of `me` would measure `c` in `me`'s frame, `margin` m inside
+/// their cover, if they would: for checking a vehicle's claim (`c`, at its stamp) against
+/// the returns ([`Sensed::ids`]) — a claim surely inside the cover by more than the
+/// vehicle can have moved since, and the sensors' error, is belied by a return elsewhere
+/// or by none.
+pub fn seen_at(net: &Network, me: &Seen, c: &Seen, sn: &Sensing<f64>, margin: f64) -> Option<f64> {
+    match me.at {
+        At::Lane { seg, x, lane, .. } => {
+            lane_cover(net, (seg, x, lane), me.length, c, (sn, margin)).map(|l| l.x)
+        }
+        At::Crossing { junction, route, s } => {
+            path_cover(net, (junction, route, s), me.length, c, (sn, margin))
         }
     }
-    out
 }
 
 /// Where `c` is along junction `j`'s route `route`, if it is on that route's path: on
 /// the route itself, on its inlet before the stop line or its outlet past A_S (through
-/// another route sharing them, by any part of its body), or on a road the path joins.
-fn along_route(net: &Network, (j, route): (usize, u8), c: &Seen) -> Option<f64> {
+/// another route sharing them, by any part of its body — on the inlet by more than
+/// `margin` m, for a claim that must stay there whatever it did since), or on a road the
+/// path joins.
+fn along_route(net: &Network, (j, route): (usize, u8), c: &Seen, margin: f64) -> Option<f64> {
     let jn = net.junctions.get(j)?;
     let mine = jn.layout.route(usize::from(route))?;
     match c.at {
@@ -192,9 +231,10 @@ fn along_route(net: &Network, (j, route): (usize, u8), c: &Seen) -> Option<f64> 
             let other = jn.layout.route(usize::from(r))?;
             let (oe, ox) = (other.path.entry(), other.path.exit());
             let half = 0.5 * c.length;
-            if r == route || (other.inlet == mine.inlet && cs - half < oe) {
+            if r == route || (other.inlet == mine.inlet && cs - half + margin < oe) {
                 Some(cs)
             } else if other.outlet == mine.outlet && cs + half > ox {
+                // Positions only grow: a front past A_S stays past it.
                 Some(mine.path.exit() + (cs - ox))
             } else {
                 None

@@ -385,7 +385,7 @@ impl<const N: usize> Vehicle<N> {
             at: self.position(net),
             v: self.v,
         };
-        let at = self.at();
+        let (at, seen) = (self.at(), self.seen());
         let Some(b) = self.role.brain_mut() else {
             return true;
         };
@@ -424,6 +424,12 @@ impl<const N: usize> Vehicle<N> {
                     }
                 }
             }
+        }
+        // What its own sensors returned belies a claim that stays within the physical
+        // bounds (View::belied).
+        if let Some(sn) = &b.setup.sensing {
+            let now = (ctx.now, ctx.lim.v_max);
+            b.view.belied(net, (&seen, sn), ctx.returns, now);
         }
         whole && !b.view.take_overflow()
     }
