@@ -345,17 +345,13 @@ pub fn junction_faults(
         totals: Totals::of(results.iter().filter(|c| c.label == a.name())),
     };
     // Safety over every run; liveness (outages) over the live algorithms.
+    let live = |c: &&Case| c.label != Algorithm::Concurrent.name();
     let mut totals = Totals::of(results.iter());
-    let live = Totals::of(
-        results
-            .iter()
-            .filter(|c| c.label != Algorithm::Concurrent.name()),
-    );
-    totals.unfinished = live.unfinished;
-    totals.deadlocks = live.deadlocks;
+    let of_live = Totals::of(results.iter().filter(live));
+    totals.unfinished = of_live.unfinished;
+    totals.deadlocks = of_live.deadlocks;
     // Cases drawn (each run under every algorithm: `runs`), as the other sweeps count.
     totals.cases = cases;
-    let live = |c: &Case| c.label != Algorithm::Concurrent.name();
     let failed = |c: &&Case| {
         let s = &c.summary;
         let not_live =

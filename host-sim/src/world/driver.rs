@@ -187,12 +187,10 @@ pub enum Driver<const N: usize> {
 impl<const N: usize> Brain<N> {
     /// A brain for vehicle `id` of `body` with `setup`.
     pub fn new(id: u16, setup: PlannerSetup, body: Body) -> Self {
-        let mut view = View::new(id, setup.relevant_m).for_fleet(setup.fleet);
-        view.set_seeing(setup.sensing.is_some());
         Self {
             lane: None,
             crossing: None,
-            view,
+            view: View::new(id, setup.relevant_m).for_fleet(setup.fleet),
             others: Box::new(heapless::Vec::new()),
             setup,
             body,
@@ -201,7 +199,6 @@ impl<const N: usize> Brain<N> {
 
     /// A new setup for the planners built from now on.
     pub fn set_setup(&mut self, setup: PlannerSetup) {
-        self.view.set_seeing(setup.sensing.is_some());
         self.setup = setup;
     }
 

@@ -286,9 +286,6 @@ pub struct View {
     overflowed: bool,
     /// The world's fleet: how far a record can matter ([`slack`]).
     fleet: super::Fleet,
-    /// Its vehicle has onboard range sensors: a suspect's record is dropped, not kept
-    /// ([`View::take`]).
-    sees: bool,
 }
 
 impl View {
@@ -306,14 +303,7 @@ impl View {
             relevant_m,
             overflowed: false,
             fleet: super::Fleet::default(),
-            sees: false,
         }
-    }
-
-    /// Tells it whether its vehicle has onboard range sensors (see [`View::take`] for what
-    /// that changes).
-    pub fn set_seeing(&mut self, sees: bool) {
-        self.sees = sees;
     }
 
     /// The view of a vehicle in a world of `fleet`: with trucks, a record matters from
@@ -379,15 +369,8 @@ impl View {
     /// there: a vehicle ahead no further on than its ghost from that position (v ≥ 0 and
     /// its declared limit; the credit a leader-aware follower gave it stays), one behind
     /// inflated at amax for the age, and no lane change starting in front of it (stale
-    /// data). Safety never rests on its word again.
-    ///
-    /// A vehicle with onboard range sensors drops the suspect's record instead. Its
-    /// planners take every vehicle within the sensors' cover from the returns, each at its
-    /// worst case within the error bounds and never credited, and the space beyond the
-    /// cover as blocked (planner-core's `sensing`): the record can only add a constraint
-    /// the returns already impose or one they show false. Kept, it stood still for good:
-    /// a follower stopped behind the ghost of a liar that had long crossed and left
-    /// (`host-sim liars`, case 23 under PIPE, 10 s still before the deadlock report).
+    /// data). Safety never rests on its word again. A vehicle with onboard range sensors
+    /// drops the record before it plans ([`View::belied`]).
     pub fn take(&mut self, msg: &Message, net: &Network, me: Here) -> Result<(), Reject> {
         if !matches!(msg, Message::Grant { .. }) && self.suspects.contains(&msg.sender()) {
             return Err(Reject::Distrusted);
@@ -465,9 +448,9 @@ impl View {
         }
     }
 
-    /// Checks every record against what the vehicle's own sensors `sn`, on it as `me`,
-    /// returned this period (`returns`, [`Sensed::ids`]) at `now`, and makes a suspect of
-    /// each vehicle whose claim they belie; returns how many.
+    /// For a vehicle with onboard sensors `sn`, on it as `me`: checks every record against
+    /// what they returned this period (`returns`, [`Sensed::ids`]) at `now`, makes a
+    /// suspect of each vehicle whose claim they belie, and drops every suspect's record.
     ///
     /// A claim is belied where it puts its vehicle inside the sensors' cover by more than
     /// the vehicle can have moved since its stamp at `v_max`, and twice the sensors'
@@ -477,15 +460,21 @@ impl View {
     /// for good — a vehicle inside A_S stopped behind a liar's claim 5 m ahead of it
     /// while the liar stood 24 m behind it (`host-sim liars`, case 24). Safety never
     /// rested on the claim: a vehicle with sensors plans on their returns and takes the
-    /// space beyond their cover as blocked, so a record made a suspect, and dropped
-    /// ([`View::take`]), removes no constraint the returns do not impose themselves.
+    /// space beyond their cover as blocked, so a record made a suspect, and dropped,
+    /// removes no constraint the returns do not impose themselves.
+    ///
+    /// Why drop a suspect's record rather than keep it, as a vehicle without sensors
+    /// must ([`View::take`]): the record can only add a constraint the returns already
+    /// impose or one they show false. Kept, it stood still for good: a follower stopped
+    /// behind the ghost of a liar that had long crossed and left (`host-sim liars`, case
+    /// 23 under PIPE, 10 s still before the deadlock report).
     pub fn belied(
         &mut self,
         net: &Network,
         (me, sn): (&Seen, &Sensing<f64>),
         returns: &Sensed,
         (now, v_max): (Instant, f64),
-    ) -> usize {
+    ) {
         let err = sn.position_error_m;
         let belied: Vec<u16> = self
             .records
@@ -503,7 +492,9 @@ impl View {
         for &id in &belied {
             self.suspect(id);
         }
-        belied.len()
+        let suspects = std::mem::take(&mut self.suspects);
+        self.retain_where(|r, _| !suspects.contains(&r.id_stamp().0));
+        self.suspects = suspects;
     }
 
     /// Makes `id` a suspect: its record held now says it does not cooperate (it may
@@ -515,10 +506,6 @@ impl View {
                 self.suspects.remove(0);
             }
             self.suspects.push(id);
-        }
-        if self.sees {
-            self.retain_where(|r, _| r.id_stamp().0 != id);
-            return;
         }
         for r in self.records.iter_mut().filter(|r| r.id_stamp().0 == id) {
             *r = r.distrusted();

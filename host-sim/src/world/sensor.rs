@@ -272,14 +272,9 @@ pub fn roadside(
         .filter_map(|c| match c.at {
             At::Crossing { junction, route, s } if junction == j => {
                 let p = jn.layout.route(usize::from(route))?.path.pose_at(s);
-                jn.layout.in_comm_region(p.x, p.y).then(|| {
-                    let e = if error > 0.0 {
-                        rng.random_range(-error..=error)
-                    } else {
-                        0.0
-                    };
-                    (c.id, s + e)
-                })
+                jn.layout
+                    .in_comm_region(p.x, p.y)
+                    .then(|| (c.id, s + noise(rng, error)))
             }
             _ => None,
         })
