@@ -360,11 +360,7 @@ fn routes(spec: &WorldSpec, notes: &mut Vec<String>) -> String {
     // Table I's car (arrivals' cars), the truck if arrivals bring trucks, then every other
     // body a vehicle has, each once.
     let mut bodies = vec![Body::CAR];
-    let arriving = match &spec.arrivals {
-        Arrivals::Poisson(p) if p.trucks_percent > 0 => Some(Body::TRUCK),
-        _ => None,
-    };
-    for b in arriving
+    for b in crate::world::arriving_truck(spec.trucks_percent())
         .into_iter()
         .chain(spec.vehicles.iter().map(|v| v.body))
     {

@@ -443,20 +443,13 @@ impl JunctionScenario {
         .validate(&e)?;
         let span = raw.intersection.span();
         let lt = raw.intersection.into_inner();
-        let lim = Limits::table_i();
-        for sv in &raw.vehicles {
-            let v = sv.get_ref();
-            super::road::check_body((v.length, v.brake), &lim)
-                .map_err(|m| e.at(Some(sv.span()), format!("vehicle {}: {m}", v.id)))?;
-        }
         let arrivals = ArrivalsToml::checked(raw.arrivals.as_ref(), &e)?;
-        let arriving = arrivals.filter(|a| a.trucks > 0).map(|_| Body::TRUCK);
-        let fleet = Fleet::of(
-            raw.vehicles
-                .iter()
-                .map(|v| super::road::body_of(v.get_ref().length, v.get_ref().brake))
-                .chain(arriving),
-        );
+        let fleet = super::road::checked_fleet(
+            &raw.vehicles,
+            |v| (v.id, v.length, v.brake),
+            arrivals.as_ref(),
+            &e,
+        )?;
         let layout = build_layout_for(&lt, fleet)
             .map_err(|m| e.field(Some(span.clone()), "intersection", &m))?;
         let fewest = usize::from(arrivals.is_none());

@@ -54,7 +54,7 @@ use crate::world::network::{rotate, End, Junction, Network, Segment};
 use crate::world::spawn::Entry;
 use crate::world::vehicle::Trip;
 use crate::world::{
-    Arrivals, Body, Finish, Fleet, Poisson, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M,
+    Arrivals, Finish, Fleet, Poisson, VehicleSpec, WorldSpec, LANE_WIDTH_M, LENGTH_M,
     START_MARGIN_M,
 };
 use planner_core::intersection::Movement;
@@ -447,16 +447,13 @@ fn fleet_of(
     e: &Errors<'_>,
 ) -> Result<(Option<ArrivalsToml>, Fleet), ScenarioError> {
     let arrivals = ArrivalsToml::checked(raw.arrivals.as_ref(), e)?;
-    let lim = Limits::table_i();
-    let mut bodies = Vec::new();
-    for sv in &raw.vehicles {
-        let v = sv.get_ref();
-        super::road::check_body((v.length, v.brake), &lim)
-            .map_err(|m| e.at(Some(sv.span()), format!("vehicle {}: {m}", v.id)))?;
-        bodies.push(super::road::body_of(v.length, v.brake));
-    }
-    let arriving = arrivals.filter(|a| a.trucks > 0).map(|_| Body::TRUCK);
-    Ok((arrivals, Fleet::of(bodies.into_iter().chain(arriving))))
+    let fleet = super::road::checked_fleet(
+        &raw.vehicles,
+        |v| (v.id, v.length, v.brake),
+        arrivals.as_ref(),
+        e,
+    )?;
+    Ok((arrivals, fleet))
 }
 
 /// The shortest `block_m` a `[grid]` of `lanes` lanes at the default communication

@@ -422,6 +422,27 @@ pub(super) fn check_body(
     Ok(())
 }
 
+/// The fleet a file's planners expect: the bodies of its `vehicles` (`fields` reads a
+/// vehicle's id, length and brake), each checked and refused at its own table, and a
+/// truck's if its `arrivals` bring trucks ([`crate::world::Fleet::with_arrivals`]).
+pub(super) fn checked_fleet<V>(
+    vehicles: &[Spanned<V>],
+    fields: impl Fn(&V) -> (u16, Option<f64>, Option<f64>),
+    arrivals: Option<&super::common::ArrivalsToml>,
+    e: &Errors<'_>,
+) -> Result<crate::world::Fleet, ScenarioError> {
+    let lim = Limits::table_i();
+    let mut bodies = Vec::with_capacity(vehicles.len());
+    for sv in vehicles {
+        let (id, length, brake) = fields(sv.get_ref());
+        check_body((length, brake), &lim)
+            .map_err(|m| e.at(Some(sv.span()), format!("vehicle {id}: {m}")))?;
+        bodies.push(body_of(length, brake));
+    }
+    let trucks = arrivals.map_or(0, |a| a.trucks);
+    Ok(crate::world::Fleet::with_arrivals(bodies, trucks))
+}
+
 /// The body a file's `length` and `brake` give: Table I's car where they are silent.
 pub(super) fn body_of(length: Option<f64>, brake: Option<f64>) -> Body {
     Body {

@@ -358,6 +358,18 @@ impl Fleet {
             weakest_brake: f.weakest_brake.min(b.brake),
         })
     }
+
+    /// The fleet of the vehicles at t = 0 (`bodies`) and of arrivals of which
+    /// `trucks_percent` are trucks: a truck's body if any may arrive. The one rule
+    /// [`WorldSpec::fleet`], the scenario loaders and the SUMO export share.
+    pub fn with_arrivals(bodies: impl IntoIterator<Item = Body>, trucks_percent: u8) -> Self {
+        Self::of(bodies.into_iter().chain(arriving_truck(trucks_percent)))
+    }
+}
+
+/// The truck's body if arrivals of which `trucks_percent` are trucks may bring one.
+pub fn arriving_truck(trucks_percent: u8) -> Option<Body> {
+    (trucks_percent > 0).then_some(Body::TRUCK)
 }
 
 impl Default for Fleet {
@@ -430,11 +442,15 @@ impl WorldSpec {
     /// The fleet the world's planners expect: its vehicles' bodies, and a truck's if
     /// arrivals may bring one.
     pub fn fleet(&self) -> Fleet {
-        let trucks = match &self.arrivals {
-            Arrivals::Poisson(p) if p.trucks_percent > 0 => Some(Body::TRUCK),
-            _ => None,
-        };
-        Fleet::of(self.vehicles.iter().map(|v| v.body).chain(trucks))
+        Fleet::with_arrivals(self.vehicles.iter().map(|v| v.body), self.trucks_percent())
+    }
+
+    /// Percent of the arrivals that are trucks (0 without open arrivals).
+    pub fn trucks_percent(&self) -> u8 {
+        match &self.arrivals {
+            Arrivals::Poisson(p) => p.trucks_percent,
+            _ => 0,
+        }
     }
 }
 
