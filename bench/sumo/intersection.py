@@ -19,12 +19,17 @@ Delay is counted as host-sim counts it: from arrival to leaving the intersection
 free-flow time — SUMO's timeLoss plus its departDelay (the wait before insertion) — over
 the vehicles that finished; throughput is vehicles finished per hour per inlet lane.
 
+With `--plot OUT.png` it also draws both sides' curves (plot.py, run with the virtual
+environment's Python, into which matplotlib is installed on first use): docs/demand.png.
+
 Usage: python3 bench/sumo/intersection.py [--rates 100,200,300,400] [--duration 600]
        [--seeds 2] [--algorithms PIPE,PLATOON] [--invariant leader-aware] [--json]
+       [--plot OUT.png]
 """
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -115,6 +120,18 @@ def sumo(hs, rates, duration, seeds):
     return rows
 
 
+def plot(results, out_png):
+    """Draws `results` (the --json document) into `out_png` with plot.py."""
+    here = Path(__file__).resolve().parent
+    python = Path(sumo_bin("sumo")).with_name("python")
+    probe = subprocess.run([str(python), "-c", "import matplotlib"], capture_output=True)
+    if probe.returncode != 0:
+        print("installing matplotlib into the SUMO virtual environment (once)", file=sys.stderr)
+        subprocess.run([str(python.with_name("pip")), "install", "-q", "matplotlib"], check=True)
+    subprocess.run([str(python), str(here / "plot.py"), os.path.abspath(out_png)],
+                   input=json.dumps(results), text=True, check=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rates", default="100,200,300,400")
@@ -123,18 +140,23 @@ def main():
     ap.add_argument("--algorithms", default="PIPE,PLATOON")
     ap.add_argument("--invariant", default="leader-aware")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--plot", metavar="OUT.png")
     a = ap.parse_args()
     rates = [float(r) for r in a.rates.split(",")]
     algorithms = a.algorithms.split(",")
     hs = host_sim()
     mine = ours(hs, rates, a.duration, a.seeds, algorithms, a.invariant)
     theirs = sumo(hs, rates, a.duration, a.seeds)
+    results = {
+        "meta": {"duration": a.duration, "seeds": a.seeds, "invariant": a.invariant},
+        "ours": [{"algorithm": k[0], "rate": k[1], **v} for k, v in mine.items()],
+        "sumo": [{"control": k[0], "driver": k[1], "rate": k[2], **v}
+                 for k, v in theirs.items()],
+    }
+    if a.plot:
+        plot(results, a.plot)
     if a.json:
-        print(json.dumps({
-            "ours": [{"algorithm": k[0], "rate": k[1], **v} for k, v in mine.items()],
-            "sumo": [{"control": k[0], "driver": k[1], "rate": k[2], **v}
-                     for k, v in theirs.items()],
-        }, indent=1))
+        print(json.dumps(results, indent=1))
         return
     cell = lambda r: f"{r['throughput']:.0f} / {r['delay']:.1f}"
     head = ["rate"] + [f"**{x}**" for x in algorithms]

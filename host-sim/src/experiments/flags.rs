@@ -152,6 +152,22 @@ pub mod algorithm_names {
     }
 }
 
+/// One algorithm written by its name ([`Algorithm::name`]).
+pub mod algorithm_name {
+    use planner_core::crossing::Algorithm;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Writes the algorithm's name.
+    pub fn serialize<S: Serializer>(a: &Algorithm, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(a.name())
+    }
+
+    /// Reads an algorithm by its name.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Algorithm, D::Error> {
+        super::algorithm(&String::deserialize(d)?).map_err(serde::de::Error::custom)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,9 +13,11 @@
 
 use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::shard::{combine_all, MergeError};
+use crate::scenario::junction::AlgorithmToml;
 use crate::scenario::network::NetworkScenario;
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::{SolverChoice, World, WorldSpec};
+use planner_core::crossing::Algorithm;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -75,6 +77,16 @@ pub struct NetworkSettings {
     #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
     #[serde(with = "crate::world::invariant_serde")]
     pub invariant: planner_core::Invariant,
+    /// Every intersection's crossing algorithm (STOP, STOP-1, FIFO, CON, CON-fair, PIPE,
+    /// PLATOON).
+    #[arg(long, default_value = "PIPE", value_parser = super::flags::algorithm)]
+    #[serde(default = "pipelined", with = "super::flags::algorithm_name")]
+    pub algorithm: Algorithm,
+}
+
+/// The grid's algorithm before it could be chosen (a shard header without one).
+fn pipelined() -> Algorithm {
+    Algorithm::Pipelined
 }
 
 impl Default for NetworkSettings {
@@ -87,6 +99,7 @@ impl Default for NetworkSettings {
             duration_s: 600.0,
             seed: 1,
             invariant: planner_core::Invariant::Paper,
+            algorithm: Algorithm::Pipelined,
         }
     }
 }
@@ -133,11 +146,12 @@ impl NetworkSettings {
             i => format!("invariant = \"{}\"\n", crate::world::invariant_name(i)),
         };
         format!(
-            "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"pipelined\"\n{invariant}\n\
+            "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"{a}\"\n{invariant}\n\
              [grid]\nrows = {r}\ncols = {c}\nblock_m = {b}\nlanes = {l}\n\n\
              [arrivals]\nrate_vph = {rate}\n",
             r = self.grid.rows,
             c = self.grid.cols,
+            a = AlgorithmToml::of(self.algorithm).key(),
             d = self.duration_s,
             seed = self.seed,
             b = self.block_m,
@@ -163,6 +177,8 @@ pub struct NetworkReport {
     pub rate_vph: f64,
     /// The invariant every planner kept (`paper`, `leader-aware`).
     pub invariant: String,
+    /// Every intersection's crossing algorithm (`PIPE`, `PLATOON`, …).
+    pub algorithm: String,
     /// Vehicles that entered the network.
     pub vehicles_spawned: u64,
     /// Trips completed (left at their destination).
@@ -244,6 +260,7 @@ pub fn run_with(
         grid: format!("{}x{}", s.grid.rows, s.grid.cols),
         rate_vph: s.rate_vph,
         invariant: crate::world::invariant_name(s.invariant).into(),
+        algorithm: s.algorithm.name().into(),
         vehicles_spawned: trips.spawned,
         trips_completed: trips.completed,
         trips_in_progress: w.vehicles().len() as u64,
@@ -320,8 +337,8 @@ impl core::fmt::Display for NetworkReport {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         writeln!(
             f,
-            "grid {} at {:.0} veh/h per boundary inlet, {} invariant, {:.0} s simulated in {:.1} s ({:.1}x realtime)",
-            self.grid, self.rate_vph, self.invariant, self.sim_seconds, self.wall_seconds, self.realtime_factor
+            "grid {} at {:.0} veh/h per boundary inlet, {}, {} invariant, {:.0} s simulated in {:.1} s ({:.1}x realtime)",
+            self.grid, self.rate_vph, self.algorithm, self.invariant, self.sim_seconds, self.wall_seconds, self.realtime_factor
         )?;
         writeln!(
             f,
@@ -562,6 +579,7 @@ pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
         duration_s,
         seed: super::sweep::case_seed(seed, index),
         invariant: planner_core::Invariant::Paper,
+        algorithm: Algorithm::Pipelined,
     }
 }
 
@@ -660,5 +678,38 @@ impl Judged for NetworkReport {
             safety,
             self.deadlocks == 0 && self.due_completed_share >= 0.95,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--algorithm` reaches every junction of the grid, through the file the grid is
+    /// loaded from, and a shard header written before the flag reads as the pipelined
+    /// grid it ran.
+    #[test]
+    fn the_grid_runs_the_algorithm_asked_for() {
+        for a in [Algorithm::Platoon, Algorithm::Fifo, Algorithm::Pipelined] {
+            let s = NetworkSettings {
+                algorithm: a,
+                ..NetworkSettings::default()
+            };
+            let w = s.world().expect("a valid grid");
+            assert_eq!(w.network.junctions.len(), 9);
+            assert!(
+                w.network.junctions.iter().all(|j| j.algorithm == a),
+                "{a:?}"
+            );
+        }
+        let mut old = serde_json::to_value(NetworkSettings {
+            algorithm: Algorithm::Platoon,
+            ..NetworkSettings::default()
+        })
+        .expect("json");
+        assert_eq!(old["algorithm"], "PLATOON");
+        old.as_object_mut().expect("an object").remove("algorithm");
+        let read: NetworkSettings = serde_json::from_value(old).expect("an old header");
+        assert_eq!(read.algorithm, Algorithm::Pipelined);
     }
 }

@@ -190,6 +190,16 @@ impl AlgorithmToml {
         }
     }
 
+    /// Its name in a scenario file (`"platoon"`): what serde writes, asked of serde so
+    /// that it is spelled once.
+    pub fn key(self) -> String {
+        match serde_json::to_value(self) {
+            Ok(serde_json::Value::String(s)) => s,
+            // A unit variant always serializes as its name.
+            other => unreachable!("{other:?}"),
+        }
+    }
+
     /// From planner-core's algorithm.
     pub fn of(a: Algorithm) -> Self {
         match a {
@@ -764,6 +774,10 @@ mod tests {
     fn every_algorithm_has_a_scenario_name() {
         for a in Algorithm::ALL {
             assert_eq!(AlgorithmToml::of(a).algorithm(), a, "{}", a.name());
+            let key = AlgorithmToml::of(a).key();
+            let read: AlgorithmToml =
+                serde_json::from_value(serde_json::Value::String(key)).expect("its own key");
+            assert_eq!(read.algorithm(), a, "{}", a.name());
         }
     }
 }

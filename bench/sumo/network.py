@@ -1,0 +1,175 @@
+#!/usr/bin/env python3
+"""A grid of intersections, ours and SUMO's side by side: mean trip delay and trips per hour
+at each boundary rate, as ratios — in one run.
+
+SUMO is a benchmark dependency, never a test or runtime one: this script installs PyPI
+`eclipse-sumo` into a virtual environment of its own (bench/sumo/.venv, or $SUMO_VENV) the
+first time (lane_capacity.py's `sumo_bin`), then, for every rate:
+
+- ours: `host-sim experiment network --json` for each algorithm asked for (a rows x cols
+  grid of SPEC §8-style intersections `--block` m apart, two lanes each way, Poisson
+  arrivals at every boundary inlet, each to a random boundary exit by the shortest path);
+- SUMO: the same world written as a scenario file (what `experiment network` runs: its
+  `[grid]` and `[arrivals]`) and exported with `host-sim export sumo --control C` — the
+  same nodes, edges, lanes, turn permissions, speeds, vehicle type and the arrivals as
+  Poisson flows, one per route an arrival may draw — built by netconvert and run under
+  each control C (actuated signals, fixed-time signals) with human (Krauss, sigma 0.5,
+  tau 1 s) and automated (Krauss, sigma 0, tau 0.5 s) drivers; step 0.1 s, the same
+  seeds.
+
+A trip's delay is counted as host-sim counts it: from arrival (a wait before entering
+included) to leaving at its exit, less the free-flow time of its route — SUMO's timeLoss
+plus its departDelay — over the trips completed; trips per hour are those completed.
+
+Usage: python3 bench/sumo/network.py [--rates 200,400] [--duration 600] [--seeds 2]
+       [--grid 3x3] [--algorithms PIPE,PLATOON] [--invariant leader-aware] [--json]
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from intersection import DRIVERS, with_driver  # noqa: E402  (the same drivers)
+from lane_capacity import host_sim, sumo_bin  # noqa: E402  (the same venv and binary)
+
+CONTROLS = ["actuated", "static"]
+LANES = 2  # lanes each way, as `experiment network` builds its grid by default
+BLOCK_M = 300.0
+
+
+def ours(hs, rates, duration, seeds, grid, algorithms, invariant):
+    rows = {}
+    for a in algorithms:
+        for rate in rates:
+            runs = []
+            for seed in range(1, seeds + 1):
+                out = subprocess.run(
+                    [hs, "experiment", "network", "--grid", grid, "--rate", str(rate),
+                     "--duration", str(duration), "--seed", str(seed), "--algorithm", a,
+                     "--invariant", invariant, "--block", str(BLOCK_M), "--lanes", str(LANES),
+                     "--json"],
+                    capture_output=True, text=True,
+                )
+                # Exit 1 (a safety finding) and 3 (a liveness goal missed) still report.
+                if out.returncode not in (0, 1, 3):
+                    sys.exit(f"host-sim experiment network failed:\n{out.stderr}")
+                runs.append(json.loads(out.stdout))
+            rows[(a, rate)] = {
+                "trips_per_hour": mean(r["trips_completed"] * 3600.0 / r["sim_seconds"]
+                                       for r in runs),
+                "delay": mean(r["mean_delay_s"] for r in runs),
+                "due_completed": mean(r["due_completed_share"] for r in runs),
+                "unsafe": sum(r["collisions"] + r["invariant_violations"]
+                              + r["unpermitted_entries"] + r["deadlocks"] for r in runs),
+            }
+    return rows
+
+
+def mean(xs):
+    xs = list(xs)
+    return sum(xs) / len(xs) if xs else float("nan")
+
+
+def scenario(grid, rate, duration, seed):
+    """The world `experiment network` runs (its NetworkSettings::to_toml)."""
+    rows, cols = grid.lower().split("x")
+    return (f'name = "grid"\nduration_s = {duration}\nseed = {seed}\n'
+            f'algorithm = "pipelined"\n\n[grid]\nrows = {rows}\ncols = {cols}\n'
+            f'block_m = {BLOCK_M}\nlanes = {LANES}\n\n'
+            f'[arrivals]\nrate_vph = {rate / LANES}\n')
+
+
+def sumo_run(work, net, routes, duration, seed):
+    """(trips completed per hour, their mean delay in s) of one SUMO run."""
+    trips = work / "trips.xml"
+    subprocess.run(
+        [sumo_bin("sumo"), "-n", str(net), "-r", str(routes), "--begin", "0",
+         "--end", str(duration), "--step-length", "0.1", "--seed", str(seed),
+         "--no-step-log", "--no-warnings", "--tripinfo-output", str(trips)],
+        check=True, capture_output=True, text=True,
+    )
+    done = list(ET.parse(trips).getroot().iter("tripinfo"))
+    return (len(done) * 3600.0 / duration,
+            mean(float(t.get("timeLoss")) + float(t.get("departDelay")) for t in done))
+
+
+def sumo(hs, rates, duration, seeds, grid):
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for rate in rates:
+            for control in CONTROLS:
+                runs = {d: [] for d in DRIVERS}
+                for seed in range(1, seeds + 1):
+                    (work / "grid.toml").write_text(scenario(grid, rate, duration, seed))
+                    subprocess.run([hs, "export", "sumo", str(work / "grid.toml"), str(work),
+                                    "--control", control], check=True, capture_output=True)
+                    subprocess.run([sumo_bin("netconvert"), "-c", "grid.netccfg"], cwd=work,
+                                   check=True, capture_output=True)
+                    for d in DRIVERS:
+                        routes = with_driver(work / "grid.rou.xml", d)
+                        runs[d].append(sumo_run(work, work / "grid.net.xml", routes,
+                                                duration, seed))
+                for d, rs in runs.items():
+                    rows[(control, d, rate)] = {
+                        "trips_per_hour": mean(r[0] for r in rs),
+                        "delay": mean(r[1] for r in rs),
+                    }
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rates", default="200,400")
+    ap.add_argument("--duration", type=float, default=600.0)
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--grid", default="3x3")
+    ap.add_argument("--algorithms", default="PIPE,PLATOON")
+    ap.add_argument("--invariant", default="leader-aware")
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args()
+    rates = [float(r) for r in a.rates.split(",")]
+    algorithms = a.algorithms.split(",")
+    hs = host_sim()
+    mine = ours(hs, rates, a.duration, a.seeds, a.grid, algorithms, a.invariant)
+    theirs = sumo(hs, rates, a.duration, a.seeds, a.grid)
+    if a.json:
+        print(json.dumps({
+            "ours": [{"algorithm": k[0], "rate": k[1], **v} for k, v in mine.items()],
+            "sumo": [{"control": k[0], "driver": k[1], "rate": k[2], **v}
+                     for k, v in theirs.items()],
+        }, indent=1))
+        return
+    cell = lambda r: f"{r['trips_per_hour']:.0f} / {r['delay']:.1f}"
+    best = algorithms[-1]
+    head = ["rate per boundary inlet"] + [f"**{x}**" for x in algorithms]
+    head += [f"SUMO {c}, human · automated" for c in CONTROLS]
+    head += [f"{best} delay / SUMO actuated human", f"{best} delay / SUMO actuated automated"]
+    print(f"{a.grid} grid, {BLOCK_M:.0f} m blocks, {LANES} lanes each way: trips completed per "
+          f"hour / mean trip delay (s); {a.duration:.0f} s x {a.seeds} seeds, "
+          f"{a.invariant} invariant")
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    for rate in rates:
+        row = [f"{rate:.0f}"] + [cell(mine[(x, rate)]) for x in algorithms]
+        for c in CONTROLS:
+            row.append(cell(theirs[(c, "human", rate)]) + " · "
+                       + cell(theirs[(c, "automated", rate)]))
+        r = mine[(best, rate)]
+        for d in ("human", "automated"):
+            ref = theirs[("actuated", d, rate)]["delay"]
+            row.append(f"{r['delay'] / ref:.2f}" if ref > 0 else "–")
+        print("| " + " | ".join(row) + " |")
+    unsafe = sum(r["unsafe"] for r in mine.values())
+    least = min(r["due_completed"] for r in mine.values())
+    print(f"ours: {unsafe} collisions, invariant violations, unpermitted entries and deadlocks; "
+          f"at least {least:.1%} of the due trips completed in every run")
+
+
+if __name__ == "__main__":
+    main()
