@@ -75,14 +75,21 @@ def with_driver(routes, driver):
     tree = ET.parse(routes)
     for vt in tree.getroot().iter("vType"):
         vt.attrib.update(DRIVERS[driver])
-    out = routes.with_name(f"demand-{driver}.rou.xml")
+    out = routes.with_name(f"{routes.name.split('.')[0]}-{driver}.rou.xml")
     tree.write(out)
     return out
 
 
-def sumo_run(work, net, routes, duration, seed):
-    """(vehicles finished per hour per inlet lane, mean delay in s) of one SUMO run."""
-    trips = work / "trips.xml"
+def mean(xs):
+    """The mean of `xs`, NaN if there are none."""
+    xs = list(xs)
+    return sum(xs) / len(xs) if xs else float("nan")
+
+
+def sumo_trips(net, routes, duration, seed):
+    """(trips finished, their mean delay in s) of one SUMO run; a trip's delay is its
+    timeLoss plus its departDelay (the wait before insertion), as host-sim counts it."""
+    trips = routes.with_name("trips.xml")
     subprocess.run(
         [sumo_bin("sumo"), "-n", str(net), "-r", str(routes), "--begin", "0",
          "--end", str(duration), "--step-length", "0.1", "--seed", str(seed),
@@ -90,34 +97,37 @@ def sumo_run(work, net, routes, duration, seed):
         check=True, capture_output=True, text=True,
     )
     done = list(ET.parse(trips).getroot().iter("tripinfo"))
-    delays = [float(t.get("timeLoss")) + float(t.get("departDelay")) for t in done]
-    mean = sum(delays) / len(delays) if delays else float("nan")
-    return len(done) * 3600.0 / duration / LANES, mean
+    return len(done), mean(float(t.get("timeLoss")) + float(t.get("departDelay")) for t in done)
 
 
-def sumo(hs, rates, duration, seeds):
+def sumo_runs(hs, name, scenario_of, rates, controls, duration, seeds):
+    """{(control, driver, rate): [sumo_trips of each seed]}: the world `scenario_of(rate,
+    seed)` (a scenario file named `name`) exported by host-sim under each control, built
+    by netconvert and run with each driver."""
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         for rate in rates:
-            for control in CONTROLS:
-                runs = {d: [] for d in DRIVERS}
+            for control in controls:
                 for seed in range(1, seeds + 1):
-                    (work / "demand.toml").write_text(scenario(rate, duration, seed))
-                    subprocess.run([hs, "export", "sumo", str(work / "demand.toml"), str(work),
+                    (work / f"{name}.toml").write_text(scenario_of(rate, seed))
+                    subprocess.run([hs, "export", "sumo", str(work / f"{name}.toml"), str(work),
                                     "--control", control], check=True, capture_output=True)
-                    subprocess.run([sumo_bin("netconvert"), "-c", "demand.netccfg"], cwd=work,
+                    subprocess.run([sumo_bin("netconvert"), "-c", f"{name}.netccfg"], cwd=work,
                                    check=True, capture_output=True)
                     for d in DRIVERS:
-                        routes = with_driver(work / "demand.rou.xml", d)
-                        runs[d].append(sumo_run(work, work / "demand.net.xml", routes,
-                                                duration, seed))
-                for d, rs in runs.items():
-                    rows[(control, d, rate)] = {
-                        "throughput": sum(r[0] for r in rs) / len(rs),
-                        "delay": sum(r[1] for r in rs) / len(rs),
-                    }
+                        routes = with_driver(work / f"{name}.rou.xml", d)
+                        rows.setdefault((control, d, rate), []).append(
+                            sumo_trips(work / f"{name}.net.xml", routes, duration, seed))
     return rows
+
+
+def sumo(hs, rates, duration, seeds):
+    runs = sumo_runs(hs, "demand", lambda rate, seed: scenario(rate, duration, seed), rates,
+                     CONTROLS, duration, seeds)
+    return {k: {"throughput": mean(n * 3600.0 / duration / LANES for n, _ in rs),
+                "delay": mean(d for _, d in rs)}
+            for k, rs in runs.items()}
 
 
 def plot(results, out_png):

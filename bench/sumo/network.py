@@ -29,13 +29,11 @@ import argparse
 import json
 import subprocess
 import sys
-import tempfile
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from intersection import DRIVERS, with_driver  # noqa: E402  (the same drivers)
-from lane_capacity import host_sim, sumo_bin  # noqa: E402  (the same venv and binary)
+from intersection import mean, sumo_runs  # noqa: E402  (the same drivers and counting)
+from lane_capacity import host_sim  # noqa: E402  (the same binary)
 
 CONTROLS = ["actuated", "static"]
 LANES = 2  # lanes each way, as `experiment network` builds its grid by default
@@ -70,11 +68,6 @@ def ours(hs, rates, duration, seeds, grid, algorithms, invariant):
     return rows
 
 
-def mean(xs):
-    xs = list(xs)
-    return sum(xs) / len(xs) if xs else float("nan")
-
-
 def scenario(grid, rate, duration, seed):
     """The world `experiment network` runs (its NetworkSettings::to_toml)."""
     rows, cols = grid.lower().split("x")
@@ -84,43 +77,12 @@ def scenario(grid, rate, duration, seed):
             f'[arrivals]\nrate_vph = {rate / LANES}\n')
 
 
-def sumo_run(work, net, routes, duration, seed):
-    """(trips completed per hour, their mean delay in s) of one SUMO run."""
-    trips = work / "trips.xml"
-    subprocess.run(
-        [sumo_bin("sumo"), "-n", str(net), "-r", str(routes), "--begin", "0",
-         "--end", str(duration), "--step-length", "0.1", "--seed", str(seed),
-         "--no-step-log", "--no-warnings", "--tripinfo-output", str(trips)],
-        check=True, capture_output=True, text=True,
-    )
-    done = list(ET.parse(trips).getroot().iter("tripinfo"))
-    return (len(done) * 3600.0 / duration,
-            mean(float(t.get("timeLoss")) + float(t.get("departDelay")) for t in done))
-
-
 def sumo(hs, rates, duration, seeds, grid):
-    rows = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        for rate in rates:
-            for control in CONTROLS:
-                runs = {d: [] for d in DRIVERS}
-                for seed in range(1, seeds + 1):
-                    (work / "grid.toml").write_text(scenario(grid, rate, duration, seed))
-                    subprocess.run([hs, "export", "sumo", str(work / "grid.toml"), str(work),
-                                    "--control", control], check=True, capture_output=True)
-                    subprocess.run([sumo_bin("netconvert"), "-c", "grid.netccfg"], cwd=work,
-                                   check=True, capture_output=True)
-                    for d in DRIVERS:
-                        routes = with_driver(work / "grid.rou.xml", d)
-                        runs[d].append(sumo_run(work, work / "grid.net.xml", routes,
-                                                duration, seed))
-                for d, rs in runs.items():
-                    rows[(control, d, rate)] = {
-                        "trips_per_hour": mean(r[0] for r in rs),
-                        "delay": mean(r[1] for r in rs),
-                    }
-    return rows
+    runs = sumo_runs(hs, "grid", lambda rate, seed: scenario(grid, rate, duration, seed), rates,
+                     CONTROLS, duration, seeds)
+    return {k: {"trips_per_hour": mean(n * 3600.0 / duration for n, _ in rs),
+                "delay": mean(d for _, d in rs)}
+            for k, rs in runs.items()}
 
 
 def main():
