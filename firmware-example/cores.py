@@ -2,8 +2,9 @@
 """The per-core tables in docs/firmware.md, from the firmware's own output on each board.
 
 Usage: cores.py OUTDIR DOC.md [--write]
-OUTDIR holds fw-BOARD-N.out for every board (an386, an500, an505) and N (20, 50), as
-`run.sh BOARD N OUTDIR/fw-BOARD-N.out` writes them. Without --write: exit 0 if DOC.md
+OUTDIR holds fw-BOARD-N.out and sil-BOARD-N.out for every board (an386, an500, an505)
+and N (20, 50), as `run.sh BOARD N OUTDIR/fw-BOARD-N.out` and `run.sh BOARD N
+OUTDIR/sil-BOARD-N.out sil` (the computer in the loop) write them. Without --write: exit 0 if DOC.md
 holds exactly the tables those outputs give, else print what it should hold and exit 1
 (CI runs it so: the figures change with the code, and the docs must follow). With
 --write: put the tables into DOC.md."""
@@ -34,9 +35,17 @@ PATTERNS = {
     "footprint": r"footprint \(N=\d+\): flash=(\d+) B, static RAM=(\d+) B \(of which (\d+) B measurement buffer\), peak stack=(\d+) B",
 }
 
+# The computer in the loop (src/sil.rs, driven by sil_check.py).
+SIL_PATTERNS = {
+    "sil": r"sil: (\d+) periods, worst (\d+) instructions per period \(h = \d+\), (\d+) over h; peak stack (\d+) B",
+    "sil_footprint": r"sil: footprint \(N=\d+\): flash=(\d+) B, static RAM=(\d+) B",
+}
 
-def figures(path):
-    return matched(open(path).read(), PATTERNS, path)
+
+def figures(path, sil_path):
+    got = matched(open(path).read(), PATTERNS, path)
+    got.update(matched(open(sil_path).read(), SIL_PATTERNS, sil_path))
+    return got
 
 
 def on_time(loop):
@@ -63,11 +72,17 @@ def rows(f):
         ("peak stack (painted, whole program)", f"**{n(peak)} B**"),
         ("`size_of`: `Planner`; `LanePlanner`; `LanePlanner` + a `WorldView` of 32",
          "; ".join(f"{n(x)} B" for x in f["sizes"])),
+        ("in the loop (python-can over SLCAN, two cars): instructions per period, worst",
+         f"**{n(f['sil'][1])}**"),
+        ("in the loop: 10 ms periods on time", on_time((f["sil"][0], f["sil"][2]))),
+        ("in the loop: peak stack; flash; static RAM",
+         f"{n(f['sil'][3])} B; {n(f['sil_footprint'][0])} B; {n(f['sil_footprint'][1])} B"),
     ]
 
 
 def table(outdir, board, core, target):
-    runs = [figures(os.path.join(outdir, f"fw-{board}-{h}.out")) for h in HORIZONS]
+    runs = [figures(os.path.join(outdir, f"fw-{board}-{h}.out"),
+                    os.path.join(outdir, f"sil-{board}-{h}.out")) for h in HORIZONS]
     machine, named, hz, per100 = runs[0]["board"]
     if machine != f"mps2-{board}" or named != core:
         sys.exit(f"fw-{board}-*.out says it ran on {machine} ({named})")

@@ -1,19 +1,22 @@
 #!/usr/bin/env bash
 # Builds the firmware for one board and horizon, runs it in QEMU and decodes its log.
 #
-#   firmware-example/run.sh BOARD N OUT
+#   firmware-example/run.sh BOARD N OUT [sil]
 #
 # BOARD: an386 (Cortex-M4F), an500 (Cortex-M7) or an505 (Cortex-M33); N: 20 or 50.
 # OUT gets the decoded log (defmt-print, one line per message). The exit status is the
 # firmware's: 0 only if both scenarios met every check (src/main.rs), 2 for bad arguments.
+# With `sil`, the vehicle computer in the loop (src/sil.rs) runs instead, driven over its
+# UART by sil_check.py (python-can's slcan interface, cantools): 0 only if both sides'
+# checks passed. That needs Python with python-can, pyserial and cantools.
 # Needs qemu-system-arm and defmt-print (`cargo install defmt-print`). FW_SECOC_KEY, if
 # set, is the node's key (build.rs). `-icount shift=3,sleep=off` makes the run
 # deterministic: one instruction is 8 ns of virtual time.
 set -euo pipefail
 
-usage() { echo "usage: $0 an386|an500|an505 20|50 OUT" >&2; exit 2; }
-[ $# = 3 ] || usage
-board=$1 n=$2 out=$3
+usage() { echo "usage: $0 an386|an500|an505 20|50 OUT [sil]" >&2; exit 2; }
+[ $# = 3 ] || [ $# = 4 ] && [ "${4:-sil}" = sil ] || usage
+board=$1 n=$2 out=$3 program=${4:-scripted}
 case "$board" in
   an386) features="" target=thumbv7em-none-eabihf cpu=cortex-m4 ;;
   an500) features="an500" target=thumbv7em-none-eabihf cpu=cortex-m7 ;;
@@ -35,6 +38,9 @@ target_dir=$(cargo metadata --format-version 1 --no-deps \
   | python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
 # shellcheck disable=SC2086
 cargo build --release --target "$target" ${features:+--features "${features# }"}
+if [ "$program" = sil ]; then
+  exec python3 sil_check.py "$target_dir/$target/release/sil" "$board" "$out"
+fi
 elf="$target_dir/$target/release/firmware-example"
 raw=$(mktemp)
 trap 'rm -f "$raw"' EXIT

@@ -86,6 +86,56 @@ pub const LOCATED: StateFields = StateFields {
     len: 25,
 };
 
+/// The fields of a vehicle's own state sent to its computer ([`EGO`]): a located
+/// state's fields in their places, and the reference speed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EgoFields {
+    /// The state's fields, as in [`LOCATED`].
+    pub state: StateFields,
+    /// Lanes of the road the vehicle is on (u8, 1–14).
+    pub road_lanes: Field,
+    /// Reference speed, 0.02 m/s (u16).
+    pub v_ref: Field,
+    /// Bytes the fields cover.
+    pub len: usize,
+}
+
+/// A vehicle's own state (kind 10): a located state's layout, the road's lane count in
+/// its reserved byte 20, and the reference speed in frame 3's spare bytes.
+pub const EGO: EgoFields = EgoFields {
+    state: LOCATED,
+    road_lanes: 20..21,
+    v_ref: 25..27,
+    len: 27,
+};
+
+/// The fields of a vehicle computer's command (kind 11).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CommandFields {
+    /// Commanded speed, m/s (IEEE 754 single precision).
+    pub speed: Field,
+    /// What the planner did ([`crate::wire::CommandStatus`], u8).
+    pub status: Field,
+    /// The period answered: the low 16 bits of the tick's number (u16).
+    pub period: Field,
+    /// Commanded yaw rate, rad/s (IEEE 754 single precision).
+    pub yaw: Field,
+    /// Lane (low nibble) and the lane it changes to (high nibble, 15 = none).
+    pub lanes: Field,
+    /// Bytes the fields cover.
+    pub len: usize,
+}
+
+/// A command (kind 11): speed, status, period | yaw rate, lanes, reserved, CRC.
+pub const COMMAND: CommandFields = CommandFields {
+    speed: 0..4,
+    status: 4..5,
+    period: 5..7,
+    yaw: 7..11,
+    lanes: 11..12,
+    len: 12,
+};
+
 /// The fields of a crossing request: [`REQUEST`] at the Fig. 8 intersection,
 /// [`JUNCTION_REQUEST`] at a network's junction (and its junction).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -288,12 +338,37 @@ mod tests {
             (K::Sync, "period", SYNC.period),
             (K::Sync, "last", SYNC.last),
         ]);
+        let e = EGO.state;
+        out.extend([
+            (K::Ego, "id", e.id),
+            (K::Ego, "segment", e.segment),
+            (K::Ego, "lanes", e.lanes),
+            (K::Ego, "beta_flags", e.beta_flags),
+            (K::Ego, "brake", e.brake),
+            (K::Ego, "length", e.length),
+            (K::Ego, "x", e.x),
+            (K::Ego, "y", e.y),
+            (K::Ego, "heading", e.heading),
+            (K::Ego, "speed", e.speed),
+            (K::Ego, "yaw", e.yaw),
+            (K::Ego, "stamp", e.stamp),
+            (K::Ego, "v_ref", EGO.v_ref),
+            (K::Ego, "road_lanes", EGO.road_lanes),
+        ]);
+        let c = COMMAND;
+        out.extend([
+            (K::Command, "speed", c.speed),
+            (K::Command, "status", c.status),
+            (K::Command, "period", c.period),
+            (K::Command, "yaw", c.yaw),
+            (K::Command, "lanes", c.lanes),
+        ]);
         out
     }
 
     #[test]
     fn no_field_straddles_a_frame_and_the_crc_stays_clear() {
-        assert_eq!(all().len(), 45);
+        assert_eq!(all().len(), 64);
         for (kind, name, f) in all() {
             assert!(!f.is_empty(), "{kind:?}.{name}");
             assert_eq!(
@@ -318,6 +393,8 @@ mod tests {
             (MessageKind::Grant, ID_TIME.len),
             (MessageKind::JunctionExit, JUNCTION_EXIT.len),
             (MessageKind::Sync, SYNC.len),
+            (MessageKind::Ego, EGO.len),
+            (MessageKind::Command, COMMAND.len),
         ];
         for (kind, len) in lens {
             let mut used = [false; 28];

@@ -11,7 +11,8 @@
 //! - [`codec`]: encoding messages into frames and reassembling frames into messages;
 //! - [`frame`]: classic and CAN FD frame values for in-process buses, logs and tests;
 //! - [`log`]: `candump -l` lines;
-//! - [`secoc`]: SecOC-style authentication (AES-128-CMAC, time-based freshness).
+//! - [`secoc`]: SecOC-style authentication (AES-128-CMAC, time-based freshness);
+//! - [`slcan`]: frames as serial-line CAN (Lawicel) text, the link of USB-CAN adapters.
 //!
 //! `can-gateway.dbc` (in this crate) describes every frame for standard tools.
 //!
@@ -41,6 +42,7 @@ pub mod frame;
 pub mod layout;
 pub mod log;
 pub mod secoc;
+pub mod slcan;
 pub mod wire;
 
 pub use codec::{encode, encode_fd, DecodeError, EncodeError, Frames, Reassembler};

@@ -31,6 +31,13 @@
 //! with its junction (kind 9, 2 frames); grants come from each junction manager's own
 //! address. No field straddles two frames, so a DBC describes every one.
 //!
+//! **Software in the loop** adds the two messages between a vehicle's computer and the
+//! vehicle: its own measured state and reference speed (kind 10, [`Message::Ego`], 4
+//! frames: a located state's layout, the road's lane count in its reserved byte, the
+//! reference speed in its last frame's spare bytes; only from [`CLOCK_ADDRESS`]) and the computer's command (kind 11,
+//! [`Message::Command`], 2 frames: speed f32, status, period | yaw rate f32, lanes, CRC;
+//! IEEE 754 single precision, so that what the MCU planned is what the plant integrates).
+//!
 //! **CAN FD**: a whole message in one frame, MAC included when secured. Its identifier's
 //! frame index is [`FD_INDEX`] (15; [`FD_SECURED_INDEX`], 14, when the frame carries an
 //! authenticator), so that a DBC names plain, secured and classic frames apart. Byte 0:
@@ -124,15 +131,19 @@ pub enum MessageKind {
     JunctionRequest = 8,
     /// V2I exit from a network's junction (2 frames).
     JunctionExit = 9,
+    /// A vehicle's own measured state and reference speed, to its computer (4 frames).
+    Ego = 10,
+    /// A vehicle computer's command to its actuators (2 frames).
+    Command = 11,
 }
 
 impl MessageKind {
     /// Frames a message of this kind spans.
     pub fn frames(self) -> usize {
         match self {
-            MessageKind::Located | MessageKind::State => 4,
+            MessageKind::Located | MessageKind::State | MessageKind::Ego => 4,
             MessageKind::JunctionRequest => 3,
-            MessageKind::Request | MessageKind::JunctionExit => 2,
+            MessageKind::Request | MessageKind::JunctionExit | MessageKind::Command => 2,
             MessageKind::Grant | MessageKind::Revoke | MessageKind::Exit | MessageKind::Sync => 1,
         }
     }
@@ -148,6 +159,8 @@ impl MessageKind {
             7 => MessageKind::Located,
             8 => MessageKind::JunctionRequest,
             9 => MessageKind::JunctionExit,
+            10 => MessageKind::Ego,
+            11 => MessageKind::Command,
             _ => return None,
         })
     }
@@ -199,6 +212,110 @@ impl<F> Request<F> {
             v: f(self.v),
             brake: self.brake,
             length: self.length,
+        }
+    }
+}
+
+/// What a vehicle computer's planner did in the period a [`Command`] answers: the
+/// planner's [`planner_core::StepStatus`] as one byte on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum CommandStatus {
+    /// The optimal plan was verified and its first input applied.
+    Solved = 0,
+    /// The previous plan, shifted and verified, was applied (no solve).
+    Reused = 1,
+    /// Fallback: the invariant did not hold.
+    InvariantViolated = 2,
+    /// Fallback with nothing else possible (e.g. standing behind a stopped vehicle): not
+    /// a failure.
+    NoRoom = 3,
+    /// Fallback: the solver stopped without a solution.
+    Solver = 4,
+    /// Fallback: the plan failed verification against the exact constraints.
+    Verification = 5,
+    /// Fallback: the Yield Protocol (20)(21).
+    Yield = 6,
+    /// Fallback: the lane-change step could not be verified on the unicycle model.
+    Lateral = 7,
+    /// The computer refused its input (e.g. an ego state out of its road) and applied
+    /// maximum braking.
+    Rejected = 8,
+}
+
+impl CommandStatus {
+    /// From its code.
+    pub fn from_code(c: u8) -> Option<Self> {
+        use CommandStatus::*;
+        [
+            Solved,
+            Reused,
+            InvariantViolated,
+            NoRoom,
+            Solver,
+            Verification,
+            Yield,
+            Lateral,
+            Rejected,
+        ]
+        .into_iter()
+        .find(|s| *s as u8 == c)
+    }
+
+    /// The wire's status of a planner step.
+    pub fn of<F>(s: &planner_core::StepStatus<F>) -> Self {
+        use planner_core::{FallbackReason as R, StepStatus as S};
+        match s {
+            S::Solved { .. } => Self::Solved,
+            S::Reused { .. } => Self::Reused,
+            S::Fallback(R::InvariantViolated) => Self::InvariantViolated,
+            S::Fallback(R::NoRoom) => Self::NoRoom,
+            S::Fallback(R::Solver(_)) => Self::Solver,
+            S::Fallback(R::Yield) => Self::Yield,
+            S::Fallback(R::Lateral) => Self::Lateral,
+            // Verification, and any reason added later: a failed check.
+            _ => Self::Verification,
+        }
+    }
+
+    /// Whether the planner's own plan was applied (no fallback, no refusal).
+    pub fn planned(self) -> bool {
+        matches!(self, Self::Solved | Self::Reused)
+    }
+}
+
+/// A vehicle computer's command for one period ([`Message::Command`]): the speed and yaw
+/// rate (1) it applies over the period, exactly as its planner computed them (IEEE 754
+/// single precision on the wire, so that a simulator integrates what the MCU planned, bit
+/// for bit), which lane it is in and is changing to, and what its planner did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Command<F> {
+    /// The period it answers: the low 16 bits of the [`Message::Sync`] tick's number.
+    pub period: u16,
+    /// Commanded speed v (m/s).
+    pub v: F,
+    /// Commanded yaw rate ω (rad/s).
+    pub omega: F,
+    /// What the planner did.
+    pub status: CommandStatus,
+    /// The lane the planner takes the vehicle to be in.
+    pub lane: u8,
+    /// The lane it is changing to (α), if any.
+    pub alpha: Option<u8>,
+}
+
+impl<F> Command<F> {
+    /// The same command with its numbers converted by `f`.
+    pub fn map<G>(self, f: impl Fn(F) -> G) -> Command<G> {
+        Command {
+            period: self.period,
+            v: f(self.v),
+            omega: f(self.omega),
+            status: self.status,
+            lane: self.lane,
+            alpha: self.alpha,
         }
     }
 }
@@ -256,6 +373,23 @@ pub enum Message<F> {
         /// When.
         at: Instant,
     },
+    /// A vehicle's own state, as its sensors measure it, the road it is on and its
+    /// reference speed: what its computer plans from. In simulation the world sends it
+    /// from [`CLOCK_ADDRESS`] (software in the loop); `state.beta` is the lane its route
+    /// asks for.
+    Ego {
+        /// The segment (scenario index; 0 on a straight road).
+        segment: u16,
+        /// The road's lanes (1–14).
+        lanes: u8,
+        /// The measured state.
+        state: VehicleState<F>,
+        /// The speed to keep when nothing is in the way (m/s).
+        v_ref: F,
+    },
+    /// A vehicle computer's command for one period, to its actuators (in simulation, to
+    /// the world that integrates (1)).
+    Command(Command<F>),
     /// The time master's tick: period `period` begins (a simulated fleet's clock, sent by
     /// [`CLOCK_ADDRESS`]; nodes act on it as CANopen nodes act on SYNC).
     Sync {
@@ -290,6 +424,18 @@ impl<F> Message<F> {
                 Message::JunctionExit { junction, id, at }
             }
             Message::Sync { period, last } => Message::Sync { period, last },
+            Message::Ego {
+                segment,
+                lanes,
+                state,
+                v_ref,
+            } => Message::Ego {
+                segment,
+                lanes,
+                state: state.map(&f),
+                v_ref: f(v_ref),
+            },
+            Message::Command(c) => Message::Command(c.map(f)),
         }
     }
 
@@ -305,6 +451,8 @@ impl<F> Message<F> {
             Message::Located { .. } => MessageKind::Located,
             Message::JunctionRequest { .. } => MessageKind::JunctionRequest,
             Message::JunctionExit { .. } => MessageKind::JunctionExit,
+            Message::Ego { .. } => MessageKind::Ego,
+            Message::Command(_) => MessageKind::Command,
         }
     }
 }

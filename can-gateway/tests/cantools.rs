@@ -299,6 +299,53 @@ fn cantools_decodes_the_gateways_candump_log() {
         &mut log,
         &mut expected,
     );
+    // Software in the loop: the world tells a vehicle's computer its own state and
+    // reference speed, and the computer answers with its command (f32 on the wire).
+    let frames: Frames<F8> = encode(
+        &Message::Ego {
+            segment: 1013,
+            lanes: 3,
+            state: st,
+            v_ref: 27.8,
+        },
+        CLOCK_ADDRESS,
+        5,
+    )
+    .expect("encodes");
+    push(
+        &frames,
+        vec![
+            vec![("VehicleId", 33.0), ("Segment", 1013.0), ("Lane", 2.0)],
+            vec![("X", st.x), ("Y", st.y)],
+            vec![("Speed", st.v), ("RoadLanes", 3.0)],
+            vec![("Timestamp", dbc_secs(st.stamp)), ("VRef", 27.8)],
+        ],
+        &mut log,
+        &mut expected,
+    );
+    let (v, omega) = (13.871_234_f32, -0.012_345_678_f32);
+    let cmd = can_gateway::wire::Command {
+        period: 513,
+        v: f64::from(v),
+        omega: f64::from(omega),
+        status: can_gateway::wire::CommandStatus::Yield,
+        lane: 1,
+        alpha: Some(0),
+    };
+    let frames: Frames<F8> = encode(&Message::Command(cmd), 0x21, 9).expect("encodes");
+    push(
+        &frames,
+        vec![
+            vec![("Speed", f64::from(v)), ("Status", 6.0), ("Period", 513.0)],
+            vec![
+                ("YawRate", f64::from(omega)),
+                ("Lane", 1.0),
+                ("LaneChangeTo", 0.0),
+            ],
+        ],
+        &mut log,
+        &mut expected,
+    );
     // A truck's request at a network's junction declares its body (a plain request
     // cannot: its frames have no room, and cantools sees none there).
     let truck = Request {

@@ -67,6 +67,27 @@ fn fields() -> Vec<(MessageKind, &'static str, Field, &'static [&'static str])> 
     };
     out.extend(state(MessageKind::State, "VehicleState", layout::STATE));
     out.extend(state(MessageKind::Located, "Located", layout::LOCATED));
+    out.extend(state(MessageKind::Ego, "Ego", layout::EGO.state));
+    out.push((MessageKind::Ego, "Ego", layout::EGO.v_ref, &["VRef"][..]));
+    out.push((
+        MessageKind::Ego,
+        "Ego",
+        layout::EGO.road_lanes,
+        &["RoadLanes"][..],
+    ));
+    let c = layout::COMMAND;
+    out.extend([
+        (MessageKind::Command, "Command", c.speed, &["Speed"][..]),
+        (MessageKind::Command, "Command", c.status, &["Status"][..]),
+        (MessageKind::Command, "Command", c.period, &["Period"][..]),
+        (MessageKind::Command, "Command", c.yaw, &["YawRate"][..]),
+        (
+            MessageKind::Command,
+            "Command",
+            c.lanes,
+            &["Lane", "LaneChangeTo"][..],
+        ),
+    ]);
     for (k, p, f) in [
         (MessageKind::Request, "Request", layout::REQUEST),
         (
@@ -187,6 +208,8 @@ fn the_crc_is_the_last_payload_byte_in_the_dbc() {
         (MessageKind::JunctionExit, "JunctionExit"),
         (MessageKind::Grant, "Grant"),
         (MessageKind::Sync, "Sync"),
+        (MessageKind::Ego, "Ego"),
+        (MessageKind::Command, "Command"),
     ];
     for (kind, prefix) in kinds {
         let last = kind.frames() * CHUNK - 1;

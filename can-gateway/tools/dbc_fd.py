@@ -7,7 +7,7 @@ the classic frames back to back (7 bytes each, CRC last), then for a secured fra
 SecOC trailer (16-bit freshness value, 32-bit MAC), then zeros up to the CAN FD length.
 So a signal at start bit b of classic frame i sits at b + 56 i in the FD frame.
 
-  dbc_fd.py DBC            prints the FD messages' BO_ blocks and BA_ lines
+  dbc_fd.py DBC            prints the FD messages' BO_ blocks, BA_ and SIG_VALTYPE_ lines
   dbc_fd.py DBC --check    exit 1 unless the DBC's FD messages are exactly these
 """
 import re
@@ -39,8 +39,17 @@ def classic_messages(text):
     return kinds
 
 
+def float_signals(text):
+    """{frame id: [signal name]} of the signals the DBC declares IEEE float (SIG_VALTYPE_)."""
+    out = {}
+    for raw, name in re.findall(r"^SIG_VALTYPE_ (\d+) (\w+) : 1;", text, re.M):
+        out.setdefault(int(raw), []).append(name)
+    return out
+
+
 def fd_blocks(text):
     out, attrs = [], []
+    floats = float_signals(text)
     for kind, frames in sorted(classic_messages(text).items()):
         frames.sort()
         n = len(frames)
@@ -63,6 +72,11 @@ def fd_blocks(text):
                     at += length
             out.append("\n".join(lines) + "\n")
             attrs.append(f'BA_ "VFrameFormat" BO_ {raw} 15;')
+            # A float signal of a classic frame is a float in the FD frames too.
+            for index_c, _, _, _ in frames:
+                classic_raw = PRIORITY_PF | (kind << 12) | (index_c << 8)
+                for name in floats.get(classic_raw, []):
+                    attrs.append(f"SIG_VALTYPE_ {raw} {name} : 1;")
     return out, attrs
 
 

@@ -19,33 +19,32 @@
 #![no_std]
 #![no_main]
 
+// The board's UART is the in-the-loop program's (src/bin/sil.rs); this one uses none.
+#[allow(dead_code)]
 mod board;
 mod clock;
+mod measure;
 mod scenarios;
 mod secured;
 
 use board::exit;
 use clock::Clock;
-use core::panic::PanicInfo;
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
 use embedded_hal::delay::DelayNs;
-use planner_core::{CostWeights, LanePlannerSlot, Params, PlannerSlot};
-use scenarios::{Node, StepRecord};
+use measure::{calibrate, lowest_unpainted, paint_stack, peak_stack, repaint};
 
 #[cfg(not(feature = "n50"))]
 const N: usize = 20;
 #[cfg(feature = "n50")]
 const N: usize = 50;
+use planner_core::{CostWeights, LanePlannerSlot, Params, PlannerSlot};
+use scenarios::{Node, StepRecord};
 
 /// The control period h = 10 ms, in SysTick ticks.
 const PERIOD_TICKS: u64 = clock::TICKS_PER_SECOND / 100;
 /// Nanoseconds per SysTick tick.
 const NS_PER_TICK: u64 = 1_000_000_000 / clock::TICKS_PER_SECOND;
-/// Iterations of the calibration loop (two instructions each).
-const CALIBRATION_ITERATIONS: u32 = 1_000_000;
-/// Word painted over the free stack before the run.
-const PAINT: u32 = 0xDEAD_BEEF;
 const STEPS: usize = 1000;
 /// Most stack the whole program may use, painted: 8 KiB, at N = 20 and 50.
 const STACK_BUDGET: usize = 8 * 1024;
@@ -63,71 +62,6 @@ static mut SLOTS: (PlannerSlot<f32, N>, LanePlannerSlot<f32, N>) =
 /// The node's CAN side: controller, reassembler, world view, neighbour buffers (`const`,
 /// so in `.bss` too, off the stack).
 static mut NODE: Node = Node::new();
-
-extern "C" {
-    static __sdata: u32;
-    static __edata: u32;
-    static __sbss: u32;
-    static __ebss: u32;
-    static __erodata: u32;
-    static __vector_table: u32;
-    static _stack_start: u32;
-}
-
-/// Paints the free stack from the end of static RAM up to 256 bytes below the current
-/// stack pointer.
-fn paint_stack() {
-    let bottom = unsafe { &__ebss as *const u32 as usize };
-    let sp = cortex_m::register::msp::read() as usize - 256;
-    let mut a = (bottom + 3) & !3;
-    while a < sp {
-        unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
-        a += 4;
-    }
-}
-
-/// The lowest stack address written since the last paint.
-fn lowest_unpainted() -> usize {
-    let bottom = unsafe { &__ebss as *const u32 as usize };
-    let top = unsafe { &_stack_start as *const u32 as usize };
-    let mut a = (bottom + 3) & !3;
-    while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
-        a += 4;
-    }
-    a
-}
-
-/// Bytes of stack ever used: from the top down to the lowest word no longer painted.
-fn peak_stack() -> usize {
-    let top = unsafe { &_stack_start as *const u32 as usize };
-    top - lowest_unpainted()
-}
-
-/// Paints the free stack afresh and returns the stack pointer here: a call made next
-/// used `sp − lowest_unpainted()` bytes of stack (its frame and all it called).
-fn repaint() -> usize {
-    let sp = cortex_m::register::msp::read() as usize;
-    paint_stack();
-    sp
-}
-
-/// Hundredths of an instruction per SysTick tick, measured: a loop of exactly 2
-/// instructions per iteration (`subs`, `bne`) timed by the clock. Under `-icount shift=3`
-/// (8 ns per instruction) this is 500 with a 25 MHz SysTick and 625 with a 20 MHz one;
-/// hundredths, because a whole number would be 6 % off on the second. Without `-icount`
-/// it is meaningless, and so are the instruction counts.
-fn calibrate(clock: &Clock) -> u32 {
-    let t0 = clock.now();
-    let mut n = CALIBRATION_ITERATIONS;
-    // SAFETY: a register-only countdown loop.
-    unsafe {
-        core::arch::asm!("1:", "subs {0}, {0}, #1", "bne 1b", inout(reg) n, options(nomem, nostack));
-    }
-    let _ = n;
-    let ticks = (clock.now() - t0).max(1);
-    let hundredths = (200 * u64::from(CALIBRATION_ITERATIONS) + ticks / 2) / ticks;
-    u32::try_from(hundredths).unwrap_or(u32::MAX)
-}
 
 /// Median and maximum of the first `n` samples, in instructions, at `per_tick` hundredths
 /// of an instruction per tick.
@@ -375,14 +309,7 @@ fn main() -> ! {
         secoc_ok &= v.accepted == secured::MESSAGES as u32 && v.forged_accepted == 0;
     }
 
-    // Footprint, from the linker's symbols: flash from the vector table, which sits at the
-    // flash origin (0 on the AN386 and AN500, 0x1000_0000 on the AN505).
-    let (flash, ram) = unsafe {
-        let addr = |s: &u32| s as *const u32 as usize;
-        let data = addr(&__edata) - addr(&__sdata);
-        let bss = addr(&__ebss) - addr(&__sbss);
-        (addr(&__erodata) - addr(&__vector_table) + data, data + bss)
-    };
+    let (flash, ram) = measure::footprint();
     let samples = core::mem::size_of::<[u32; STEPS]>();
     let peak = peak.max(peak_stack());
     defmt::info!(
@@ -394,15 +321,4 @@ fn main() -> ! {
         peak
     );
     exit(approach_ok && lane_ok && secoc_ok && peak <= STACK_BUDGET)
-}
-
-#[panic_handler]
-fn panic(_: &PanicInfo) -> ! {
-    exit(false)
-}
-
-/// defmt's own panics (e.g. a re-entrant logger) end the run as a failure too.
-#[defmt::panic_handler]
-fn defmt_panic() -> ! {
-    exit(false)
 }

@@ -1,11 +1,12 @@
 //! Decoding: a verified payload read through its layout ([`crate::layout`]) into a
 //! message, its values checked; and who may send what.
 
-use super::quantize::{restore_millis, speed, track_of, StateWire};
+use super::quantize::{lane, restore_millis, speed, track_of, StateWire};
 use super::{DecodeError, Field};
 use crate::layout::{self, byte, get};
 use crate::wire::{
-    Message, MessageKind, Request, CLOCK_ADDRESS, MANAGER_ADDRESS, MANAGER_LAST, POS_RES,
+    Command, CommandStatus, Message, MessageKind, Request, CLOCK_ADDRESS, MANAGER_ADDRESS,
+    MANAGER_LAST, POS_RES, SPEED_LIMIT,
 };
 use planner_core::{BodyLength, BrakeLimit, Instant, Real};
 
@@ -49,6 +50,20 @@ pub(super) fn decode_body<F: Real>(
                 _ => Message::Exit { id, at: t },
             }
         }
+        MessageKind::Ego => {
+            let (wire, id) = StateWire::read(b, &layout::EGO.state);
+            let lanes = byte(b, layout::EGO.road_lanes);
+            if !(1..crate::wire::NO_LANE).contains(&lanes) {
+                return Err(DecodeError::OutOfRange(Field::Lane));
+            }
+            Message::Ego {
+                segment: u16_at(layout::EGO.state.segment),
+                lanes,
+                state: wire.state(id, now)?,
+                v_ref: F::from_f64(speed(u16_at(layout::EGO.v_ref))?),
+            }
+        }
+        MessageKind::Command => Message::Command(read_command(b)?),
         MessageKind::Sync => {
             let last = match byte(b, layout::SYNC.last) {
                 0 => false,
@@ -60,6 +75,36 @@ pub(super) fn decode_body<F: Real>(
                 last,
             }
         }
+    })
+}
+
+/// The most yaw rate a command may carry (rad/s): a full turn per second, far beyond
+/// what any vehicle's limits allow, so only garbage is refused.
+const COMMAND_YAW_LIMIT: f32 = 2.0 * core::f32::consts::PI;
+
+/// A command's fields from their places, its values checked.
+fn read_command<F: Real>(b: &[u8]) -> Result<Command<F>, DecodeError> {
+    let f = layout::COMMAND;
+    let v = f32::from_le_bytes(get(b, f.speed));
+    // Plausible: finite, not reversing (a rounding's −0 aside), below the speed limit.
+    if !(v.is_finite() && v >= 0.0 && f64::from(v) <= SPEED_LIMIT) {
+        return Err(DecodeError::OutOfRange(Field::Speed));
+    }
+    let omega = f32::from_le_bytes(get(b, f.yaw));
+    if !(omega.is_finite() && omega.abs() <= COMMAND_YAW_LIMIT) {
+        return Err(DecodeError::OutOfRange(Field::YawRate));
+    }
+    let status =
+        CommandStatus::from_code(byte(b, f.status)).ok_or(DecodeError::OutOfRange(Field::Flag))?;
+    let lanes = byte(b, f.lanes);
+    let lane = lane(lanes & 0x0F).ok_or(DecodeError::OutOfRange(Field::Lane))?;
+    Ok(Command {
+        period: u16::from_le_bytes(get(b, f.period)),
+        v: F::from_f64(f64::from(v)),
+        omega: F::from_f64(f64::from(omega)),
+        status,
+        lane,
+        alpha: super::quantize::lane(lanes >> 4),
     })
 }
 
@@ -90,7 +135,7 @@ fn read_request<F: Real>(
 
 /// Whether `sa` may send `msg`: a vehicle speaks only for itself; permissions come only
 /// from an intersection manager (a vehicle cannot grant itself, or another, entry to
-/// A_S); ticks only from the time master.
+/// A_S); ticks and ego states only from the time master.
 pub(super) fn sender_ok<F>(msg: &Message<F>, sa: u8) -> bool {
     match msg {
         Message::State(s) | Message::Located { state: s, .. } => s.id & 0xFF == u16::from(sa),
@@ -101,6 +146,10 @@ pub(super) fn sender_ok<F>(msg: &Message<F>, sa: u8) -> bool {
         Message::Grant { .. } | Message::Revoke { .. } => {
             (MANAGER_ADDRESS..=MANAGER_LAST).contains(&sa)
         }
-        Message::Sync { .. } => sa == CLOCK_ADDRESS,
+        // The ego state comes from the vehicle's own sensing: in simulation, the world,
+        // which speaks from the time master's address.
+        Message::Sync { .. } | Message::Ego { .. } => sa == CLOCK_ADDRESS,
+        // A command is its sender's own (it names no vehicle): any vehicle address.
+        Message::Command(_) => sa < CLOCK_ADDRESS,
     }
 }

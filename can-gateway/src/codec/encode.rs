@@ -1,12 +1,13 @@
 //! Encoding: a message's payload written through its layout ([`crate::layout`]), its CRC,
 //! then classic frames, CAN FD frames, and either with an authenticator ([`crate::secoc`]).
 
-use super::quantize::{path_position, q, time, track, StateWire};
+use super::quantize::{lane_nibble, path_position, q, time, track, StateWire};
 use super::{message_crc, EncodeError, Field, Frames};
 use crate::layout::{self, put};
 use crate::secoc::{self, Key, TRAILER_LEN};
 use crate::wire::{
-    fd_len, frame_id, Message, Request, CHUNK, FD_INDEX, FD_SECURED_INDEX, MAX_FRAMES, SPEED_RES,
+    fd_len, frame_id, Command, Message, Request, CHUNK, FD_INDEX, FD_SECURED_INDEX, MAX_FRAMES,
+    SPEED_RES,
 };
 use embedded_can::{ExtendedId, Frame, Id};
 use heapless::Vec;
@@ -39,6 +40,24 @@ pub(super) fn payload<F: Real>(
         Message::Grant { id, until: t }
         | Message::Revoke { id, at: t }
         | Message::Exit { id, at: t } => write_id_time(&mut b, &layout::ID_TIME, *id, *t),
+        Message::Ego {
+            segment,
+            lanes,
+            state: s,
+            v_ref,
+        } => {
+            let f = layout::EGO;
+            if !(1..crate::wire::NO_LANE).contains(lanes) {
+                return Err(EncodeError::OutOfRange(Field::Lane));
+            }
+            put(&mut b, f.state.segment.clone(), &segment.to_le_bytes());
+            put(&mut b, f.road_lanes, &[*lanes]);
+            StateWire::of(s)?.write(&mut b, &f.state, s.id);
+            let v = q(*v_ref, SPEED_RES, 0.0, 65535.0, Field::Speed)? as u16;
+            put(&mut b, f.v_ref, &v.to_le_bytes());
+            f.len
+        }
+        Message::Command(c) => write_command(&mut b, c)?,
         Message::Sync { period, last } => {
             let f = layout::SYNC;
             put(&mut b, f.period, &period.to_le_bytes());
@@ -70,6 +89,25 @@ fn write_request<F: Real>(
         f.length.clone(),
         &[r.length.map_or(0, BodyLength::tenths)],
     );
+    Ok(f.len)
+}
+
+/// A command's fields into their places; the layout's length. Speed and yaw rate travel
+/// as the f32 the planner computed (an f64 planner's are rounded to f32).
+fn write_command<F: Real>(b: &mut [u8], c: &Command<F>) -> Result<usize, EncodeError> {
+    let f = layout::COMMAND;
+    let single = |x: F, field| {
+        let x = x.to_f64() as f32;
+        x.is_finite()
+            .then_some(x)
+            .ok_or(EncodeError::OutOfRange(field))
+    };
+    put(b, f.speed, &single(c.v, Field::Speed)?.to_le_bytes());
+    put(b, f.yaw, &single(c.omega, Field::YawRate)?.to_le_bytes());
+    put(b, f.status, &[c.status as u8]);
+    put(b, f.period, &c.period.to_le_bytes());
+    let lanes = lane_nibble(Some(c.lane))? | lane_nibble(c.alpha)? << 4;
+    put(b, f.lanes, &[lanes]);
     Ok(f.len)
 }
 

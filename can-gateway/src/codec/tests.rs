@@ -323,9 +323,32 @@ mod secured {
     }
 
     /// Every kind, each from a sender allowed to send it.
-    pub(super) fn every_kind() -> [(Message<f64>, u8); 9] {
+    pub(super) fn every_kind() -> [(Message<f64>, u8); 11] {
         let [e, je, rq, jrq, st, loc] = naming_vehicle_9();
+        let Message::Located { state: own, .. } = loc else {
+            unreachable!("naming_vehicle_9 ends with a located state")
+        };
         [
+            (
+                Message::Ego {
+                    segment: 3,
+                    lanes: 3,
+                    state: own,
+                    v_ref: 13.9,
+                },
+                CLOCK_ADDRESS,
+            ),
+            (
+                Message::Command(crate::wire::Command {
+                    period: 513,
+                    v: f64::from(13.871_234_f32),
+                    omega: f64::from(-0.012_345_678_f32),
+                    status: crate::wire::CommandStatus::Yield,
+                    lane: 1,
+                    alpha: Some(0),
+                }),
+                9,
+            ),
             (e, 9),
             (je, 9),
             (rq, 9),
@@ -436,6 +459,22 @@ mod secured {
                         .saturating_add(planner_core::Duration::from_millis(100));
                     Message::Located { segment, state }
                 }
+                Message::Ego {
+                    segment,
+                    lanes,
+                    mut state,
+                    v_ref,
+                } => {
+                    state.stamp = state
+                        .stamp
+                        .saturating_add(planner_core::Duration::from_millis(100));
+                    Message::Ego {
+                        segment,
+                        lanes,
+                        state,
+                        v_ref,
+                    }
+                }
                 Message::Sync { period, last } => Message::Sync {
                     period: period + 1,
                     last,
@@ -449,7 +488,10 @@ mod secured {
             ));
             let replay = rx.push_all(&frames, 1_010);
             let expect = match m.kind() {
-                MessageKind::State | MessageKind::Located | MessageKind::Sync => DecodeError::Stale,
+                MessageKind::State
+                | MessageKind::Located
+                | MessageKind::Ego
+                | MessageKind::Sync => DecodeError::Stale,
                 _ => DecodeError::Auth(AuthError::Replayed),
             };
             assert_eq!(*replay.last().unwrap(), Err(expect), "{m:?}");
@@ -1055,4 +1097,116 @@ mod mutation_audit {
         };
         assert_eq!(push_all(&mut r, &exit, 9, 2), Ok(Some(exit)));
     }
+}
+
+/// A command carries the f32 its planner computed, bit for bit; one that is not a
+/// plausible command (NaN, reversing, spinning, an unknown status, no lane) is refused.
+#[test]
+fn commands_keep_their_f32_bits_and_refuse_garbage() {
+    use crate::wire::{Command, CommandStatus};
+    let cmd = |v: f32, omega: f32| Command {
+        period: 7,
+        v: f64::from(v),
+        omega: f64::from(omega),
+        status: CommandStatus::Solved,
+        lane: 0,
+        alpha: None,
+    };
+    for (v, omega) in [
+        (13.9_f32, 0.0_f32),
+        (1e-7, -1e-9),
+        (0.1 + 0.2, 0.333_333_34),
+    ] {
+        let mut r = Reassembler::<8>::new();
+        let got = push_all(&mut r, &Message::Command(cmd(v, omega)), 4, 1);
+        let Ok(Some(Message::Command(c))) = got else {
+            panic!("{got:?}")
+        };
+        assert_eq!(
+            ((c.v as f32).to_bits(), (c.omega as f32).to_bits()),
+            (v.to_bits(), omega.to_bits())
+        );
+    }
+    // Bytes an encoder would refuse to write, written by hand.
+    let bad = |edit: &dyn Fn(&mut [u8; 14])| {
+        let m = Message::Command(cmd(1.0, 0.0));
+        let mut body = super::encode::protected(&m, 4, 1).unwrap();
+        let mut chunk = [0u8; 14];
+        chunk.copy_from_slice(&body[..14]);
+        edit(&mut chunk);
+        body[..13].copy_from_slice(&chunk[..13]);
+        body[13] = message_crc(MessageKind::Command, 4, 1, &body[..13]);
+        let mut r = Reassembler::<8>::new();
+        let mut res = Ok(None);
+        for i in 0..2 {
+            let mut data = [0u8; 8];
+            data[0] = (i as u8) << 4 | 1;
+            data[1..].copy_from_slice(&body[i * 7..i * 7 + 7]);
+            let id = ExtendedId::new(frame_id(MessageKind::Command, i as u8, 4)).unwrap();
+            res = r.push::<f64, _>(&TestFrame::new(id, &data).unwrap(), NOW);
+        }
+        res
+    };
+    let speed = crate::layout::COMMAND.speed.start;
+    let yaw = crate::layout::COMMAND.yaw.start;
+    let put = |b: &mut [u8; 14], at: usize, x: f32| b[at..at + 4].copy_from_slice(&x.to_le_bytes());
+    for v in [f32::NAN, -1.0, 101.0, f32::INFINITY] {
+        assert_eq!(
+            bad(&|b| put(b, speed, v)),
+            Err(DecodeError::OutOfRange(Field::Speed)),
+            "{v}"
+        );
+    }
+    for w in [f32::NAN, 7.0, -7.0] {
+        assert_eq!(
+            bad(&|b| put(b, yaw, w)),
+            Err(DecodeError::OutOfRange(Field::YawRate)),
+            "{w}"
+        );
+    }
+    let status = crate::layout::COMMAND.status.start;
+    assert_eq!(
+        bad(&|b| b[status] = 9),
+        Err(DecodeError::OutOfRange(Field::Flag))
+    );
+    let lanes = crate::layout::COMMAND.lanes.start;
+    assert_eq!(
+        bad(&|b| b[lanes] = 0xFF),
+        Err(DecodeError::OutOfRange(Field::Lane))
+    );
+    // A command is its sender's: any vehicle may send one, the time master not.
+    let mut r = Reassembler::<8>::new();
+    assert_eq!(
+        push_all(&mut r, &Message::Command(cmd(1.0, 0.0)), CLOCK_ADDRESS, 1).map(|_| ()),
+        Err(DecodeError::SenderMismatch)
+    );
+}
+
+/// A vehicle's own state comes only from the time master's address (the world, in
+/// simulation): a vehicle cannot tell another where it is.
+#[test]
+fn ego_states_come_only_from_the_time_master() {
+    let Message::Located { segment, state } = naming_vehicle_9()[5] else {
+        unreachable!("the sixth names a located state")
+    };
+    let ego = Message::Ego {
+        segment,
+        lanes: 2,
+        state,
+        v_ref: 27.8,
+    };
+    for sa in [9u8, 8, MANAGER_ADDRESS] {
+        let mut r = Reassembler::<8>::new();
+        assert_eq!(
+            push_all(&mut r, &ego, sa, 1).map(|_| ()),
+            Err(DecodeError::SenderMismatch),
+            "from {sa:#x}"
+        );
+    }
+    let mut r = Reassembler::<8>::new();
+    let got = push_all(&mut r, &ego, CLOCK_ADDRESS, 1);
+    assert!(
+        matches!(got, Ok(Some(Message::Ego { v_ref, .. })) if (v_ref - 27.8).abs() < 0.011),
+        "{got:?}"
+    );
 }

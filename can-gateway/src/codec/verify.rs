@@ -48,6 +48,7 @@ pub(super) fn complete<F: Real, const K: usize, const R: usize>(
     let ordinal = match kind {
         MessageKind::State => Some(layout::STATE.stamp),
         MessageKind::Located => Some(layout::LOCATED.stamp),
+        MessageKind::Ego => Some(layout::EGO.state.stamp),
         MessageKind::Sync => Some(layout::SYNC.period),
         _ => None,
     }

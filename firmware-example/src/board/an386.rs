@@ -8,3 +8,5 @@ pub const CORE: &str = "Cortex-M4F";
 /// SysTick's clock: the board's 25 MHz system clock (QEMU's `sysclk_frq`), which SysTick
 /// takes as the core clock.
 pub const SYSTICK_HZ: u32 = 25_000_000;
+/// UART 0 (`-serial`'s first device): the CMSDK APB UART at 0x4000_4000.
+pub const UART0: usize = 0x4000_4000;

@@ -10,3 +10,5 @@ pub const MACHINE: &str = "mps2-an500";
 pub const CORE: &str = "Cortex-M7";
 /// SysTick's clock: the board's 25 MHz system clock.
 pub const SYSTICK_HZ: u32 = 25_000_000;
+/// UART 0 (`-serial`'s first device): the CMSDK APB UART at 0x4000_4000, as on the AN386.
+pub const UART0: usize = 0x4000_4000;

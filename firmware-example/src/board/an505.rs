@@ -12,3 +12,5 @@ pub const CORE: &str = "Cortex-M33";
 /// AN505). At `-icount shift=3` (125 MHz of virtual time) a tick is 6.25 instructions,
 /// which is why the calibration is fractional.
 pub const SYSTICK_HZ: u32 = 20_000_000;
+/// UART 0 (`-serial`'s first device): the CMSDK APB UART's Secure alias (0x4020_0000 + 0x1000_0000), behind a PPC that leaves it Secure after reset.
+pub const UART0: usize = 0x5020_0000;

@@ -41,3 +41,15 @@ pub fn exit(ok: bool) -> ! {
         cortex_m::asm::wfi();
     }
 }
+
+/// A panic ends the run as a failure (the program's exit status is its verdict).
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    exit(false)
+}
+
+/// defmt's own panics (e.g. a re-entrant logger) end the run as a failure too.
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    exit(false)
+}
