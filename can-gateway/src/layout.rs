@@ -122,18 +122,21 @@ pub struct CommandFields {
     pub yaw: Field,
     /// Lane (low nibble) and the lane it changes to (high nibble, 15 = none).
     pub lanes: Field,
+    /// The lane it intends (low nibble, 15 = none; the high nibble is reserved, 0).
+    pub beta: Field,
     /// Bytes the fields cover.
     pub len: usize,
 }
 
-/// A command (kind 11): speed, status, period | yaw rate, lanes, reserved, CRC.
+/// A command (kind 11): speed, status, period | yaw rate, lanes, β, CRC.
 pub const COMMAND: CommandFields = CommandFields {
     speed: 0..4,
     status: 4..5,
     period: 5..7,
     yaw: 7..11,
     lanes: 11..12,
-    len: 12,
+    beta: 12..13,
+    len: 13,
 };
 
 /// The fields of a crossing request: [`REQUEST`] at the Fig. 8 intersection,
@@ -278,7 +281,7 @@ mod tests {
     type Row = (MessageKind, &'static str, Field);
 
     /// Every field of every kind, with the kind whose payload holds it.
-    fn all() -> heapless::Vec<Row, 64> {
+    fn all() -> heapless::Vec<Row, 80> {
         use MessageKind as K;
         let (s, l) = (STATE, LOCATED);
         let mut out = heapless::Vec::new();
@@ -362,13 +365,14 @@ mod tests {
             (K::Command, "period", c.period),
             (K::Command, "yaw", c.yaw),
             (K::Command, "lanes", c.lanes),
+            (K::Command, "beta", c.beta),
         ]);
         out
     }
 
     #[test]
     fn no_field_straddles_a_frame_and_the_crc_stays_clear() {
-        assert_eq!(all().len(), 64);
+        assert_eq!(all().len(), 65);
         for (kind, name, f) in all() {
             assert!(!f.is_empty(), "{kind:?}.{name}");
             assert_eq!(

@@ -35,7 +35,7 @@
 //! vehicle: its own measured state and reference speed (kind 10, [`Message::Ego`], 4
 //! frames: a located state's layout, the road's lane count in its reserved byte, the
 //! reference speed in its last frame's spare bytes; only from [`CLOCK_ADDRESS`]) and the computer's command (kind 11,
-//! [`Message::Command`], 2 frames: speed f32, status, period | yaw rate f32, lanes, CRC;
+//! [`Message::Command`], 2 frames: speed f32, status, period | yaw rate f32, lanes, β, CRC;
 //! IEEE 754 single precision, so that what the MCU planned is what the plant integrates).
 //!
 //! **CAN FD**: a whole message in one frame, MAC included when secured. Its identifier's
@@ -288,7 +288,7 @@ impl CommandStatus {
 /// A vehicle computer's command for one period ([`Message::Command`]): the speed and yaw
 /// rate (1) it applies over the period, exactly as its planner computed them (IEEE 754
 /// single precision on the wire, so that a simulator integrates what the MCU planned, bit
-/// for bit), which lane it is in and is changing to, and what its planner did.
+/// for bit), its lanes after the step (ℓ, α, β) and what its planner did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Command<F> {
@@ -304,6 +304,8 @@ pub struct Command<F> {
     pub lane: u8,
     /// The lane it is changing to (α), if any.
     pub alpha: Option<u8>,
+    /// The lane it intends to change to (β), if any.
+    pub beta: Option<u8>,
 }
 
 impl<F> Command<F> {
@@ -316,6 +318,7 @@ impl<F> Command<F> {
             status: self.status,
             lane: self.lane,
             alpha: self.alpha,
+            beta: self.beta,
         }
     }
 }

@@ -331,6 +331,7 @@ fn cantools_decodes_the_gateways_candump_log() {
         status: can_gateway::wire::CommandStatus::Yield,
         lane: 1,
         alpha: Some(0),
+        beta: None,
     };
     let frames: Frames<F8> = encode(&Message::Command(cmd), 0x21, 9).expect("encodes");
     push(
@@ -341,6 +342,7 @@ fn cantools_decodes_the_gateways_candump_log() {
                 ("YawRate", f64::from(omega)),
                 ("Lane", 1.0),
                 ("LaneChangeTo", 0.0),
+                ("IntendedLane", 15.0),
             ],
         ],
         &mut log,

@@ -87,6 +87,12 @@ fn fields() -> Vec<(MessageKind, &'static str, Field, &'static [&'static str])> 
             c.lanes,
             &["Lane", "LaneChangeTo"][..],
         ),
+        (
+            MessageKind::Command,
+            "Command",
+            c.beta,
+            &["IntendedLane"][..],
+        ),
     ]);
     for (k, p, f) in [
         (MessageKind::Request, "Request", layout::REQUEST),

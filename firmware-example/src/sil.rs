@@ -14,7 +14,8 @@
 //! 2. the world sends what the vehicle hears on the bus (the others' V2V states), then
 //!    the tick ([`Message::Sync`]); on the tick the computer runs the multi-lane planner
 //!    (Sec. IV–V) and answers with its command ([`Message::Command`]: v and ω as the f32
-//!    the planner computed), which the world integrates (1).
+//!    the planner computed, and its lanes ℓ, α, β after the step), which the world
+//!    integrates (1).
 //!
 //! The node's time is the world's: the stamp of the last ego state. The planner's
 //! v_{t−h} and ω_{t−h} are the command it gave last period (what the world applied),
@@ -88,7 +89,7 @@ pub struct Figures {
     /// Ticks answered.
     pub periods: u32,
     /// Steps the planner did not plan itself (fallback or refused input; standing
-    /// behind a stopped vehicle, `NoRoom`, is not counted).
+    /// behind a stopped vehicle, `NoRoom`, and yielding are not counted).
     pub fallbacks: u32,
     /// Steps whose work took more than h.
     pub overruns: u32,
@@ -117,6 +118,8 @@ pub struct Node {
     now: Instant,
     /// Alive counters of its states and of its commands.
     counters: (u8, u8),
+    /// What its planner did last.
+    last_status: CommandStatus,
     /// The run's figures.
     pub figures: Figures,
 }
@@ -134,6 +137,7 @@ impl Node {
             last: None,
             now: Instant::from_micros(0),
             counters: (0, 0),
+            last_status: CommandStatus::Solved,
             figures: Figures {
                 periods: 0,
                 fallbacks: 0,
@@ -222,7 +226,7 @@ pub fn run() -> ! {
                 let t0 = clock.now();
                 node.plan(lp, period, &mut uart);
                 let ticks = clock.now() - t0;
-                node.count(ticks * u64::from(per_tick) / 100);
+                node.count(period, ticks * u64::from(per_tick) / 100);
                 if last {
                     finish(node)
                 }
@@ -442,6 +446,7 @@ impl Node {
                     status: CommandStatus::of(&c.status),
                     lane: c.lane,
                     alpha: c.alpha,
+                    beta: c.beta,
                 }
             }
             Err(_) => {
@@ -454,22 +459,32 @@ impl Node {
                     status: CommandStatus::Rejected,
                     lane: last.lane,
                     alpha: last.alpha,
+                    beta: last.beta,
                 }
             }
         };
-        if !(cmd.status.planned() || cmd.status == CommandStatus::NoRoom) {
+        // Standing with no room and yielding (20)(21) are the protocol, not failures.
+        let protocol = matches!(cmd.status, CommandStatus::NoRoom | CommandStatus::Yield);
+        self.last_status = cmd.status;
+        if !(cmd.status.planned() || protocol) {
             self.figures.fallbacks += 1;
         }
         self.send(&Message::Command(cmd), uart);
     }
 
     /// Counts one tick's work of `instructions`.
-    fn count(&mut self, instructions: u64) {
+    fn count(&mut self, period: u32, instructions: u64) {
         let f = &mut self.figures;
         f.periods += 1;
         f.worst_instructions = f.worst_instructions.max(instructions);
         if instructions > PERIOD_INSTRUCTIONS {
             f.overruns += 1;
+            defmt::warn!(
+                "sil: period {=u32} took {=u64} instructions ({})",
+                period,
+                instructions,
+                self.last_status
+            );
         }
     }
 

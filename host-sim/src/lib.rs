@@ -8,6 +8,8 @@
 //! - [`scenario`]: the scenario file format (roads, intersections, networks), validated;
 //! - [`world`]: the network, vehicles, managers and the one simulation loop;
 //! - [`bus`]: the bus trait, its messages and node addresses, the in-process bus with faults;
+//! - [`firmware`]: vehicle computers in the loop — the firmware's image in QEMU, talking
+//!   serial-line CAN on its UART;
 //! - [`fleet`]: CAN media (SocketCAN, an in-process frame hub) and a world run as a fleet
 //!   of tasks on them, one per vehicle and per junction manager;
 //! - [`monitor`]: ground-truth safety checks, liveness and the deadlock detector;
@@ -18,8 +20,8 @@
 //! - [`reference`](mod@reference): the Clarabel reference, random instances, the planner benchmark.
 //!
 //! Modules depend on each other one way, folders and the files inside them alike (the
-//! workspace's `tests/tests/layout.rs` checks it): `monitor`, `reference`, `bus` and
-//! `verdict` on nothing; `world` on those; `scenario` (the
+//! workspace's `tests/tests/layout.rs` checks it): `monitor`, `reference`, `bus`,
+//! `firmware` and `verdict` on nothing; `world` on those; `scenario` (the
 //! file formats, which build a world) on `world`; `fleet` and `experiments` on all of
 //! these; `output` on `experiments`; the binary's `cli` on everything.
 #![deny(missing_docs)]
@@ -28,6 +30,7 @@
 
 pub mod bus;
 pub mod experiments;
+pub mod firmware;
 pub mod fleet;
 pub mod monitor;
 pub mod output;

@@ -753,3 +753,78 @@ fn summaries_agree_with_themselves_in_text_and_json() {
         }
     }
 }
+
+/// `run --firmware` checks the world and the vehicles before it starts any QEMU, and
+/// refuses what a computer in the loop cannot be: each refusal is bad input (exit 2),
+/// says why, and writes nothing.
+#[test]
+fn firmware_in_the_loop_refuses_what_it_cannot_run() {
+    // Any existing file stands for the image: the checks come before it is run.
+    let elf = scenario("multilane.toml");
+    let refused = |file: &str, extra: &[&str], why: &str| {
+        let trace = tmp(&format!("firmware-refused-{why}.csv").replace(' ', "-"));
+        let out = bin()
+            .arg("run")
+            .arg(scenario(file))
+            .arg("--firmware")
+            .arg(&elf)
+            .args(extra)
+            .arg("--trace")
+            .arg(&trace)
+            .output()
+            .expect("runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{file} {extra:?}: {err}");
+        assert!(err.contains(why), "{file} {extra:?}: {err}");
+        assert!(!trace.exists(), "{file} {extra:?} wrote its trace");
+    };
+    let v = ["--firmware-vehicles", "2"];
+    refused(
+        "intersection.toml",
+        &["--firmware-vehicles", "1"],
+        "drives a road",
+    );
+    refused(
+        "multilane.toml",
+        &["--firmware-vehicles", "2", "--invariant", "leader-aware"],
+        "paper's invariant",
+    );
+    refused("multilane-faults.toml", &v, "no [faults]");
+    refused(
+        "multilane.toml",
+        &["--firmware-vehicles", "99"],
+        "vehicle 99 is not",
+    );
+    refused(
+        "multilane.toml",
+        &["--firmware-vehicles", "2,2"],
+        "named twice",
+    );
+    refused(
+        "multilane.toml",
+        &["--firmware-vehicles", "2", "--firmware-board", "an999"],
+        "an386, an500 or an505",
+    );
+    refused(
+        "multilane.toml",
+        &["--firmware-vehicles", "2", "--bus", "can-hub"],
+        "in-process bus",
+    );
+    let out = bin()
+        .arg("run")
+        .arg(scenario("multilane.toml"))
+        .args(["--firmware", "/nonexistent/sil", "--firmware-vehicles", "2"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no such file"));
+    // The two flags go together.
+    let out = bin()
+        .arg("run")
+        .arg(scenario("multilane.toml"))
+        .arg("--firmware")
+        .arg(&elf)
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+}

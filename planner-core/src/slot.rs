@@ -61,7 +61,7 @@
 //! | N | `size_of` `Planner` | `size_of` `LanePlanner` | stack per call: approach | stack per call: lane change, both planners | peak stack, whole firmware | instructions per single-lane step, median / worst | per lane-change step, median / worst |
 //! |---|---|---|---|---|---|---|---|
 //! | 20 | 5,272 B | 8,784 B | 3,176 B | 3,840 B | 4,104 B | 50,760 / 330,580 | 197,545 / 203,365 |
-//! | 50 | 12,992 B | 16,624 B | 6,472 B | 7,624 B | 7,880 B | 125,490 / 1,050,495 | 255,060 / 701,375 |
+//! | 50 | 12,992 B | 16,624 B | 6,472 B | 7,624 B | 7,880 B | 125,490 / 1,050,495 | 255,060 / 701,370 |
 //! <!-- resources: end -->
 
 use crate::mpc::CostWeights;

@@ -98,6 +98,10 @@ fn read_command<F: Real>(b: &[u8]) -> Result<Command<F>, DecodeError> {
         CommandStatus::from_code(byte(b, f.status)).ok_or(DecodeError::OutOfRange(Field::Flag))?;
     let lanes = byte(b, f.lanes);
     let lane = lane(lanes & 0x0F).ok_or(DecodeError::OutOfRange(Field::Lane))?;
+    let beta = byte(b, f.beta);
+    if beta & 0xF0 != 0 {
+        return Err(DecodeError::OutOfRange(Field::Flag));
+    }
     Ok(Command {
         period: u16::from_le_bytes(get(b, f.period)),
         v: F::from_f64(f64::from(v)),
@@ -105,6 +109,7 @@ fn read_command<F: Real>(b: &[u8]) -> Result<Command<F>, DecodeError> {
         status,
         lane,
         alpha: super::quantize::lane(lanes >> 4),
+        beta: super::quantize::lane(beta),
     })
 }
 

@@ -108,6 +108,7 @@ fn write_command<F: Real>(b: &mut [u8], c: &Command<F>) -> Result<usize, EncodeE
     put(b, f.period, &c.period.to_le_bytes());
     let lanes = lane_nibble(Some(c.lane))? | lane_nibble(c.alpha)? << 4;
     put(b, f.lanes, &[lanes]);
+    put(b, f.beta, &[lane_nibble(c.beta)?]);
     Ok(f.len)
 }
 

@@ -346,6 +346,7 @@ mod secured {
                     status: crate::wire::CommandStatus::Yield,
                     lane: 1,
                     alpha: Some(0),
+                    beta: Some(0),
                 }),
                 9,
             ),
@@ -1111,6 +1112,7 @@ fn commands_keep_their_f32_bits_and_refuse_garbage() {
         status: CommandStatus::Solved,
         lane: 0,
         alpha: None,
+        beta: None,
     };
     for (v, omega) in [
         (13.9_f32, 0.0_f32),
@@ -1173,6 +1175,11 @@ fn commands_keep_their_f32_bits_and_refuse_garbage() {
     assert_eq!(
         bad(&|b| b[lanes] = 0xFF),
         Err(DecodeError::OutOfRange(Field::Lane))
+    );
+    let beta = crate::layout::COMMAND.beta.start;
+    assert_eq!(
+        bad(&|b| b[beta] = 0x1F),
+        Err(DecodeError::OutOfRange(Field::Flag))
     );
     // A command is its sender's: any vehicle may send one, the time master not.
     let mut r = Reassembler::<8>::new();

@@ -156,6 +156,24 @@ enum Command {
         /// scenario's `invariant` key (default: the scenario's, else `paper`).
         #[arg(long, value_enum)]
         invariant: Option<InvariantArg>,
+        /// Vehicle computers in the loop: the firmware's `sil` image (firmware-example,
+        /// built for --firmware-board) is the computer of each of --firmware-vehicles,
+        /// in QEMU, talking serial-line CAN on its UART (docs/firmware.md). A road, the
+        /// in-process bus, the paper's invariant, no faults or sensors.
+        #[arg(long, value_name = "ELF", requires = "firmware_vehicles")]
+        firmware: Option<PathBuf>,
+        /// The vehicles (ids) whose computers are --firmware.
+        #[arg(
+            long,
+            value_name = "ID,ID,...",
+            value_delimiter = ',',
+            requires = "firmware"
+        )]
+        firmware_vehicles: Vec<u16>,
+        /// The QEMU machine --firmware is built for: an386 (Cortex-M4F), an500 (M7) or
+        /// an505 (M33).
+        #[arg(long, value_name = "BOARD", default_value = "an386")]
+        firmware_board: String,
     },
     /// Theorem 1 sweep: random single-lane platoons under adversarial leaders.
     Platoons(SweepCmd<x::platoon::Platoons>),
@@ -274,6 +292,9 @@ fn dispatch(command: Command) -> ExitCode {
             precision,
             clock_start,
             invariant,
+            firmware,
+            firmware_vehicles,
+            firmware_board,
         } => run::run(run::RunArgs {
             file,
             seed,
@@ -289,6 +310,7 @@ fn dispatch(command: Command) -> ExitCode {
             precision: precision.precision(),
             clock_start,
             invariant: invariant.map(InvariantArg::invariant),
+            firmware: firmware.map(|elf| (elf, firmware_board, firmware_vehicles)),
         }),
         Command::Platoons(c) => conduct(&c.settings, c.answer, None),
         Command::Traffic(c) => conduct(&c.settings, c.answer, None),

@@ -18,6 +18,10 @@ pub const EXIT_BUS: u8 = 4;
 /// A run that started failed inside the simulator: a bug, never the input's fault (the
 /// input was checked before anything ran), reported with what failed.
 pub const EXIT_INTERNAL: u8 = 5;
+/// A vehicle computer in the loop (`run --firmware`) failed: its image did not answer,
+/// or exited with its figures out of bounds (a period over h, a refused frame, its
+/// stack) — on a run that was otherwise safe and live.
+pub const EXIT_FIRMWARE: u8 = 6;
 
 /// Prints `value` as one line of JSON, its floats rounded to 12 significant digits (a sum
 /// of 0.01 s steps is 19.84, not 19.840000000000302).

@@ -2,8 +2,9 @@
 //! its own planner, talking only over the bus; its trace, plot and viewer page.
 
 use super::output::{
-    bad_input, check_plot, commit, exit, print_json, staged, EXIT_BUS, EXIT_INTERNAL,
+    bad_input, check_plot, commit, exit, print_json, staged, EXIT_BUS, EXIT_FIRMWARE, EXIT_INTERNAL,
 };
+use host_sim::firmware::{Board, FirmwareSpec};
 use host_sim::output::plot::PlotData;
 use host_sim::output::staged::Staged;
 use host_sim::output::trace::TraceWriter;
@@ -45,6 +46,8 @@ pub struct RunArgs {
     pub clock_start: f64,
     /// The invariant, over the scenario's.
     pub invariant: Option<planner_core::Invariant>,
+    /// Computers in the loop: the image, its board's name, the vehicles.
+    pub firmware: Option<(PathBuf, String, Vec<u16>)>,
 }
 
 /// Where a run's rows go, and the staged files they end in (nothing is written to an
@@ -76,9 +79,90 @@ pub fn run(a: RunArgs) -> ExitCode {
         Err(code) => return code,
     };
     match prepare(&a) {
-        Ok((spec, sinks)) => execute(&a, keys, spec, sinks),
+        Ok((spec, sinks)) => match firmware(&a, &spec) {
+            Ok(fw) => execute(&a, keys, (spec, fw), sinks),
+            Err(code) => code,
+        },
         Err(code) => code,
     }
+}
+
+/// The computers in the loop asked for, checked against the scenario: a road (one
+/// segment, no junctions), the in-process bus, the paper's invariant, no faults or
+/// sensors (the firmware plans from what it hears), planner-driven vehicles; a board
+/// QEMU has, a readable image, QEMU on the path.
+fn firmware(a: &RunArgs, spec: &WorldSpec) -> Result<Option<FirmwareSpec>, ExitCode> {
+    let Some((elf, board, vehicles)) = &a.firmware else {
+        return Ok(None);
+    };
+    let board = Board::parse(board)
+        .ok_or_else(|| bad_input(format!("--firmware-board {board}: an386, an500 or an505")))?;
+    let why = firmware_world(a, spec).or_else(|| firmware_vehicles(spec, vehicles));
+    if let Some(why) = why {
+        return Err(bad_input(format!("--firmware: {why}")));
+    }
+    if !elf.is_file() {
+        return Err(bad_input(format!(
+            "--firmware {}: no such file",
+            elf.display()
+        )));
+    }
+    let qemu = std::process::Command::new("qemu-system-arm")
+        .arg("--version")
+        .output();
+    if !qemu.is_ok_and(|o| o.status.success()) {
+        return Err(bad_input(
+            "--firmware runs the image in QEMU: qemu-system-arm is not on the path",
+        ));
+    }
+    Ok(Some(FirmwareSpec {
+        elf: elf.clone(),
+        board,
+        vehicles: vehicles.clone(),
+    }))
+}
+
+/// Why the world cannot have computers in the loop, if it cannot.
+fn firmware_world(a: &RunArgs, spec: &WorldSpec) -> Option<String> {
+    let net = &spec.network;
+    if a.bus != "in-process" {
+        Some("computers in the loop run on the in-process bus (drop --bus)".into())
+    } else if !net.junctions.is_empty() || net.segments.len() != 1 {
+        Some("the firmware drives a road: this scenario has junctions or several segments".into())
+    } else if spec.invariant != planner_core::Invariant::Paper {
+        Some("the firmware keeps the paper's invariant: drop the leader-aware one".into())
+    } else if spec.sensing.is_some() || spec.faults != host_sim::bus::faults::Faults::default() {
+        Some(
+            "the firmware plans from what it hears on a clean bus: no [sensing], no [faults]"
+                .into(),
+        )
+    } else {
+        None
+    }
+}
+
+/// Why `ids` cannot be the computers in the loop, if they cannot.
+fn firmware_vehicles(spec: &WorldSpec, ids: &[u16]) -> Option<String> {
+    if ids.is_empty() {
+        return Some("--firmware-vehicles names no vehicle".into());
+    }
+    for (i, id) in ids.iter().enumerate() {
+        let planner = spec
+            .vehicles
+            .iter()
+            .any(|v| v.id == *id && v.driver == host_sim::world::DriverKind::Planner);
+        if !planner {
+            return Some(format!(
+                "vehicle {id} is not a planner-driven vehicle of the scenario"
+            ));
+        }
+        if ids[..i].contains(id) || *id >= u16::from(can_gateway::wire::CLOCK_ADDRESS) {
+            return Some(format!(
+                "vehicle {id} named twice, or not a CAN node id (below 240)"
+            ));
+        }
+    }
+    None
 }
 
 /// Every input checked before any output is staged, and every output staged (so that
@@ -168,24 +252,31 @@ fn link_keys(a: &RunArgs) -> Result<Option<std::sync::Arc<host_sim::fleet::can::
 fn execute(
     a: &RunArgs,
     keys: Option<std::sync::Arc<host_sim::fleet::can::Keys>>,
-    spec: WorldSpec,
+    (spec, fw): (WorldSpec, Option<FirmwareSpec>),
     mut sinks: Sinks,
 ) -> ExitCode {
     let name = spec.name.clone();
     let net = spec.network.clone();
     let outcome = if a.bus == "in-process" {
+        let setup = (a.solver, a.seed, fw.as_ref());
         match spec.horizon {
-            50 => in_process::<50>(spec, a.solver, a.seed, &mut sinks),
-            _ => in_process::<20>(spec, a.solver, a.seed, &mut sinks),
+            50 => in_process::<50>(spec, setup, &mut sinks),
+            _ => in_process::<20>(spec, setup, &mut sinks),
         }
         .map(|s| (s, None))
         .map_err(|e| {
-            // Everything the world could refuse was refused before it started: a failure
-            // now is the simulator's, and says so (exit 5, not bad input).
-            eprintln!(
-                "error: internal: the run stopped at an in-process bus error: {e} \
-                 (a bug: the scenario passed every check; please report it with the file)"
-            );
+            match e {
+                InProcessError::Firmware(e) => {
+                    eprintln!("error: --firmware: {e}");
+                    return ExitCode::from(EXIT_FIRMWARE);
+                }
+                // Everything the world could refuse was refused before it started: a
+                // failure now is the simulator's, and says so (exit 5, not bad input).
+                InProcessError::Bus(e) => eprintln!(
+                    "error: internal: the run stopped at an in-process bus error: {e} \
+                     (a bug: the scenario passed every check; please report it with the file)"
+                ),
+            }
             ExitCode::from(EXIT_INTERNAL)
         })
     } else {
@@ -210,6 +301,20 @@ fn execute(
     if let Some(d) = &summary.deadlock {
         eprintln!("{}: {d}", summary.scenario);
     }
+    for r in summary.firmware.iter().filter(|r| !r.ok()) {
+        eprintln!(
+            "{}: the computer of vehicle {} ({}) failed: exit {:?}{} (its log: {})",
+            summary.scenario,
+            r.vehicle,
+            r.board,
+            r.exit,
+            r.failed
+                .as_deref()
+                .map(|w| format!(", {w}"))
+                .unwrap_or_default(),
+            r.log
+        );
+    }
     if a.json {
         let printed = match &fleet {
             Some(f) => print_json(f),
@@ -225,7 +330,12 @@ fn execute(
             return code;
         }
     }
-    exit(summary.verdict())
+    let verdict = summary.verdict();
+    let computers_ok = summary.firmware.iter().all(|r| r.ok());
+    if verdict.is_safe() && verdict.live && !computers_ok {
+        return ExitCode::from(EXIT_FIRMWARE);
+    }
+    exit(verdict)
 }
 
 /// Finishes every output of a complete run and puts each in place; the paths written.
@@ -254,20 +364,36 @@ fn write_outputs(
     Ok(written)
 }
 
-/// Runs a world in one task on the in-process bus.
+/// Why a run on the in-process bus stopped.
+enum InProcessError {
+    /// The bus failed (a bug: the input was checked).
+    Bus(host_sim::bus::BusError),
+    /// A computer in the loop could not be started.
+    Firmware(host_sim::firmware::FirmwareError),
+}
+
+/// Runs a world in one task on the in-process bus (with its computers in the loop, if
+/// any: their logs in a directory of their own under the system's temporary one).
 fn in_process<const N: usize>(
     spec: WorldSpec,
-    solver: SolverChoice,
-    seed: Option<u64>,
+    (solver, seed, fw): (SolverChoice, Option<u64>, Option<&FirmwareSpec>),
     sinks: &mut Sinks,
-) -> Result<Summary, host_sim::bus::BusError> {
+) -> Result<Summary, InProcessError> {
     let t0 = std::time::Instant::now();
     let mut w = World::<N>::new(spec, solver, seed);
+    if let Some(fw) = fw {
+        let logs = std::env::temp_dir().join(format!("host-sim-firmware-{}", std::process::id()));
+        std::fs::create_dir_all(&logs).map_err(|e| {
+            InProcessError::Firmware(host_sim::firmware::FirmwareError::Log(e.to_string()))
+        })?;
+        w.attach_firmware(fw, &logs)
+            .map_err(InProcessError::Firmware)?;
+    }
     let bar = progress_bar();
     let total = w.total_steps().max(1);
     let every = (total / 200).max(1);
     while !w.finished() {
-        w.step(&mut |r| sinks.row(r))?;
+        w.step(&mut |r| sinks.row(r)).map_err(InProcessError::Bus)?;
         if w.steps_done().is_multiple_of(every) {
             if let Some(b) = &bar {
                 b.set_position(w.steps_done() * 1000 / total);
@@ -277,7 +403,10 @@ fn in_process<const N: usize>(
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    Ok(w.summary(t0.elapsed().as_secs_f64()))
+    let firmware = w.finish_firmware();
+    let mut s = w.summary(t0.elapsed().as_secs_f64());
+    s.firmware = firmware;
+    Ok(s)
 }
 
 /// A progress bar on a terminal.

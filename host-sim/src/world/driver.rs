@@ -164,6 +164,9 @@ pub struct Brain<const N: usize> {
     pub(super) setup: PlannerSetup,
     /// Its vehicle's body (its planners' length and braking limit).
     pub(super) body: Body,
+    /// Its computer is a firmware image in the loop: it plans on a road instead of the
+    /// multi-lane planner, from what the vehicle heard ([`crate::firmware`]).
+    pub(super) computer: Option<Box<crate::firmware::Computer>>,
 }
 
 /// How a vehicle is driven.
@@ -194,6 +197,7 @@ impl<const N: usize> Brain<N> {
             others: Box::new(heapless::Vec::new()),
             setup,
             body,
+            computer: None,
         }
     }
 

@@ -656,6 +656,44 @@ impl<const N: usize, B: Bus> World<N, B> {
         self.give_setup();
     }
 
+    /// Makes the firmware image of `spec` the computer of each of its vehicles (each in
+    /// its own QEMU, its defmt log into `logs`): they plan on their roads from then on.
+    /// Fails, changing nothing, if one cannot be started.
+    pub fn attach_firmware(
+        &mut self,
+        spec: &crate::firmware::FirmwareSpec,
+        logs: &std::path::Path,
+    ) -> Result<(), crate::firmware::FirmwareError> {
+        let mut started = Vec::new();
+        for &id in &spec.vehicles {
+            let log = logs.join(format!("firmware-{id}.defmt"));
+            started.push((
+                id,
+                crate::firmware::Computer::start(&spec.elf, spec.board, id, &log)?,
+            ));
+        }
+        for (id, c) in started {
+            if let Some(v) = self.vehicles.iter_mut().find(|v| v.id == id) {
+                v.set_computer(c);
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends every computer in the loop (a last period, the tick marked last) and reports
+    /// how each ended.
+    pub fn finish_firmware(&mut self) -> Vec<crate::firmware::FirmwareReport> {
+        let now = self.time.clock.at_step(self.time.steps_done);
+        let mut reports = Vec::new();
+        for v in &mut self.vehicles {
+            let ego = v.road_limits(&self.net).and_then(|r| v.ego(now, r));
+            if let (Some(c), Some(ego)) = (v.take_computer(), ego) {
+                reports.push(c.finish(&ego));
+            }
+        }
+        reports
+    }
+
     /// Gives every vehicle's brain the world's planner setup (for planners built from
     /// now on).
     fn give_setup(&mut self) {

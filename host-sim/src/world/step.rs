@@ -19,10 +19,14 @@ impl<const N: usize, B: Bus> World<N, B> {
         self.manage(t)?;
         let sensed = self.sense_all();
         let mut moves = Vec::with_capacity(self.vehicles.len());
+        let mut early = self.tick_computers(t)?;
         let mut inbox: Vec<Received> = Vec::new();
         for (i, v) in self.vehicles.iter_mut().enumerate() {
             inbox.clear();
-            self.bus.receive(v.id, t, &mut inbox)?;
+            match early.get_mut(i) {
+                Some(e) => std::mem::swap(&mut inbox, e),
+                None => self.bus.receive(v.id, t, &mut inbox)?,
+            }
             let empty = Sensed::default();
             let ctx = StepCtx {
                 t,
@@ -75,12 +79,35 @@ impl<const N: usize, B: Bus> World<N, B> {
             let (x, y) = v.position(&self.net);
             self.bus.locate(v.id, x, y);
         }
-        for v in &self.vehicles {
-            let msg = self.spec.faults.told(v.id, v.message(now), t);
+        // Every computer in the loop told first, so that their images work at once.
+        for v in &mut self.vehicles {
+            v.tell_computer(now, &self.net);
+        }
+        for v in &mut self.vehicles {
+            let msg = v.broadcast(now);
+            let msg = self.spec.faults.told(v.id, msg, t);
             self.bus.send(v.id, &msg, t)?;
         }
         self.tally.messages_sent += self.vehicles.len() as u64;
         Ok(())
+    }
+
+    /// Phase 4's first half where computers are in the loop: every vehicle's deliveries
+    /// taken now, and each computer given its own and the tick, so that their images plan
+    /// at once; the deliveries, in the vehicles' order (empty when no computer is in the
+    /// loop: each vehicle then takes its own in turn).
+    fn tick_computers(&mut self, t: f64) -> Result<Vec<Vec<Received>>, BusError> {
+        if !self.vehicles.iter().any(Vehicle::in_the_loop) {
+            return Ok(Vec::new());
+        }
+        let mut all = Vec::with_capacity(self.vehicles.len());
+        for v in &mut self.vehicles {
+            let mut inbox = Vec::new();
+            self.bus.receive(v.id, t, &mut inbox)?;
+            v.tick_computer(&inbox);
+            all.push(inbox);
+        }
+        Ok(all)
     }
 
     /// Phase 2: every manager hears its junction's reports, decides, and grants leases.

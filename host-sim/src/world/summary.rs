@@ -139,6 +139,10 @@ pub struct Summary {
     pub unfinished: usize,
     /// The deadlock that ended the run, if one did.
     pub deadlock: Option<Deadlock>,
+    /// How each vehicle computer in the loop ended (`run --firmware`; else empty, and
+    /// not in the JSON).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub firmware: Vec<crate::firmware::FirmwareReport>,
 }
 
 impl Summary {
@@ -316,6 +320,7 @@ pub fn summarize<'v, const N: usize>(
         crossing,
         unfinished: o.unfinished,
         deadlock: o.deadlock.cloned(),
+        firmware: Vec::new(),
     }
 }
 

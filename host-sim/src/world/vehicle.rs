@@ -19,6 +19,7 @@ use super::{DriverKind, VehicleSpec};
 use super::{Mode, TraceRow, LANE_WIDTH_M};
 use crate::bus::{Clock, Message, Received};
 use crate::monitor::Limits;
+use can_gateway::wire::CommandStatus;
 use planner_core::crossing::CrossingReport;
 use planner_core::intersection::Movement;
 use planner_core::lane_change::LaneEvent;
@@ -364,6 +365,92 @@ impl<const N: usize> Vehicle<N> {
         }
     }
 
+    /// Its computer is a firmware image in the loop.
+    pub fn in_the_loop(&self) -> bool {
+        self.role.brain().is_some_and(|b| b.computer.is_some())
+    }
+
+    /// Makes a firmware image in the loop its computer.
+    pub(crate) fn set_computer(&mut self, c: crate::firmware::Computer) {
+        if let Some(b) = self.role.brain_mut() {
+            b.computer = Some(Box::new(c));
+        }
+    }
+
+    /// The lanes and speed limit of the segment it is on, if it is on one.
+    pub fn road_limits(&self, net: &Network) -> Option<(u8, f64)> {
+        match self.at() {
+            At::Lane { seg, .. } => net.segments.get(seg).map(|s| (s.lanes, s.v_max)),
+            At::Crossing { .. } => None,
+        }
+    }
+
+    /// Its computer in the loop, taken away (at the end of a run).
+    pub(crate) fn take_computer(&mut self) -> Option<Box<crate::firmware::Computer>> {
+        self.role.brain_mut().and_then(|b| b.computer.take())
+    }
+
+    /// What its sensors and route tell a computer in the loop at `now` on a road of
+    /// `lanes` lanes with speed limit `v_max`, if it is on a road.
+    pub fn ego(&self, now: Instant, (lanes, v_max): (u8, f64)) -> Option<crate::firmware::Ego> {
+        let Message::State { state, .. } = self.message(now) else {
+            return None;
+        };
+        Some(crate::firmware::Ego {
+            // Its route's lane, as the vehicle's own intention layer would say.
+            state: VehicleState {
+                beta: Some(self.trip.target_lane),
+                ..state
+            },
+            lanes,
+            v_ref: self.trip.v_ref.unwrap_or(v_max),
+        })
+    }
+
+    /// A computer in the loop told where the vehicle is at `now` on `net` (its answer is
+    /// [`Vehicle::broadcast`]'s); nothing for another vehicle.
+    pub fn tell_computer(&mut self, now: Instant, net: &Network) {
+        let ego = self.road_limits(net).and_then(|r| self.ego(now, r));
+        let computer = self.role.brain_mut().and_then(|b| b.computer.as_mut());
+        if let (Some(c), Some(ego)) = (computer, ego) {
+            // A failure is remembered by the computer, and fails its run.
+            let _ = c.tell(&ego);
+        }
+    }
+
+    /// What it broadcasts at `now`: a computer in the loop's own V2V state (told by
+    /// [`Vehicle::tell_computer`]), else [`Vehicle::message`] — also when the computer
+    /// does not answer (it remembers that, and its run fails).
+    pub fn broadcast(&mut self, now: Instant) -> Message {
+        let At::Lane { seg, .. } = self.at() else {
+            return self.message(now);
+        };
+        let computer = self.role.brain_mut().and_then(|b| b.computer.as_mut());
+        match computer.map(|c| c.state()) {
+            Some(Ok(state)) => Message::State {
+                state,
+                segment: seg,
+            },
+            _ => self.message(now),
+        }
+    }
+
+    /// A computer in the loop given what the vehicle heard (`inbox`) and the tick (its
+    /// command is read in [`Vehicle::decide`]); nothing for another vehicle.
+    pub fn tick_computer(&mut self, inbox: &[Received]) {
+        let Some(c) = self.role.brain_mut().and_then(|b| b.computer.as_mut()) else {
+            return;
+        };
+        let heard: Vec<VehicleState<f64>> = inbox
+            .iter()
+            .filter_map(|r| match r.msg {
+                Message::State { state, .. } => Some(state),
+                _ => None,
+            })
+            .collect();
+        let _ = c.tick(&heard, false);
+    }
+
     /// What it broadcasts about itself at `now` (its clock): its state on a segment, its
     /// crossing report in a junction.
     pub fn message(&self, now: Instant) -> Message {
@@ -473,6 +560,7 @@ impl<const N: usize> Vehicle<N> {
         let whole = self.hear(ctx, inbox, counters);
         // Where it is and who drives it, matched once: each decider gets its place.
         let cmd = match self.at() {
+            At::Lane { x, .. } if self.in_the_loop() => self.decide_in_loop(x, ctx, counters),
             _ if !whole => self.blind(ctx, counters),
             At::Lane { .. } if !self.is_planner() => self.decide_script(ctx),
             At::Lane {
@@ -704,6 +792,66 @@ impl<const N: usize> Vehicle<N> {
                 self.mode = Mode::Fallback;
                 planner.braking_command(theta, self.v)
             }
+        }
+    }
+
+    /// A computer in the loop at `x` on a road (what it heard was relayed to it with the
+    /// tick, [`Vehicle::tick_computer`]): its command applied and its lanes taken; a
+    /// computer that does not answer is braked (the certified fallback) and its run fails
+    /// at its end.
+    fn decide_in_loop(&mut self, x: f64, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
+        let answer = self
+            .role
+            .brain_mut()
+            .and_then(|b| b.computer.as_mut())
+            .map(|c| c.answer());
+        // The computer remembers that it failed; its run's report says so.
+        let Some(Ok(c)) = answer else {
+            return self.fallback(ctx, counters);
+        };
+        counters.planner_steps += 1;
+        let before = self.at();
+        self.role.set_lane_state(c.lane, c.alpha, c.beta);
+        self.log_lanes(before, x, ctx.t);
+        let changing = c.alpha.is_some();
+        self.mode = match c.status {
+            CommandStatus::Solved | CommandStatus::Reused => Mode::moving(changing),
+            CommandStatus::NoRoom => Mode::Waiting,
+            CommandStatus::Yield => Mode::Yield,
+            _ => {
+                counters.fallback_steps += 1;
+                Mode::Fallback
+            }
+        };
+        self.last_status = None;
+        (c.v, c.omega)
+    }
+
+    /// The lane changes a computer in the loop made, from its lanes `before` this step
+    /// and now (it reports lanes, not events), at `x` and time `t`.
+    fn log_lanes(&mut self, before: At, x: f64, t: f64) {
+        let (
+            At::Lane {
+                alpha: a0,
+                beta: b0,
+                ..
+            },
+            At::Lane {
+                lane, alpha, beta, ..
+            },
+        ) = (before, self.at())
+        else {
+            return;
+        };
+        if (a0.is_none() && b0.is_none()) && (alpha.is_some() || beta.is_some()) {
+            self.log.declared_x.get_or_insert(x);
+        }
+        if a0 == Some(lane) && alpha.is_none() {
+            let from = self.log.declared_x.take().unwrap_or(x);
+            self.log.changes.push((x - from, t));
+        }
+        if lane == self.trip.target_lane && alpha.is_none() {
+            self.log.in_target_at.get_or_insert(t);
         }
     }
 

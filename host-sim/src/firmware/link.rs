@@ -1,0 +1,229 @@
+//! One firmware image in QEMU and its UART as a serial-line CAN link: QEMU listens on a
+//! local TCP port for its first `-serial` device (the board's UART 0) and waits for this
+//! side before it starts the core, so no byte is lost; frames go out as SLCAN lines
+//! ([`can_gateway::slcan`]) and come back through can-gateway's reassembler, every CRC,
+//! alive counter and sender checked.
+
+use super::FirmwareError;
+use can_gateway::slcan::{self, Line, LineBuffer, MAX_LINE};
+use can_gateway::wire::{split_id, Message, MessageKind};
+use can_gateway::{encode, Frames, Instant, PlainFrame, Reassembler};
+use embedded_can::{Frame, Id};
+use std::io::{Read, Write};
+use std::net::{Ipv4Addr, TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+/// How long the world waits for an answer: far beyond a period's work in QEMU (a few
+/// milliseconds), short enough that a hung image stops the run.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(20);
+/// How long QEMU may take to load the image and open its socket.
+const START_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// A QEMU machine the firmware is built for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Board {
+    /// MPS2 AN386, Cortex-M4F.
+    An386,
+    /// MPS2 AN500, Cortex-M7.
+    An500,
+    /// MPS2 AN505, Cortex-M33.
+    An505,
+}
+
+impl Board {
+    /// The board of `run.sh`'s name (`an386`, `an500`, `an505`).
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "an386" => Some(Self::An386),
+            "an500" => Some(Self::An500),
+            "an505" => Some(Self::An505),
+            _ => None,
+        }
+    }
+
+    /// QEMU's `-machine` and `-cpu`.
+    pub fn qemu(self) -> (&'static str, &'static str) {
+        match self {
+            Self::An386 => ("mps2-an386", "cortex-m4"),
+            Self::An500 => ("mps2-an500", "cortex-m7"),
+            Self::An505 => ("mps2-an505", "cortex-m33"),
+        }
+    }
+}
+
+/// A running image and its serial line.
+pub struct Link {
+    child: Child,
+    stream: TcpStream,
+    /// Bytes read from the line and not yet taken, and where the next one is.
+    inbox: (Vec<u8>, usize),
+    lines: LineBuffer,
+    rx: Box<Reassembler<4>>,
+    /// The clock the reassembler restores stamps against (the world's).
+    pub now: Instant,
+    log: PathBuf,
+}
+
+impl Link {
+    /// Starts `elf` on `board` under `-icount shift=3,sleep=off`, its semihosting output
+    /// (the defmt log) into `log`, and opens its UART.
+    pub fn start(elf: &Path, board: Board, log: &Path) -> Result<Self, FirmwareError> {
+        let port = free_port()?;
+        let out = std::fs::File::create(log)
+            .map_err(|e| FirmwareError::Log(format!("{}: {e}", log.display())))?;
+        let (machine, cpu) = board.qemu();
+        let child = Command::new("qemu-system-arm")
+            .args([
+                "-machine",
+                machine,
+                "-cpu",
+                cpu,
+                "-nographic",
+                "-monitor",
+                "none",
+            ])
+            .args(["-semihosting-config", "enable=on,target=native"])
+            .args(["-icount", "shift=3,sleep=off"])
+            .arg("-serial")
+            .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
+            .arg("-kernel")
+            .arg(elf)
+            .stdin(Stdio::null())
+            .stdout(out)
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| FirmwareError::Start(format!("qemu-system-arm: {e}")))?;
+        let stream = connect(port)?;
+        let mut link = Self {
+            child,
+            stream,
+            inbox: (Vec::new(), 0),
+            lines: LineBuffer::new(),
+            rx: Box::default(),
+            now: Instant::EPOCH,
+            log: log.to_path_buf(),
+        };
+        // As python-can and slcand open an adapter: bit rate, then open the channel.
+        link.stream.write_all(b"S6\rO\r")?;
+        Ok(link)
+    }
+
+    /// The log file.
+    pub fn log(&self) -> &Path {
+        &self.log
+    }
+
+    /// Sends `m` from source address `sa` with alive counter `counter`.
+    pub fn send(&mut self, m: &Message<f64>, sa: u8, counter: u8) -> Result<(), FirmwareError> {
+        let frames: Frames<PlainFrame> = encode(m, sa, counter).map_err(FirmwareError::Encode)?;
+        let mut bytes = Vec::with_capacity(frames.len() * (MAX_LINE + 1));
+        let mut line = [0u8; MAX_LINE + 1];
+        for f in &frames {
+            let n = slcan::encode(f, &mut line).map_err(FirmwareError::Line)?;
+            bytes.extend_from_slice(line.get(..n).unwrap_or(&[]));
+        }
+        self.stream.write_all(&bytes)?;
+        Ok(())
+    }
+
+    /// The next whole message of `kind` from source address `sa` (others are dropped:
+    /// the adapter's answers to commands, anything else).
+    pub fn receive(&mut self, kind: MessageKind, sa: u8) -> Result<Message<f64>, FirmwareError> {
+        loop {
+            let byte = self.next_byte()?;
+            let Some(Ok(Line::Frame(f))) = self.lines.push::<PlainFrame>(byte) else {
+                continue;
+            };
+            let from = match f.id() {
+                Id::Extended(e) => split_id(e.as_raw()),
+                Id::Standard(_) => None,
+            };
+            if let Ok(Some(m)) = self.rx.push::<f64, _>(&f, self.now) {
+                if m.kind() == kind && from.is_some_and(|(_, _, s)| s == sa) {
+                    return Ok(m);
+                }
+            }
+        }
+    }
+
+    /// The next byte from the line, reading more when none is left.
+    fn next_byte(&mut self) -> Result<u8, FirmwareError> {
+        let (buf, pos) = &mut self.inbox;
+        if let Some(&b) = buf.get(*pos) {
+            *pos += 1;
+            return Ok(b);
+        }
+        buf.resize(4096, 0);
+        let n = self.stream.read(buf).map_err(|e| match e.kind() {
+            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => {
+                FirmwareError::Timeout("a message")
+            }
+            _ => FirmwareError::Io(e),
+        })?;
+        buf.truncate(n);
+        *pos = 0;
+        match buf.first() {
+            Some(&b) => {
+                *pos = 1;
+                Ok(b)
+            }
+            None => Err(FirmwareError::Timeout(
+                "a message: the firmware closed its line",
+            )),
+        }
+    }
+
+    /// Waits (at most `timeout`) for the image to exit; its status, if it did.
+    pub fn wait(mut self, timeout: Duration) -> Option<i32> {
+        let deadline = std::time::Instant::now() + timeout;
+        while std::time::Instant::now() < deadline {
+            match self.child.try_wait() {
+                Ok(Some(status)) => return status.code(),
+                Ok(None) => std::thread::sleep(Duration::from_millis(20)),
+                Err(_) => break,
+            }
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        None
+    }
+}
+
+impl Drop for Link {
+    fn drop(&mut self) {
+        // A link dropped before `wait` (a failed run) takes its QEMU with it.
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// A local TCP port nobody listens on now.
+fn free_port() -> Result<u16, FirmwareError> {
+    let l = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))?;
+    Ok(l.local_addr()?.port())
+}
+
+/// Connects to QEMU's UART socket once QEMU listens on it; answers time out.
+fn connect(port: u16) -> Result<TcpStream, FirmwareError> {
+    let deadline = std::time::Instant::now() + START_TIMEOUT;
+    loop {
+        match TcpStream::connect((Ipv4Addr::LOCALHOST, port)) {
+            Ok(s) => {
+                // Each line is sent whole: no waiting for the last one's delayed ACK.
+                s.set_nodelay(true)?;
+                s.set_read_timeout(Some(ANSWER_TIMEOUT))?;
+                return Ok(s);
+            }
+            Err(e) if std::time::Instant::now() >= deadline => {
+                return Err(FirmwareError::Start(format!(
+                    "its UART socket never opened: {e}"
+                )))
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+}
