@@ -317,6 +317,10 @@ mod tests {
         let Line::Frame(g) = g else { panic!("a frame") };
         assert_eq!(g.id(), Id::Extended(ExtendedId::new(0x18FF_1002).unwrap()));
         assert_eq!(g.data(), &[1, 2, 3, 4, 5, 6, 7, 8]);
+        // Lower-case data digits read as upper-case ones do.
+        let l: Line<PlainFrame> = parse(b"t1233a0fFcb").unwrap();
+        let Line::Frame(l) = l else { panic!("a frame") };
+        assert_eq!(l.data(), &[0xA0, 0xFF, 0xCB]);
         let r: Line<PlainFrame> = parse(b"R18FF10024").unwrap();
         let Line::Frame(r) = r else { panic!("a frame") };
         assert!(r.is_remote_frame());
@@ -342,6 +346,20 @@ mod tests {
         assert_eq!(p(b"O"), Ok(Line::Command(Command::Open)));
         assert_eq!(p(b"S6"), Ok(Line::Command(Command::Bitrate(6))));
         assert_eq!(p(b"Z1"), Ok(Line::Command(Command::Timestamps(true))));
+        assert_eq!(p(b"Z0"), Ok(Line::Command(Command::Timestamps(false))));
+        assert_eq!(p(b"S0"), Ok(Line::Command(Command::Bitrate(0))));
+        assert_eq!(p(b"S8"), Ok(Line::Command(Command::Bitrate(8))));
+        assert_eq!(p(b"Z2"), Err(SlcanError::Argument));
+        for (line, c) in [
+            (&b"O"[..], Command::Open),
+            (b"L", Command::ListenOnly),
+            (b"C", Command::Close),
+            (b"V", Command::Version),
+            (b"N", Command::SerialNumber),
+            (b"F", Command::Status),
+        ] {
+            assert_eq!(p(line), Ok(Line::Command(c)));
+        }
         assert_eq!(p(b""), Err(SlcanError::Empty));
         assert_eq!(p(b"S9"), Err(SlcanError::Argument));
         assert_eq!(p(b"Ox"), Err(SlcanError::Argument));
@@ -367,6 +385,50 @@ mod tests {
         assert_eq!(results[0], Err(SlcanError::TooLong));
         assert!(matches!(results[1], Ok(Line::Frame(_))));
         assert_eq!(results[2], Ok(Line::Command(Command::Open)));
+    }
+
+    #[test]
+    fn the_longest_line_reads_and_one_more_character_does_not() {
+        // T, 8 id digits, the length, 16 data digits, a 4-digit timestamp: 30.
+        let longest = b"T18FF1002801020304050607081A2B";
+        assert_eq!(longest.len(), MAX_LINE);
+        assert!(matches!(parse::<PlainFrame>(longest), Ok(Line::Frame(_))));
+        let mut b = LineBuffer::new();
+        let mut last = None;
+        for &byte in longest.iter().chain(b"0\r") {
+            last = b.push::<PlainFrame>(byte).or(last);
+        }
+        assert_eq!(last, Some(Err(SlcanError::TooLong)));
+        // The encoder's longest line (no timestamp) and its `\r` fit a buffer of
+        // MAX_LINE + 1.
+        let f = PlainFrame::new(ExtendedId::new(0x1FFF_FFFF).unwrap(), &[0xFF; 8]).unwrap();
+        let (_, n) = line(&f);
+        assert_eq!(n, MAX_LINE - 4 + 1);
+    }
+
+    #[test]
+    fn every_error_says_what_it_is() {
+        let all = [
+            SlcanError::Empty,
+            SlcanError::TooLong,
+            SlcanError::Unknown(b'd'),
+            SlcanError::NotHex,
+            SlcanError::Length,
+            SlcanError::Id,
+            SlcanError::Argument,
+            SlcanError::Buffer,
+        ];
+        let mut said: heapless::Vec<heapless::String<64>, 8> = heapless::Vec::new();
+        for e in all {
+            let mut text = heapless::String::<64>::new();
+            core::fmt::write(&mut text, format_args!("{e}")).unwrap();
+            assert!(text.contains("SLCAN"), "{e:?}: {text}");
+            assert!(!said.contains(&text), "{e:?} says what another says");
+            said.push(text).unwrap();
+        }
+        let mut text = heapless::String::<64>::new();
+        core::fmt::write(&mut text, format_args!("{}", SlcanError::Unknown(0x64))).unwrap();
+        assert!(text.contains("0x64"), "{text}");
     }
 
     proptest! {

@@ -1114,16 +1114,22 @@ fn commands_keep_their_f32_bits_and_refuse_garbage() {
         alpha: None,
         beta: None,
     };
+    // The edges are plausible: standing, the speed limit, a full turn per second.
+    let full_turn = 2.0 * core::f32::consts::PI;
     for (v, omega) in [
         (13.9_f32, 0.0_f32),
         (1e-7, -1e-9),
         (0.1 + 0.2, 0.333_333_34),
+        (0.0, full_turn),
+        (SPEED_LIMIT as f32, -full_turn),
     ] {
         let mut r = Reassembler::<8>::new();
         let got = push_all(&mut r, &Message::Command(cmd(v, omega)), 4, 1);
         let Ok(Some(Message::Command(c))) = got else {
             panic!("{got:?}")
         };
+        // Every field back, the lanes' "none" included.
+        assert_eq!(c.map(|x| x as f32), cmd(v, omega).map(|x| x as f32));
         assert_eq!(
             ((c.v as f32).to_bits(), (c.omega as f32).to_bits()),
             (v.to_bits(), omega.to_bits())
@@ -1181,6 +1187,35 @@ fn commands_keep_their_f32_bits_and_refuse_garbage() {
         bad(&|b| b[beta] = 0x1F),
         Err(DecodeError::OutOfRange(Field::Flag))
     );
+}
+
+/// What an encoder cannot put on the wire in a command, it refuses; and a command is its
+/// sender's: any vehicle may send one, the time master not.
+#[test]
+fn commands_are_encoded_only_when_they_fit_and_come_from_vehicles() {
+    use crate::wire::{Command, CommandStatus};
+    let cmd = |v: f32, omega: f32| Command {
+        period: 7,
+        v: f64::from(v),
+        omega: f64::from(omega),
+        status: CommandStatus::Solved,
+        lane: 0,
+        alpha: None,
+        beta: None,
+    };
+    let enc = |c: Command<f64>| encode::<f64, TestFrame>(&Message::Command(c), 4, 1).map(|_| ());
+    let mut c = cmd(1.0, 0.0);
+    c.v = f64::NAN;
+    assert_eq!(enc(c), Err(EncodeError::OutOfRange(Field::Speed)));
+    let mut c = cmd(1.0, 0.0);
+    c.omega = f64::INFINITY;
+    assert_eq!(enc(c), Err(EncodeError::OutOfRange(Field::YawRate)));
+    let mut c = cmd(1.0, 0.0);
+    c.lane = NO_LANE;
+    assert_eq!(enc(c), Err(EncodeError::OutOfRange(Field::Lane)));
+    let mut c = cmd(1.0, 0.0);
+    c.beta = Some(NO_LANE);
+    assert_eq!(enc(c), Err(EncodeError::OutOfRange(Field::Lane)));
     // A command is its sender's: any vehicle may send one, the time master not.
     let mut r = Reassembler::<8>::new();
     assert_eq!(
@@ -1209,6 +1244,48 @@ fn ego_states_come_only_from_the_time_master() {
             Err(DecodeError::SenderMismatch),
             "from {sa:#x}"
         );
+    }
+    // A road has 1 to 14 lanes: the encoder writes no other count, the decoder reads none.
+    for lanes in [0u8, NO_LANE, 200] {
+        let m = Message::Ego {
+            segment,
+            lanes,
+            state,
+            v_ref: 27.8,
+        };
+        assert_eq!(
+            encode::<f64, TestFrame>(&m, CLOCK_ADDRESS, 1).map(|_| ()),
+            Err(EncodeError::OutOfRange(Field::Lane))
+        );
+    }
+    let edge = |lanes| Message::Ego {
+        segment,
+        lanes,
+        state,
+        v_ref: 27.8,
+    };
+    for lanes in [1u8, 14] {
+        let mut r = Reassembler::<8>::new();
+        assert!(matches!(
+            push_all(&mut r, &edge(lanes), CLOCK_ADDRESS, 1),
+            Ok(Some(_))
+        ));
+    }
+    let written: Frames<TestFrame> = encode(&edge(2), CLOCK_ADDRESS, 1).unwrap();
+    let at = crate::layout::EGO.road_lanes.start;
+    for bad in [0u8, NO_LANE] {
+        let mut bytes = super::encode::protected(&edge(2), CLOCK_ADDRESS, 1).unwrap();
+        bytes[at] = bad;
+        bytes[27] = message_crc(MessageKind::Ego, CLOCK_ADDRESS, 1, &bytes[..27]);
+        let mut r = Reassembler::<8>::new();
+        let mut res = Ok(None);
+        for (i, f) in written.iter().enumerate() {
+            let mut data = [0u8; 8];
+            data.copy_from_slice(f.data());
+            data[1..].copy_from_slice(&bytes[i * 7..i * 7 + 7]);
+            res = r.push::<f64, _>(&TestFrame::new(f.id(), &data).unwrap(), NOW);
+        }
+        assert_eq!(res, Err(DecodeError::OutOfRange(Field::Lane)), "{bad}");
     }
     let mut r = Reassembler::<8>::new();
     let got = push_all(&mut r, &ego, CLOCK_ADDRESS, 1);
