@@ -1100,20 +1100,24 @@ mod mutation_audit {
     }
 }
 
+/// A solved command in lane 0, changing to none, its speed and yaw rate `v` and `omega`
+/// (as an f32 planner computed them).
+fn cmd(v: f32, omega: f32) -> crate::wire::Command<f64> {
+    crate::wire::Command {
+        period: 7,
+        v: f64::from(v),
+        omega: f64::from(omega),
+        status: crate::wire::CommandStatus::Solved,
+        lane: 0,
+        alpha: None,
+        beta: None,
+    }
+}
+
 /// A command carries the f32 its planner computed, bit for bit; one that is not a
 /// plausible command (NaN, reversing, spinning, an unknown status, no lane) is refused.
 #[test]
 fn commands_keep_their_f32_bits_and_refuse_garbage() {
-    use crate::wire::{Command, CommandStatus};
-    let cmd = |v: f32, omega: f32| Command {
-        period: 7,
-        v: f64::from(v),
-        omega: f64::from(omega),
-        status: CommandStatus::Solved,
-        lane: 0,
-        alpha: None,
-        beta: None,
-    };
     // The edges are plausible: standing, the speed limit, a full turn per second.
     let full_turn = 2.0 * core::f32::consts::PI;
     for (v, omega) in [
@@ -1193,17 +1197,9 @@ fn commands_keep_their_f32_bits_and_refuse_garbage() {
 /// sender's: any vehicle may send one, the time master not.
 #[test]
 fn commands_are_encoded_only_when_they_fit_and_come_from_vehicles() {
-    use crate::wire::{Command, CommandStatus};
-    let cmd = |v: f32, omega: f32| Command {
-        period: 7,
-        v: f64::from(v),
-        omega: f64::from(omega),
-        status: CommandStatus::Solved,
-        lane: 0,
-        alpha: None,
-        beta: None,
+    let enc = |c: crate::wire::Command<f64>| {
+        encode::<f64, TestFrame>(&Message::Command(c), 4, 1).map(|_| ())
     };
-    let enc = |c: Command<f64>| encode::<f64, TestFrame>(&Message::Command(c), 4, 1).map(|_| ());
     let mut c = cmd(1.0, 0.0);
     c.v = f64::NAN;
     assert_eq!(enc(c), Err(EncodeError::OutOfRange(Field::Speed)));

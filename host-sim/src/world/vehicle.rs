@@ -385,6 +385,13 @@ impl<const N: usize> Vehicle<N> {
         }
     }
 
+    /// Its computer in the loop, if it has one.
+    fn computer_mut(&mut self) -> Option<&mut crate::firmware::Computer> {
+        self.role
+            .brain_mut()
+            .and_then(|b| b.computer.as_deref_mut())
+    }
+
     /// Its computer in the loop, taken away (at the end of a run).
     pub(crate) fn take_computer(&mut self) -> Option<Box<crate::firmware::Computer>> {
         self.role.brain_mut().and_then(|b| b.computer.take())
@@ -410,9 +417,13 @@ impl<const N: usize> Vehicle<N> {
     /// A computer in the loop told where the vehicle is at `now` on `net` (its answer is
     /// [`Vehicle::broadcast`]'s); nothing for another vehicle.
     pub fn tell_computer(&mut self, now: Instant, net: &Network) {
+        // Checked first: the ego state is built only for a computer (every vehicle,
+        // every period, passes here).
+        if !self.in_the_loop() {
+            return;
+        }
         let ego = self.road_limits(net).and_then(|r| self.ego(now, r));
-        let computer = self.role.brain_mut().and_then(|b| b.computer.as_mut());
-        if let (Some(c), Some(ego)) = (computer, ego) {
+        if let (Some(c), Some(ego)) = (self.computer_mut(), ego) {
             // A failure is remembered by the computer, and fails its run.
             let _ = c.tell(&ego);
         }
@@ -425,8 +436,7 @@ impl<const N: usize> Vehicle<N> {
         let At::Lane { seg, .. } = self.at() else {
             return self.message(now);
         };
-        let computer = self.role.brain_mut().and_then(|b| b.computer.as_mut());
-        match computer.map(|c| c.state()) {
+        match self.computer_mut().map(|c| c.state()) {
             Some(Ok(state)) => Message::State {
                 state,
                 segment: seg,
@@ -438,7 +448,7 @@ impl<const N: usize> Vehicle<N> {
     /// A computer in the loop given what the vehicle heard (`inbox`) and the tick (its
     /// command is read in [`Vehicle::decide`]); nothing for another vehicle.
     pub fn tick_computer(&mut self, inbox: &[Received]) {
-        let Some(c) = self.role.brain_mut().and_then(|b| b.computer.as_mut()) else {
+        let Some(c) = self.computer_mut() else {
             return;
         };
         let heard: Vec<VehicleState<f64>> = inbox
@@ -800,11 +810,7 @@ impl<const N: usize> Vehicle<N> {
     /// computer that does not answer is braked (the certified fallback) and its run fails
     /// at its end.
     fn decide_in_loop(&mut self, x: f64, ctx: &StepCtx<'_>, counters: &mut Counters) -> (f64, f64) {
-        let answer = self
-            .role
-            .brain_mut()
-            .and_then(|b| b.computer.as_mut())
-            .map(|c| c.answer());
+        let answer = self.computer_mut().map(|c| c.answer());
         // The computer remembers that it failed; its run's report says so.
         let Some(Ok(c)) = answer else {
             return self.fallback(ctx, counters);
