@@ -35,7 +35,7 @@ PATTERNS = {
     "footprint": r"footprint \(N=\d+\): flash=(\d+) B, static RAM=(\d+) B \(of which (\d+) B measurement buffer\), peak stack=(\d+) B",
 }
 
-# The computer in the loop (src/sil.rs, driven by sil_check.py).
+# The computer in the loop (src/sil.rs and src/sil_node.rs, driven by sil_check.py).
 SIL_PATTERNS = {
     "sil": r"sil: (\d+) periods, worst (\d+) instructions per period \(h = \d+\), (\d+) over h; peak stack (\d+) B",
     "sil_footprint": r"sil: footprint \(N=\d+\): flash=(\d+) B, static RAM=(\d+) B",

@@ -6,7 +6,7 @@
 # BOARD: an386 (Cortex-M4F), an500 (Cortex-M7) or an505 (Cortex-M33); N: 20 or 50.
 # OUT gets the decoded log (defmt-print, one line per message). The exit status is the
 # firmware's: 0 only if both scenarios met every check (src/main.rs), 2 for bad arguments.
-# With `sil`, the vehicle computer in the loop (src/sil.rs) runs instead, driven over its
+# With `sil`, the vehicle computer in the loop (src/sil.rs, src/sil_node.rs) runs instead, driven over its
 # UART by sil_check.py (python-can's slcan interface, cantools): 0 only if both sides'
 # checks passed. That needs Python with python-can, pyserial and cantools.
 # Needs qemu-system-arm and defmt-print (`cargo install defmt-print`). FW_SECOC_KEY, if

@@ -202,6 +202,8 @@ pub fn approach<const N: usize>(
     planner
         .set_bus_resolution(RESOLUTION.0, RESOLUTION.1)
         .ok()?;
+    // A period has a deadline: after a fallback, solve cold (Planner::set_warm_from_fallback).
+    planner.set_warm_from_fallback(false);
     node.clear();
     let mut out = Approach {
         x: 0.0,
@@ -297,6 +299,8 @@ pub fn lane_change<const N: usize>(
     let params = *lp.params();
     lp.set_bus_resolution(RESOLUTION.0, RESOLUTION.1).ok()?;
     single.set_bus_resolution(RESOLUTION.0, RESOLUTION.1).ok()?;
+    lp.set_warm_from_fallback(false);
+    single.set_warm_from_fallback(false);
     // A new road: the single-lane planner starts cold, as after a handover.
     single.reset();
     node.clear();

@@ -60,8 +60,8 @@
 //! <!-- resources: begin (firmware-example/resources.py) -->
 //! | N | `size_of` `Planner` | `size_of` `LanePlanner` | stack per call: approach | stack per call: lane change, both planners | peak stack, whole firmware | instructions per single-lane step, median / worst | per lane-change step, median / worst |
 //! |---|---|---|---|---|---|---|---|
-//! | 20 | 5,272 B | 8,784 B | 3,176 B | 3,840 B | 4,104 B | 50,760 / 330,580 | 197,545 / 203,365 |
-//! | 50 | 12,992 B | 16,624 B | 6,472 B | 7,624 B | 7,880 B | 125,490 / 1,050,495 | 255,060 / 701,370 |
+//! | 20 | 5,276 B | 8,788 B | 3,176 B | 3,752 B | 4,016 B | 50,870 / 330,690 | 198,510 / 204,315 |
+//! | 50 | 12,996 B | 16,628 B | 6,472 B | 7,624 B | 7,880 B | 125,695 / 1,050,700 | 254,430 / 700,745 |
 //! <!-- resources: end -->
 
 use crate::mpc::CostWeights;

@@ -1,5 +1,6 @@
-//! The vehicle computer in the loop (`src/sil.rs`): the planner as one vehicle of a world
-//! simulated on the other end of the board's UART, serial-line CAN between them. Built
+//! The vehicle computer in the loop (`src/sil.rs`, its node in `src/sil_node.rs`): the
+//! planner as one vehicle of a world simulated on the other end of the board's UART,
+//! serial-line CAN between them. Built
 //! beside the scripted program (`src/main.rs`) from the same board, clock and measurement
 //! modules; `run.sh BOARD N OUT sil` builds it and drives it with `sil_check.py`.
 #![no_std]
@@ -16,6 +17,8 @@ mod clock;
 mod measure;
 #[path = "../sil.rs"]
 mod sil;
+#[path = "../sil_node.rs"]
+mod sil_node;
 #[path = "../uart.rs"]
 mod uart;
 

@@ -184,6 +184,8 @@ impl Computer {
                 .is_ok();
         let (vehicle, board, periods) = (self.id, self.board, self.period);
         let log = self.link.log().display().to_string();
+        let (rx, tx) = self.link.serial();
+        let serial = [rx.display().to_string(), tx.display().to_string()];
         let exit = if ended {
             self.link.wait(EXIT_TIMEOUT)
         } else {
@@ -196,6 +198,7 @@ impl Computer {
             exit,
             failed: self.failed,
             log,
+            serial,
         }
     }
 }

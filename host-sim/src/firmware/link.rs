@@ -3,6 +3,11 @@
 //! side before it starts the core, so no byte is lost; frames go out as SLCAN lines
 //! ([`can_gateway::slcan`]) and come back through can-gateway's reassembler, every CRC,
 //! alive counter and sender checked.
+//!
+//! Every byte that crosses the line is kept, each way in a file beside the log
+//! ([`Link::serial`]): the bytes the image received are all its inputs, so replaying them
+//! into the same node on the host (`tests/examples/sil_mirror.rs`) must give the bytes it
+//! sent, which is how its commands in the loop are compared with the host planner's.
 
 use super::FirmwareError;
 use can_gateway::slcan::{self, Line, LineBuffer, MAX_LINE};
@@ -64,6 +69,35 @@ pub struct Link {
     /// The clock the reassembler restores stamps against (the world's).
     pub now: Instant,
     log: PathBuf,
+    /// What the image received and what it sent, byte for byte.
+    serial: Serial,
+}
+
+/// The two halves of a serial line's record.
+struct Serial {
+    to: std::io::BufWriter<std::fs::File>,
+    from: std::io::BufWriter<std::fs::File>,
+    paths: (PathBuf, PathBuf),
+}
+
+impl Serial {
+    /// Records beside `log`: `<log>.rx.slcan` (into the image) and `.tx.slcan` (out of it).
+    fn beside(log: &Path) -> Result<Self, FirmwareError> {
+        let paths = (
+            log.with_extension("rx.slcan"),
+            log.with_extension("tx.slcan"),
+        );
+        let open = |p: &Path| {
+            std::fs::File::create(p)
+                .map(std::io::BufWriter::new)
+                .map_err(|e| FirmwareError::Log(format!("{}: {e}", p.display())))
+        };
+        Ok(Self {
+            to: open(&paths.0)?,
+            from: open(&paths.1)?,
+            paths,
+        })
+    }
 }
 
 impl Link {
@@ -73,6 +107,7 @@ impl Link {
         let port = free_port()?;
         let out = std::fs::File::create(log)
             .map_err(|e| FirmwareError::Log(format!("{}: {e}", log.display())))?;
+        let serial = Serial::beside(log)?;
         let (machine, cpu) = board.qemu();
         let child = Command::new("qemu-system-arm")
             .args([
@@ -104,15 +139,28 @@ impl Link {
             rx: Box::default(),
             now: Instant::EPOCH,
             log: log.to_path_buf(),
+            serial,
         };
         // As python-can and slcand open an adapter: bit rate, then open the channel.
-        link.stream.write_all(b"S6\rO\r")?;
+        link.write(b"S6\rO\r")?;
         Ok(link)
     }
 
     /// The log file.
     pub fn log(&self) -> &Path {
         &self.log
+    }
+
+    /// The files of what the image received and what it sent (whole once it has ended).
+    pub fn serial(&self) -> (&Path, &Path) {
+        (&self.serial.paths.0, &self.serial.paths.1)
+    }
+
+    /// Writes `bytes` to the line, and to its record.
+    fn write(&mut self, bytes: &[u8]) -> Result<(), FirmwareError> {
+        self.serial.to.write_all(bytes)?;
+        self.stream.write_all(bytes)?;
+        Ok(())
     }
 
     /// Sends `m` from source address `sa` with alive counter `counter`.
@@ -124,8 +172,7 @@ impl Link {
             let n = slcan::encode(f, &mut line).map_err(FirmwareError::Line)?;
             bytes.extend_from_slice(line.get(..n).unwrap_or(&[]));
         }
-        self.stream.write_all(&bytes)?;
-        Ok(())
+        self.write(&bytes)
     }
 
     /// The next whole message of `kind` from source address `sa` (others are dropped:
@@ -163,6 +210,7 @@ impl Link {
             _ => FirmwareError::Io(e),
         })?;
         buf.truncate(n);
+        self.serial.from.write_all(buf)?;
         *pos = 0;
         match buf.first() {
             Some(&b) => {
@@ -177,6 +225,7 @@ impl Link {
 
     /// Waits (at most `timeout`) for the image to exit; its status, if it did.
     pub fn wait(mut self, timeout: Duration) -> Option<i32> {
+        self.flush();
         let deadline = std::time::Instant::now() + timeout;
         while std::time::Instant::now() < deadline {
             match self.child.try_wait() {
@@ -191,8 +240,18 @@ impl Link {
     }
 }
 
+impl Link {
+    /// Writes out what is kept of the line; a record that cannot be written is only
+    /// incomplete (a mirror of it will say so), the run itself is not affected.
+    fn flush(&mut self) {
+        let _ = self.serial.to.flush();
+        let _ = self.serial.from.flush();
+    }
+}
+
 impl Drop for Link {
     fn drop(&mut self) {
+        self.flush();
         // A link dropped before `wait` (a failed run) takes its QEMU with it.
         if let Ok(None) = self.child.try_wait() {
             let _ = self.child.kill();

@@ -51,6 +51,10 @@ pub struct FirmwareReport {
     pub failed: Option<String>,
     /// Its defmt log, undecoded (`defmt-print -e ELF < LOG` reads it).
     pub log: String,
+    /// Its serial line, byte for byte: what it received, then what it sent. The bytes
+    /// received are all its inputs: the host's mirror of the node
+    /// (`tests/examples/sil_mirror.rs`) replays them and must send the same bytes.
+    pub serial: [String; 2],
 }
 
 impl FirmwareReport {

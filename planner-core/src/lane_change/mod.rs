@@ -482,6 +482,18 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         self.invariant = invariant;
     }
 
+    /// Whether the speed MPC's solve after a fallback starts from the fallback's braking
+    /// plan (`true`, the default) or cold: [`Planner::set_warm_from_fallback`], where the
+    /// firmware's reason for `false` is measured.
+    pub fn set_warm_from_fallback(&mut self, warm: bool) {
+        self.speed.set_warm_from_fallback(warm);
+    }
+
+    /// See [`LanePlanner::set_warm_from_fallback`].
+    pub fn warm_from_fallback(&self) -> bool {
+        self.speed.warm_from_fallback()
+    }
+
     /// Sets the braking limit |amin| (m/s²) of the weakest-braking vehicle that may be
     /// behind this one without declaring its own limit (a sensor return, a vehicle that
     /// does not cooperate or sent none): the Lane Change Protocol's check (17) that a
