@@ -79,6 +79,8 @@ pub struct Figures {
     pub bad_lines: u32,
     /// Frames that could not be sent.
     pub lost: u32,
+    /// The most neighbours the planner saw at once (the view holds [`NEIGHBOURS`]).
+    pub neighbours: u32,
 }
 
 /// The node: its link, codec, view and planner bookkeeping (all `const`-constructible,
@@ -127,6 +129,7 @@ impl Node {
                 refused: 0,
                 bad_lines: 0,
                 lost: 0,
+                neighbours: 0,
             },
         }
     }
@@ -311,6 +314,8 @@ impl Node {
         self.view.forget_older_than(self.now, SILENT);
         self.view
             .others(self.now, lp.params().length(), &mut self.others);
+        let seen = u32::try_from(self.others.len()).unwrap_or(u32::MAX);
+        self.figures.neighbours = self.figures.neighbours.max(seen);
         let s = ego.state;
         let obs = LaneObservation {
             pose: Pose {

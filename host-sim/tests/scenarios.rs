@@ -508,3 +508,23 @@ fn an_intersection_too_tight_for_its_trucks_is_refused() {
     let car = text(12.0, 0.0).replace("length = 16.5\nbrake = 4.5\n", "");
     load_text(&car);
 }
+
+/// The dense road of the firmware in the loop (scenarios/dense.toml): 33 vehicles on 3
+/// lanes, every third one changing lanes, so that each hears 32 others. With host
+/// planners only: safe and every goal met, so a computer in the loop is judged on a road
+/// the planners can drive.
+#[test]
+fn the_dense_road_is_driven_safely_with_32_neighbours_each() {
+    let sc = load(&builtin("dense.toml")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(sc.vehicles.len(), 33, "32 neighbours for each");
+    let s = go(sc, None, &mut |_| {});
+    let found = (
+        s.collisions,
+        s.invariant_violations,
+        s.limit_violations,
+        s.off_road,
+    );
+    assert_eq!(found, (0, 0, 0, 0), "{s:?}");
+    assert_eq!((s.goals, s.goals_met), (33, 33), "{s:?}");
+    assert!(s.completed, "{s:?}");
+}

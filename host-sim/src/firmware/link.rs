@@ -21,8 +21,10 @@ use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 /// How long the world waits for an answer: far beyond a period's work in QEMU (a few
-/// milliseconds), short enough that a hung image stops the run.
-const ANSWER_TIMEOUT: Duration = Duration::from_secs(20);
+/// milliseconds of host time, a fraction of a second for a dense road's frames), and
+/// beyond a machine shared with many other QEMUs (a run with nine of them on two cores
+/// once waited more than 20 s); short enough that a hung image stops the run.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(60);
 /// How long QEMU may take to load the image and open its socket.
 const START_TIMEOUT: Duration = Duration::from_secs(20);
 
