@@ -518,13 +518,7 @@ fn the_dense_road_is_driven_safely_with_32_neighbours_each() {
     let sc = load(&builtin("dense.toml")).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(sc.vehicles.len(), 33, "32 neighbours for each");
     let s = go(sc, None, &mut |_| {});
-    let found = (
-        s.collisions,
-        s.invariant_violations,
-        s.limit_violations,
-        s.off_road,
-    );
-    assert_eq!(found, (0, 0, 0, 0), "{s:?}");
+    common::assert_safe(&s);
     assert_eq!((s.goals, s.goals_met), (33, 33), "{s:?}");
     assert!(s.completed, "{s:?}");
 }
