@@ -59,6 +59,38 @@ impl Clock {
         Clock(at)
     }
 
+    /// Stops SysTick, counter and interrupt: [`Clock::now`] stands still until
+    /// [`Clock::restart`]. Under QEMU's `-icount sleep=off` a core in `wfi` with no timer
+    /// running halts until an interrupt, instead of jumping from tick to tick.
+    #[allow(dead_code)]
+    pub fn stop(&mut self) {
+        // SAFETY: `start` took SysTick (its SYST handle), so nothing else drives it; this
+        // clears its enable and interrupt bits.
+        unsafe { (*SYST::PTR).csr.modify(|csr| csr & !0b11) }
+    }
+
+    /// Starts SysTick again from millisecond 0, as [`Clock::start`] did: [`Clock::now`]
+    /// counts from here.
+    // The computer in the loop's (src/sil.rs), as is `stop`; the scripted program sleeps
+    // with SysTick running.
+    #[allow(dead_code)]
+    pub fn restart(&mut self) {
+        // SAFETY: as in `stop`; the same register writes as `start`'s.
+        let syst = unsafe { &*SYST::PTR };
+        unsafe {
+            syst.cvr.write(0);
+            syst.csr.modify(|csr| csr | 0b1);
+        }
+        for _ in 0..1_000 {
+            if SYST::get_current() != 0 {
+                break;
+            }
+        }
+        MILLIS.store(0, Ordering::Relaxed);
+        // SAFETY: as above.
+        unsafe { syst.csr.modify(|csr| csr | 0b10) }
+    }
+
     /// The node's time now: the start reading plus the ticks since, in microseconds.
     pub fn instant(&self) -> Instant {
         let us = self.now() / TICKS_PER_US;

@@ -59,7 +59,7 @@ pub fn run() -> ! {
         board::exit(false)
     };
     // The clock only times the node's work: its time is the world's (the ego states').
-    let clock = Clock::start(cp.SYST, Instant::from_micros(0));
+    let mut clock = Clock::start(cp.SYST, Instant::from_micros(0));
     let per_tick = measure::calibrate(&clock);
     defmt::info!(
         "sil: board {=str} ({=str}), N={=usize}, {=u32} instructions per 100 SysTick ticks; SLCAN on UART 0",
@@ -70,12 +70,22 @@ pub fn run() -> ! {
     );
     // SAFETY: the board's UART 0, driven by nothing else.
     let mut uart = unsafe { Uart::new(board::UART0, board::SYSTICK_HZ) };
+    // Between periods the core sleeps until a byte comes, SysTick stopped: only the
+    // work is timed, and under QEMU a waiting computer costs its host no CPU.
+    uart.listen();
+    // SAFETY: the receive interrupt's handler (`DefaultHandler`) only acknowledges it, so
+    // unmasking it breaks no critical section.
+    unsafe { cortex_m::peripheral::NVIC::unmask(UartRx) };
+    clock.stop();
     // SAFETY: `run` runs once and never returns; these are the only references.
     let node = unsafe { &mut *core::ptr::addr_of_mut!(NODE) };
     let mut slot = Some(unsafe { &mut *core::ptr::addr_of_mut!(SLOT) });
     let mut planner: Option<&mut LanePlanner<f32, N>> = None;
     loop {
-        let Some(byte) = uart.read() else { continue };
+        let Some(byte) = uart.read() else {
+            uart.wait();
+            continue;
+        };
         match node.take(byte, &mut uart) {
             Event::None => {}
             Event::Refused(id, e) => {
@@ -96,20 +106,45 @@ pub fn run() -> ! {
                     node.figures.refused += 1;
                     continue;
                 };
-                // Start on a millisecond's boundary: the only interrupt is SysTick's, so
-                // `wfi` returns at its next tick. The world sends nothing until the command
-                // (no byte can be missed), and the work's SysTick count no longer depends
-                // on when the tick arrived: under QEMU's -icount, each run counts the same.
-                cortex_m::asm::wfi();
+                // SysTick starts at the tick, from a millisecond's boundary, so the work's
+                // count does not depend on when the tick arrived: under QEMU's -icount,
+                // each run counts the same.
+                clock.restart();
                 let t0 = clock.now();
                 node.plan(lp, period, &mut uart);
                 let ticks = clock.now() - t0;
+                clock.stop();
                 count(node, period, ticks * u64::from(per_tick) / 100);
                 if last {
                     finish(node)
                 }
             }
         }
+    }
+}
+
+/// UART 0's receive interrupt, which wakes the waiting core.
+#[derive(Debug, Clone, Copy)]
+struct UartRx;
+
+// SAFETY: the board's IRQ number for UART 0's receive interrupt.
+unsafe impl cortex_m::interrupt::InterruptNumber for UartRx {
+    fn number(self) -> u16 {
+        board::UART0_RX_IRQ
+    }
+}
+
+/// Every interrupt without a handler of its own: UART 0's receive interrupt is
+/// acknowledged (the byte stays for the loop to read); any other is a fault of the
+/// build, and the node exits with failure.
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    if irqn == board::UART0_RX_IRQ as i16 {
+        // SAFETY: UART 0 is this board's CMSDK APB UART.
+        unsafe { Uart::clear_receive_interrupt(board::UART0) }
+    } else {
+        defmt::error!("sil: unexpected interrupt {=i16}", irqn);
+        board::exit(false)
     }
 }
 

@@ -12,3 +12,5 @@ pub const CORE: &str = "Cortex-M7";
 pub const SYSTICK_HZ: u32 = 25_000_000;
 /// UART 0 (`-serial`'s first device): the CMSDK APB UART at 0x4000_4000, as on the AN386.
 pub const UART0: usize = 0x4000_4000;
+/// UART 0's receive interrupt: QEMU's `mps2` machines wire it to IRQ 0 (transmit to 1).
+pub const UART0_RX_IRQ: u16 = 0;

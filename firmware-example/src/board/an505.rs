@@ -14,3 +14,6 @@ pub const CORE: &str = "Cortex-M33";
 pub const SYSTICK_HZ: u32 = 20_000_000;
 /// UART 0 (`-serial`'s first device): the CMSDK APB UART's Secure alias (0x4020_0000 + 0x1000_0000), behind a PPC that leaves it Secure after reset.
 pub const UART0: usize = 0x5020_0000;
+/// UART 0's receive interrupt: QEMU's `mps2-an505` wires the UART 0 of the expansion
+/// area to IRQ 32 (receive) and 33 (transmit), as the AN505's interrupt map lists them.
+pub const UART0_RX_IRQ: u16 = 32;
