@@ -106,10 +106,14 @@ pub fn run() -> ! {
                     node.figures.refused += 1;
                     continue;
                 };
-                // SysTick starts at the tick, from a millisecond's boundary, so the work's
-                // count does not depend on when the tick arrived: under QEMU's -icount,
-                // each run counts the same.
+                // SysTick starts at the tick, and the work starts on its first millisecond
+                // boundary: its interrupt ends this `wfi` (the world sends nothing until
+                // the command, so no byte can end it), so the count does not depend on
+                // the phase SysTick started at. Runs under a loaded host still differ by
+                // up to three ticks in a period's count (15 instructions in 1,250,000),
+                // where the polling node counted the same every run.
                 clock.restart();
+                cortex_m::asm::wfi();
                 let t0 = clock.now();
                 node.plan(lp, period, &mut uart);
                 let ticks = clock.now() - t0;

@@ -12,8 +12,26 @@ use can_gateway::wire::{Command, CommandStatus, Message, POS_RES, SPEED_RES};
 use can_gateway::{encode, DecodeError, Frames, Instant, PlainFrame, Reassembler};
 use planner_core::{
     BodyLength, BrakeLimit, CostWeights, Duration, LaneObservation, LanePlanner, LanePlannerSlot,
-    MpcSolver, Other, Params, Pose, Road, StepStatus, VehicleState, WorldView,
+    Method, MpcSolver, Other, Params, Pose, Road, Settings, StepStatus, VehicleState, WorldView,
 };
+
+/// The speed MPC's Newton steps in a period at horizon `n`: its iteration cap, which is a
+/// deadline (`Settings::with_answer_at_cap`: at the cap the iterate is applied if the
+/// exact verification of (10) passes, else the certified fallback). A step costs about
+/// 2,000 instructions per horizon step on the M4F (100,000 at N = 50), and the rest of a
+/// period's work, the lateral QP included, up to REST_INSTRUCTIONS: what is left of h's
+/// 1,250,000 instructions, divided.
+pub const fn speed_steps(n: usize) -> u32 {
+    const BUDGET: usize = 1_250_000;
+    const REST_INSTRUCTIONS: usize = 350_000;
+    const PER_HORIZON_STEP: usize = 2_000;
+    let steps = (BUDGET - REST_INSTRUCTIONS) / (PER_HORIZON_STEP * n);
+    if steps > 60 {
+        60
+    } else {
+        steps as u32
+    }
+}
 
 /// The most neighbours the node tracks: a dense multi-lane road's 32 in range.
 pub const NEIGHBOURS: usize = 32;
@@ -81,6 +99,9 @@ pub struct Figures {
     pub lost: u32,
     /// The most neighbours the planner saw at once (the view holds [`NEIGHBOURS`]).
     pub neighbours: u32,
+    /// Steps whose speed plan was the solver's iterate at its deadline ([`speed_steps`]),
+    /// verified and applied.
+    pub capped: u32,
 }
 
 /// The node: its link, codec, view and planner bookkeeping (all `const`-constructible,
@@ -130,6 +151,7 @@ impl Node {
                 bad_lines: 0,
                 lost: 0,
                 neighbours: 0,
+                capped: 0,
             },
         }
     }
@@ -270,6 +292,15 @@ impl Node {
         // A period has a deadline: after a fallback the speed MPC starts cold, which
         // bounds the worst solve better than the braking plan's vertex does.
         lp.set_warm_from_fallback(false);
+        // and its cold starts begin with multipliers of the cost gradient's size, which
+        // at N = 50 halves the iterations of a start from standing; its iteration cap is
+        // a deadline (`speed_steps`).
+        let settings = Settings::default()
+            .with_scaled_cold_start(true)
+            .with_max_iter(speed_steps(N))
+            .ok()?
+            .with_answer_at_cap(true);
+        lp.set_solver_settings(settings);
         self.last = Some(Last {
             lane: ego.state.lane,
             alpha: None,
@@ -338,7 +369,12 @@ impl Node {
         let cmd = match lp.step(&obs) {
             Ok(c) => {
                 let speed = match c.status {
-                    StepStatus::Solved { iterations, .. } => iterations,
+                    StepStatus::Solved { iterations, method } => {
+                        if method == Method::Capped {
+                            self.figures.capped += 1;
+                        }
+                        iterations
+                    }
                     _ => 0,
                 };
                 self.last_iterations = (speed, c.lateral_iterations);

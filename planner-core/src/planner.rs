@@ -10,7 +10,7 @@ use crate::params::Params;
 use crate::real::Real;
 use crate::reuse::{self, ReusePolicy};
 use crate::safety::{self, BrakeLimit, Invariant};
-use crate::solver::{IpmSolver, Method, MpcSolver, SolveError};
+use crate::solver::{IpmSolver, Method, MpcSolver, Settings, SolveError};
 
 /// Another vehicle in the ego's lane, as the ego knows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -432,6 +432,12 @@ impl<F: Real, const N: usize> Planner<F, N, IpmSolver<F, N>> {
         *invariant = Invariant::Paper;
         *warm_from_fallback = true;
         Ok(())
+    }
+
+    /// Sets the speed solver's settings (they take effect at the next solve; its warm
+    /// state stays): e.g. [`Settings::with_scaled_cold_start`], which the firmware sets.
+    pub fn set_solver_settings(&mut self, settings: Settings<F>) {
+        self.solver.set_settings(settings);
     }
 }
 

@@ -386,6 +386,16 @@ impl<F: Real, const N: usize> LanePlanner<F, N, IpmSolver<F, N>> {
         *weakest_brake = params.brake();
         Ok(())
     }
+
+    /// Sets its speed MPC's solver settings: [`Planner::set_solver_settings`].
+    pub fn set_solver_settings(&mut self, settings: crate::solver::Settings<F>) {
+        self.speed.set_solver_settings(settings);
+    }
+
+    /// Its speed MPC's solver settings.
+    pub fn solver_settings(&self) -> &crate::solver::Settings<F> {
+        self.speed.solver().settings()
+    }
 }
 
 impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {

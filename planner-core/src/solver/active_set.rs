@@ -209,7 +209,13 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         let m = F::from_usize(FAMILIES * N);
         // Checksums of the held set one and two steps back, to see a 2-cycle.
         let (mut one_back, mut two_back) = (0u32, 0u32);
-        for it in 0..st.active_set_iter {
+        // Under a deadline (`Settings::with_answer_at_cap`) these steps count toward it.
+        let cap = if st.answer_at_cap() {
+            st.active_set_iter.min(st.max_iter)
+        } else {
+            st.active_set_iter
+        };
+        for it in 0..cap {
             if it > 0 {
                 self.evaluate(pr);
             }
@@ -259,7 +265,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 return Err(it + 1);
             }
         }
-        Err(st.active_set_iter)
+        Err(cap)
     }
 
     /// A checksum of the held set (order-free: a sum of hashed indices), to recognise a

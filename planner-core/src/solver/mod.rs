@@ -101,6 +101,12 @@ pub struct Settings<F> {
     /// enter it as ρ·aaᵀ and their multipliers move by ρ·residual each step
     /// ([`active_set`]; default [`Real::ACTIVE_SET_PENALTY`]).
     active_set_penalty: F,
+    /// Whether a cold start's multipliers are scaled to the cost's gradient (see
+    /// `IpmSolver::start`); `false` starts them at 1 over the slack.
+    scaled_cold_start: bool,
+    /// Whether `max_iter` is a deadline: it counts every Newton step of a solve, and at
+    /// the cap the solver answers with its iterate ([`Method::Capped`]).
+    answer_at_cap: bool,
 }
 
 /// The largest iteration cap [`Settings::with_max_iter`] takes: a cap is there to bound
@@ -327,6 +333,44 @@ impl<F: Real> Settings<F> {
         )
     }
 
+    /// Whether a cold start's multipliers are scaled to the cost's gradient.
+    pub fn scaled_cold_start(&self) -> bool {
+        self.scaled_cold_start
+    }
+    /// With a cold start's multipliers at ‖∇J‖∞ (at least 1) over the slack (`true`)
+    /// instead of 1 over it. Stationarity, ∇J + Σ λᵢ ∇gᵢ = 0, wants multipliers of the
+    /// gradient's size where constraints bind: a vehicle standing with its reference
+    /// speed far above, or a plan pressed against (10)'s bounds, has ‖∇J‖∞ in the tens to
+    /// hundreds, and unit multipliers leave the first Newton steps to grow them. Measured
+    /// on the firmware's problems at N = 50 (`planner-core/tests/scaled_cold_start.rs`).
+    /// Off by default: every figure of the host's was measured without it.
+    pub fn with_scaled_cold_start(self, on: bool) -> Self {
+        Self {
+            scaled_cold_start: on,
+            ..self
+        }
+    }
+
+    /// Whether `max_iter` is a deadline that is answered at ([`Settings::with_answer_at_cap`]).
+    pub fn answer_at_cap(&self) -> bool {
+        self.answer_at_cap
+    }
+    /// With `max_iter` as a deadline (`true`): it counts every Newton step of a solve
+    /// (the active-set step's, the interior-point method's and a retry's), and a solve
+    /// that reaches it answers with its current iterate ([`Method::Capped`]) instead of
+    /// [`SolveError::IterationLimit`]. The iterate is not optimal, and may not be
+    /// feasible: the planner applies it only if it passes the exact verification of (10)
+    /// that every answer passes ([`crate::planner::verify`]), else the certified fallback,
+    /// so safety is the same; what is lost is optimality, for a step whose work is
+    /// bounded by `max_iter` Newton steps. A microcontroller sets the cap from its period
+    /// (the firmware at N = 50: docs/firmware.md). Off by default.
+    pub fn with_answer_at_cap(self, on: bool) -> Self {
+        Self {
+            answer_at_cap: on,
+            ..self
+        }
+    }
+
     /// The active-set step's penalty ρ.
     pub fn active_set_penalty(&self) -> F {
         self.active_set_penalty
@@ -361,6 +405,8 @@ impl<F: Real> Settings<F> {
             adaptive_warm_barrier: false,
             active_set_iter: 0,
             active_set_penalty: F::ZERO,
+            scaled_cold_start: false,
+            answer_at_cap: false,
         }
     }
 
@@ -394,6 +440,8 @@ impl<F: Real> Default for Settings<F> {
             adaptive_warm_barrier: true,
             active_set_iter: ACTIVE_SET_ITER,
             active_set_penalty: F::ACTIVE_SET_PENALTY,
+            scaled_cold_start: false,
+            answer_at_cap: false,
         }
     }
 }
@@ -445,6 +493,10 @@ pub enum Method {
     ActiveSet,
     /// The interior-point method.
     InteriorPoint,
+    /// The interior-point method's iterate at the iteration cap, when the cap is a
+    /// deadline ([`Settings::with_answer_at_cap`]): not optimal, and verified by the
+    /// planner like every answer.
+    Capped,
 }
 
 /// An optimal plan.
@@ -701,6 +753,11 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
     /// The settings in use.
     pub fn settings(&self) -> &Settings<F> {
         &self.settings
+    }
+
+    /// Replaces the settings, keeping the warm state (the next solve uses them).
+    pub fn set_settings(&mut self, settings: Settings<F>) {
+        self.settings = settings;
     }
 
     /// Evaluates every constraint g at the iterate, and the safety stencil.
@@ -963,6 +1020,15 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         } else {
             self.settings.warm_barrier
         };
+        // A cold start's multipliers at the cost gradient's size (`Settings::
+        // with_scaled_cold_start`), else at 1: λ s = scale, centred at that barrier.
+        let scale = if !warm_ok && self.settings.scaled_cold_start {
+            let mut grad = [F::ZERO; N];
+            self.cost_gradient(pr, &mut grad);
+            grad.iter().fold(F::ONE, |a, &x| a.max(x.abs()))
+        } else {
+            F::ONE
+        };
         for f in self.fam.iter_mut() {
             f.prev = f.lam;
             // Previous duals, shifted one step (the last one repeated).
@@ -977,7 +1043,7 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
                 *l = if use_duals {
                     lp.max(floor * floor / *s)
                 } else {
-                    floor / s.max(F::ONE)
+                    scale * floor / s.max(F::ONE)
                 };
             }
         }
@@ -1083,7 +1149,13 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
         let st = self.settings;
         self.have_duals = false;
         let m = F::from_usize(FAMILIES * N);
-        for it in 0..st.max_iter {
+        // A deadline counts the Newton steps this solve already took.
+        let cap = if st.answer_at_cap {
+            st.max_iter.saturating_sub(spent)
+        } else {
+            st.max_iter
+        };
+        for it in 0..cap {
             let (max_rd, scale, max_rp, gap_sum) = self.residuals(pr);
             if !(gap_sum.is_finite() && max_rd.is_finite() && max_rp.is_finite()) {
                 return Err((SolveError::NonFinite, it));
@@ -1134,11 +1206,22 @@ impl<F: Real, const N: usize> IpmSolver<F, N> {
             }
             self.take_step(alpha);
         }
+        if st.answer_at_cap && self.v.iter().all(|x| x.is_finite()) {
+            // The deadline: the iterate, for the planner to verify. Its multipliers are
+            // kept, positive, for the next warm start.
+            self.have_duals = true;
+            return Ok(Solution {
+                v: self.v,
+                objective: pr.objective(&self.v),
+                iterations: cap + spent,
+                method: Method::Capped,
+            });
+        }
         Err((
             SolveError::IterationLimit {
-                iterations: st.max_iter + spent,
+                iterations: cap + spent,
             },
-            st.max_iter,
+            cap,
         ))
     }
 
