@@ -45,8 +45,33 @@ impl Clock {
     pub fn start(mut syst: SYST, at: Instant) -> Self {
         syst.set_clock_source(SystClkSource::Core);
         syst.set_reload(TICKS_PER_MS - 1);
-        syst.clear_current();
-        syst.enable_counter();
+        let mut clock = Clock(at);
+        clock.restart();
+        clock
+    }
+
+    /// Stops SysTick, counter and interrupt: [`Clock::now`] stands still until
+    /// [`Clock::restart`]. Under QEMU's `-icount sleep=off` a core in `wfi` with no timer
+    /// running halts until an interrupt, instead of jumping from tick to tick.
+    // The computer in the loop's (src/sil.rs); the scripted program sleeps with SysTick
+    // running.
+    #[allow(dead_code)]
+    pub fn stop(&mut self) {
+        // SAFETY: `start` took SysTick (its SYST handle), so nothing else drives it; this
+        // clears its enable and interrupt bits.
+        unsafe { (*SYST::PTR).csr.modify(|csr| csr & !0b11) }
+    }
+
+    /// Starts SysTick from millisecond 0 (at [`Clock::start`], and again after
+    /// [`Clock::stop`]): [`Clock::now`] counts from here.
+    pub fn restart(&mut self) {
+        // SAFETY: `start` took SysTick (its SYST handle) and set its source and reload, so
+        // nothing else drives it; this clears the counter and sets its enable bit.
+        let syst = unsafe { &*SYST::PTR };
+        unsafe {
+            syst.cvr.write(0);
+            syst.csr.modify(|csr| csr | 0b1);
+        }
         // The counter starts at 0 and loads the reload value on its first tick; wait for
         // that (a few instructions) so millisecond 0 begins at the reload.
         for _ in 0..1_000 {
@@ -55,39 +80,7 @@ impl Clock {
             }
         }
         MILLIS.store(0, Ordering::Relaxed);
-        syst.enable_interrupt();
-        Clock(at)
-    }
-
-    /// Stops SysTick, counter and interrupt: [`Clock::now`] stands still until
-    /// [`Clock::restart`]. Under QEMU's `-icount sleep=off` a core in `wfi` with no timer
-    /// running halts until an interrupt, instead of jumping from tick to tick.
-    #[allow(dead_code)]
-    pub fn stop(&mut self) {
-        // SAFETY: `start` took SysTick (its SYST handle), so nothing else drives it; this
-        // clears its enable and interrupt bits.
-        unsafe { (*SYST::PTR).csr.modify(|csr| csr & !0b11) }
-    }
-
-    /// Starts SysTick again from millisecond 0, as [`Clock::start`] did: [`Clock::now`]
-    /// counts from here.
-    // The computer in the loop's (src/sil.rs), as is `stop`; the scripted program sleeps
-    // with SysTick running.
-    #[allow(dead_code)]
-    pub fn restart(&mut self) {
-        // SAFETY: as in `stop`; the same register writes as `start`'s.
-        let syst = unsafe { &*SYST::PTR };
-        unsafe {
-            syst.cvr.write(0);
-            syst.csr.modify(|csr| csr | 0b1);
-        }
-        for _ in 0..1_000 {
-            if SYST::get_current() != 0 {
-                break;
-            }
-        }
-        MILLIS.store(0, Ordering::Relaxed);
-        // SAFETY: as above.
+        // SAFETY: as above; sets the interrupt's enable bit.
         unsafe { syst.csr.modify(|csr| csr | 0b10) }
     }
 
