@@ -84,7 +84,8 @@ fn run_writes_json_trace_and_plots() {
     assert_eq!(rows.len(), 60_000);
     for r in &rows {
         assert_eq!(r.len(), 15);
-        assert_eq!(r[11..], ["4.5", "1.7", "7.9", "paper"], "{r:?}");
+        // road-end.toml names no invariant: the default, the leader-aware one.
+        assert_eq!(r[11..], ["4.5", "1.7", "7.9", "leader-aware"], "{r:?}");
         assert_eq!(r[10], "s0", "a straight road is segment 0");
         assert!(r[..7].iter().all(|x| x.parse::<f64>().is_ok()), "{r:?}");
         assert!(
@@ -778,7 +779,6 @@ fn firmware_in_the_loop_refuses_what_it_cannot_run() {
         assert!(err.contains(why), "{file} {extra:?}: {err}");
         assert!(!trace.exists(), "{file} {extra:?} wrote its trace");
     };
-    let v = ["--firmware-vehicles", "2"];
     refused(
         "intersection.toml",
         &["--firmware-vehicles", "1"],
@@ -789,7 +789,11 @@ fn firmware_in_the_loop_refuses_what_it_cannot_run() {
         &["--firmware-vehicles", "2", "--invariant", "leader-aware"],
         "paper's invariant",
     );
-    refused("multilane-faults.toml", &v, "no [faults]");
+    refused(
+        "multilane-faults.toml",
+        &["--firmware-vehicles", "2", "--invariant", "paper"],
+        "no [faults]",
+    );
     refused(
         "multilane.toml",
         &["--firmware-vehicles", "99"],

@@ -62,10 +62,12 @@ fn queued_intersection_fleets_on_can_frames() {
         assert_eq!(f.sync_ticks, 2 * f.periods - 1, "{alg}");
         assert!(f.can.rejected.is_empty(), "{alg}: {:?}", f.can.rejected);
         let m = f.messages;
-        // A request per vehicle and period in the system; every vehicle says it left for
-        // 0.5 s (50 periods) unless the run ended first.
+        // A request per vehicle and period in the system; every vehicle, leaving the world
+        // with the junction, says it left for EXIT_REPEAT_S (1,000 periods) unless the
+        // run ended first.
         assert!(m.requests >= n as u64 && m.grants > 0, "{alg}: {m:?}");
-        assert!(m.exits > 0 && m.exits <= 50 * n as u64, "{alg}: {m:?}");
+        let repeats = (host_sim::world::junction::EXIT_REPEAT_S / 0.01).round() as u64;
+        assert!(m.exits > 0 && m.exits <= repeats * n as u64, "{alg}: {m:?}");
         // Two frames per request, one per grant and exit; no states at a lone junction.
         assert_eq!(m.states, 0, "{alg}");
         assert_eq!(

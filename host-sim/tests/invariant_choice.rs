@@ -57,8 +57,17 @@ fn a_grid_keeps_the_invariant_asked_for_and_names_it_in_its_file() {
         s.world().expect("a valid grid").invariant,
         Invariant::LeaderAware
     );
-    // A paper grid's file is as it always was: no invariant key.
-    assert!(!grid_case(1, 0, 30.0).to_toml().contains("invariant"));
+    // A paper grid's file names its invariant too: the loader's default is the
+    // leader-aware one, and a file replays under the invariant it ran under.
+    let paper = NetworkSettings {
+        invariant: Invariant::Paper,
+        ..grid_case(1, 0, 30.0)
+    };
+    assert!(paper.to_toml().contains("invariant = \"paper\""));
+    assert_eq!(
+        paper.world().expect("a valid grid").invariant,
+        Invariant::Paper
+    );
     let r = grids((1, 0), 1, 30.0, Invariant::LeaderAware, 0);
     assert_eq!(r.invariant, "leader-aware");
     assert_eq!(
@@ -103,7 +112,7 @@ fn json(args: &[&str]) -> serde_json::Value {
 
 #[test]
 fn the_command_line_takes_the_invariant_and_reports_it() {
-    let aware = ["--invariant", "leader-aware"];
+    let paper = ["--invariant", "paper"];
     for args in [
         &["platoons", "--cases", "3"][..],
         &["grids", "--cases", "1", "--duration", "20"],
@@ -120,10 +129,11 @@ fn the_command_line_takes_the_invariant_and_reports_it() {
             "--no-baseline",
         ],
     ] {
-        let v = json(&[args, &aware[..]].concat());
-        assert_eq!(v["invariant"], "leader-aware", "{args:?}");
-        let v = json(args);
+        let v = json(&[args, &paper[..]].concat());
         assert_eq!(v["invariant"], "paper", "{args:?}");
+        // The default.
+        let v = json(args);
+        assert_eq!(v["invariant"], "leader-aware", "{args:?}");
     }
     // The paper's experiments take it too, and say so in each report (the plain fault
     // comparison in each of its four).
@@ -156,10 +166,10 @@ fn the_command_line_takes_the_invariant_and_reports_it() {
         (&faults[..], "/multilane_faulty/invariant"),
         (&faults[..], "/throughput_clean/invariant"),
     ] {
-        let v = json(&[args, &aware[..]].concat());
-        assert_eq!(v.pointer(at), Some(&"leader-aware".into()), "{args:?}");
-        let v = json(args);
+        let v = json(&[args, &paper[..]].concat());
         assert_eq!(v.pointer(at), Some(&"paper".into()), "{args:?}");
+        let v = json(args);
+        assert_eq!(v.pointer(at), Some(&"leader-aware".into()), "{args:?}");
     }
 }
 

@@ -4,9 +4,11 @@
 mod common;
 
 use common::run_world;
+use host_sim::bus::{Faults, Silent};
 use host_sim::monitor::liveness::{WaitsOn, DEADLOCK_WINDOW_S};
 use host_sim::world::{SolverChoice, TraceRow, World, WorldSpec};
 use planner_core::crossing::Algorithm;
+use planner_core::Invariant;
 use std::path::PathBuf;
 
 fn file(name: &str) -> PathBuf {
@@ -120,6 +122,61 @@ fn thirty_two_queued_vehicles_cross_under_every_live_algorithm() {
         assert!(s.deadlock.is_none(), "{}: {:?}", a.name(), s.deadlock);
         common::assert_all_crossed_safely(&s, 32);
     }
+}
+
+#[test]
+fn no_vehicle_stops_behind_one_that_left_the_world_at_99_percent_loss() {
+    // Found by the fault grid: a vehicle that left the world said so 50 times, every
+    // one lost with probability 0.61 at 99 % loss, and the one behind it on the outlet
+    // stopped behind its last report for good.
+    for invariant in [Invariant::Paper, Invariant::LeaderAware] {
+        for a in [
+            Algorithm::AllWayStop,
+            Algorithm::AllWayStopSingle,
+            Algorithm::Fifo,
+            Algorithm::ConcurrentFair,
+            Algorithm::Pipelined,
+            Algorithm::Platoon,
+        ] {
+            let mut spec = with_algorithm(load("exit-ghost-99.toml"), a);
+            spec.invariant = invariant;
+            let s = run_world(spec);
+            assert!(
+                s.deadlock.is_none(),
+                "{} {invariant:?}: {:?}",
+                a.name(),
+                s.deadlock
+            );
+            common::assert_all_crossed_safely(&s, 16);
+        }
+    }
+}
+
+#[test]
+fn a_silent_vehicle_at_its_stop_line_waits_for_its_own_silence() {
+    // Its transmitter silent from t = 0, vehicle 1 never asks for a grant: the deadlock
+    // report names that as its reason, and it is the only one stuck on a grant it
+    // cannot ask for.
+    let mut spec = load("exit-ghost-99.toml");
+    spec.faults = Faults::NONE;
+    spec.faults.silent = Some(Silent { id: 1, from_s: 0.0 });
+    let s = run_world(spec);
+    common::assert_safe(&s);
+    let d = s
+        .deadlock
+        .as_ref()
+        .expect("vehicle 1 cannot ask for its grant");
+    let silent: Vec<u16> = d
+        .waits
+        .iter()
+        .filter(|w| w.waits_on.contains(&WaitsOn::OwnSilence { junction: 0 }))
+        .map(|w| w.id)
+        .collect();
+    assert_eq!(silent, [1], "{d}");
+    assert!(
+        d.to_string().contains("its own transmitter is silent"),
+        "{d}"
+    );
 }
 
 #[test]

@@ -123,7 +123,10 @@ fn a_driver_that_never_yields_is_not_cut_in_front_of_even_if_it_claims_to_cooper
     // E's scripted driver accelerates and never yields. Scripts do not cooperate by
     // default; a lane change starts only when (17) holds as if the script never heard it,
     // and the change enters the script's lane only when the entry check holds then. Even a
-    // script that claims to cooperate gets no less: the entry check trusts no one.
+    // script that claims to cooperate gets no less under the paper's invariant: the entry
+    // check trusts no one. (Under the leader-aware one a claim to cooperate is a claim to
+    // be credited as a leader, and a script that lies about it is a liar the plausibility
+    // checks cannot see: `a_script_that_lies_about_cooperating_is_credited_but_not_hit`.)
     for (label, t) in [
         ("default", text("E.toml")),
         (
@@ -134,6 +137,10 @@ fn a_driver_that_never_yields_is_not_cut_in_front_of_even_if_it_claims_to_cooper
             ),
         ),
     ] {
+        let t = t.replace(
+            "duration_s = 10.0",
+            "duration_s = 10.0\ninvariant = \"paper\"",
+        );
         let spec = parse(&t, "cut-in.toml");
         let claims = spec
             .vehicles
@@ -149,4 +156,29 @@ fn a_driver_that_never_yields_is_not_cut_in_front_of_even_if_it_claims_to_cooper
             s.lane_changes
         );
     }
+}
+
+#[test]
+fn a_script_that_lies_about_cooperating_is_credited_but_not_hit() {
+    // Under the leader-aware invariant (the default) the planner credits a leader that
+    // declares it cooperates and its braking limit: E's script, told to claim it, is
+    // credited once the planner is behind it in its lane. The monitor credits only
+    // vehicles that do keep the invariant (ground truth: planners), so it counts the
+    // pair-steps that relied on the lie as violations; nothing is hit, because the liar
+    // never brakes harder than it declared. A lie about cooperating is outside what a
+    // receiver can check (docs/spec.md §11, "What breaks the induction"); the paper's
+    // invariant, which credits no one, has none (the test above).
+    let t = text("E.toml").replace(
+        "driver = \"script\"",
+        "cooperative = true, driver = \"script\"",
+    );
+    let honest = run_world(parse(&text("E.toml"), "cut-in.toml"));
+    assert_safe(&honest);
+    let s = run_world(parse(&t, "cut-in.toml"));
+    assert_eq!((s.collisions, s.limit_violations), (0, 0), "{s:?}");
+    assert!(
+        s.invariant_violations > 0,
+        "the lie was not relied on: {s:?}"
+    );
+    assert_eq!(s.lane_changes.in_target_lane, 1, "{:?}", s.lane_changes);
 }

@@ -66,7 +66,7 @@ pub struct ScaleArgs {
     #[arg(long, default_value_t = planner_core::ReusePolicy::<f64>::default().max_age)]
     reuse_max_age: u8,
     /// The invariant every planner keeps toward the vehicle ahead.
-    #[arg(long, value_enum, default_value = "paper")]
+    #[arg(long, value_enum, default_value = host_sim::world::DEFAULT_INVARIANT_NAME)]
     pub invariant: super::InvariantArg,
     /// Print one JSON object.
     #[arg(long)]

@@ -130,7 +130,11 @@ fn firmware_world(a: &RunArgs, spec: &WorldSpec) -> Option<String> {
     } else if !net.junctions.is_empty() || net.segments.len() != 1 {
         Some("the firmware drives a road: this scenario has junctions or several segments".into())
     } else if spec.invariant != planner_core::Invariant::Paper {
-        Some("the firmware keeps the paper's invariant: drop the leader-aware one".into())
+        Some(
+            "the firmware keeps the paper's invariant: add --invariant paper (or \
+             invariant = \"paper\" to the scenario)"
+                .into(),
+        )
     } else if spec.sensing.is_some() || spec.faults != host_sim::bus::faults::Faults::default() {
         Some(
             "the firmware plans from what it hears on a clean bus: no [sensing], no [faults]"

@@ -70,7 +70,7 @@ pub struct Settings {
     #[arg(long = "no-baseline", action = clap::ArgAction::SetFalse)]
     pub baseline: bool,
     /// The invariant every planner keeps toward the vehicle ahead.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     pub invariant: planner_core::Invariant,
 }
 

@@ -202,13 +202,11 @@ pub fn sweep_with(
         let mut world = sc.world();
         world.finish = Finish::GoalsMetAndStill;
         world.invariant = invariant;
-        let named = match invariant {
-            planner_core::Invariant::Paper => String::new(),
-            _ => format!(
-                "invariant = \"{}\"\n",
-                crate::world::invariant_name(invariant)
-            ),
-        };
+        // Always named: the file replays under this invariant whatever the default.
+        let named = format!(
+            "invariant = \"{}\"\n",
+            crate::world::invariant_name(invariant)
+        );
         Case {
             index,
             seed: case_seed(seed, index),

@@ -125,7 +125,7 @@ pub struct DemandSettings {
     pub seeds: u64,
     /// The invariant every vehicle keeps toward the vehicle ahead.
     // A shard header of an older version has none: the paper's.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: Invariant,
 }

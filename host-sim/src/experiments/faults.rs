@@ -137,7 +137,7 @@ pub struct FaultSettings {
     /// The invariant every planner keeps toward the vehicle ahead (in both experiments,
     /// or in the grid).
     // A shard header of an older version has none: the paper's.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: planner_core::Invariant,
 }

@@ -17,7 +17,7 @@
 
 use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
-use super::sweep::{case_seed, keep_failing, Cases, Failing};
+use super::sweep::{case_seed, keep_failing, CasesUnder, Failing};
 use crate::reference::instances::rng;
 use crate::scenario::network::NetworkScenario;
 use crate::verdict::{Judged, Safety, Verdict};
@@ -28,13 +28,14 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// `host-sim layouts`: cases and seed (each case is a network file of its own).
+/// `host-sim layouts`: cases, seed and invariant (each case is a network file of its own,
+/// which names the invariant: the sweep's).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
 pub struct Layouts {
-    /// Cases and seed.
+    /// Cases, seed, invariant.
     #[command(flatten)]
     #[serde(flatten)]
-    pub sweep: Cases,
+    pub sweep: CasesUnder,
 }
 
 impl Experiment for Layouts {
@@ -43,11 +44,18 @@ impl Experiment for Layouts {
     type Report = LayoutsReport;
 
     fn cases(&self) -> u64 {
-        self.sweep.cases
+        self.sweep.sweep.cases
     }
 
     fn run(&self, (first, end): (u64, u64), threads: usize) -> Result<LayoutsReport, RunError> {
-        Ok(sweep(end - first, first, self.sweep.seed, threads))
+        let s = &self.sweep;
+        Ok(sweep_with(
+            end - first,
+            first,
+            s.sweep.seed,
+            threads,
+            s.invariant,
+        ))
     }
 
     fn report(&self, parts: Vec<LayoutsReport>) -> Result<LayoutsReport, MergeError> {
@@ -323,12 +331,30 @@ fn run_case(text: &str) -> Outcome {
     Outcome::Ran(Box::new(w.summary(t0.elapsed().as_secs_f64())))
 }
 
-/// Runs `cases` cases from index `first` of the sweep seeded `seed` on `threads` threads.
+/// Runs `cases` cases from index `first` of the sweep seeded `seed` on `threads` threads,
+/// every file under the default invariant.
 pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> LayoutsReport {
+    sweep_with(cases, first, seed, threads, crate::world::DEFAULT_INVARIANT)
+}
+
+/// [`sweep()`] with every file naming `invariant` (after what its seed draws, so the
+/// layouts are the same under either).
+pub fn sweep_with(
+    cases: u64,
+    first: u64,
+    seed: u64,
+    threads: usize,
+    invariant: planner_core::Invariant,
+) -> LayoutsReport {
     let t0 = std::time::Instant::now();
+    let named = format!(
+        "invariant = \"{}\"\n",
+        crate::world::invariant_name(invariant)
+    );
     let outcomes = super::par::map_indexed(cases as usize, threads, |i| {
         let index = first + i as u64;
-        let text = case(seed, index);
+        // The key goes first: top-level keys before any table.
+        let text = format!("{named}{}", case(seed, index));
         (index, run_case(&text), text)
     });
     let mut r = LayoutsReport {

@@ -34,7 +34,7 @@ pub struct MultilaneSettings {
     pub faults: FaultFlags,
     /// The invariant every planner keeps toward the vehicle ahead.
     // A shard header of an older version has none: the paper's.
-    #[arg(long, default_value = "paper", value_parser = flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: Invariant,
 }

@@ -74,7 +74,7 @@ pub struct NetworkSettings {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// The invariant every planner keeps toward the vehicle ahead.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(with = "crate::world::invariant_serde")]
     pub invariant: planner_core::Invariant,
     /// Every intersection's crossing algorithm (STOP, STOP-1, FIFO, CON, CON-fair, PIPE,
@@ -140,11 +140,11 @@ impl Experiment for NetworkSettings {
 impl NetworkSettings {
     /// The scenario file of this grid (what `host-sim run` would load).
     pub fn to_toml(&self) -> String {
-        // Named only when not the paper's: a paper grid's file stays as it was.
-        let invariant = match self.invariant {
-            planner_core::Invariant::Paper => String::new(),
-            i => format!("invariant = \"{}\"\n", crate::world::invariant_name(i)),
-        };
+        // Always named: the file replays under this invariant whatever the default.
+        let invariant = format!(
+            "invariant = \"{}\"\n",
+            crate::world::invariant_name(self.invariant)
+        );
         format!(
             "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"{a}\"\n{invariant}\n\
              [grid]\nrows = {r}\ncols = {c}\nblock_m = {b}\nlanes = {l}\n\n\
@@ -492,7 +492,7 @@ pub struct Grids {
     #[arg(long, default_value_t = 180.0)]
     pub duration: f64,
     /// The invariant every planner keeps toward the vehicle ahead.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(
         default,
         skip_serializing_if = "super::flags::is_paper",

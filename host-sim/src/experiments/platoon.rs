@@ -366,7 +366,7 @@ pub struct Platoons {
     pub reuse: bool,
     /// The invariant every follower keeps toward the vehicle ahead (the adversarial
     /// leader, scripted, is a wall under either).
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(
         default,
         skip_serializing_if = "super::flags::is_paper",

@@ -29,7 +29,7 @@ pub struct CasesUnder {
     #[serde(flatten)]
     pub sweep: Cases,
     /// The invariant every planner keeps toward the vehicle ahead.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(
         default,
         skip_serializing_if = "super::flags::is_paper",
@@ -193,6 +193,13 @@ pub struct Totals {
     pub unfinished: u64,
     /// Cases that deadlocked.
     pub deadlocks: u64,
+    /// Of the unfinished, those of runs whose deadlock holds a vehicle waiting on a grant
+    /// it cannot ask for, its own transmitter silent
+    /// ([`crate::monitor::liveness::WaitsOn::OwnSilence`]): the vehicles behind it wait
+    /// on it, and a manager that never heard of it may have granted one of them, so the
+    /// routes that conflict with that one wait too. Counted in `unfinished` all the same.
+    #[serde(default)]
+    pub own_silence: u64,
     /// Latest time by which a case had every goal met (s).
     pub max_finish_time_s: f64,
     /// Mean of those times (s).
@@ -234,6 +241,7 @@ impl Totals {
             t.unpermitted_entries += s.unpermitted_entries();
             t.unfinished += c.unfinished();
             t.deadlocks += u64::from(s.deadlock.is_some());
+            t.own_silence += own_silence(s);
             t.fallback_steps += s.fallback_steps;
             let f = c.finish_time_s();
             t.max_finish_time_s = t.max_finish_time_s.max(f);
@@ -260,6 +268,7 @@ impl Totals {
             t.unpermitted_entries += p.unpermitted_entries;
             t.unfinished += p.unfinished;
             t.deadlocks += p.deadlocks;
+            t.own_silence += p.own_silence;
             t.fallback_steps += p.fallback_steps;
             t.max_finish_time_s = t.max_finish_time_s.max(p.max_finish_time_s);
             sum += p.mean_finish_time_s * p.cases as f64;
@@ -277,6 +286,23 @@ impl Totals {
             + self.unfinished
             + self.deadlocks
             == 0
+    }
+}
+
+/// `s`'s unfinished vehicles if its deadlock holds a vehicle that waits on a grant it
+/// cannot ask for, else 0.
+fn own_silence(s: &Summary) -> u64 {
+    let silent = s.deadlock.as_ref().is_some_and(|d| {
+        d.waits.iter().any(|w| {
+            w.waits_on
+                .iter()
+                .any(|o| matches!(o, crate::monitor::liveness::WaitsOn::OwnSilence { .. }))
+        })
+    });
+    if silent {
+        s.unfinished as u64 + s.goal_x.saturating_sub(s.goal_x_reached) as u64
+    } else {
+        0
     }
 }
 

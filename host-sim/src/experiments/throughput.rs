@@ -37,7 +37,7 @@ pub struct ThroughputSettings {
     pub faults: FaultFlags,
     /// The invariant every planner keeps toward the vehicle ahead.
     // A shard header of an older version has none: the paper's.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: Invariant,
 }

@@ -41,7 +41,7 @@ pub struct Traffic {
     #[arg(long)]
     pub reuse: bool,
     /// The invariant every planner keeps toward the vehicle ahead.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(
         default,
         skip_serializing_if = "super::flags::is_paper",

@@ -175,7 +175,7 @@ pub struct Worlds {
     #[arg(long)]
     pub delay: Option<f64>,
     /// The invariant every planner keeps toward the vehicle ahead.
-    #[arg(long, default_value = "paper", value_parser = super::flags::invariant())]
+    #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     pub invariant: planner_core::Invariant,
 }
 

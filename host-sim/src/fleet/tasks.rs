@@ -213,9 +213,8 @@ pub(super) fn vehicle_task<const N: usize, P: CanPort>(
         node.set_time(now);
         let published = SystemTime::now();
         let mut exit = false;
-        if let Some((j, at)) =
-            departing.filter(|&(_, at)| t < at + crate::world::junction::LEFT_REPEAT_S)
-        {
+        let repeat = crate::world::junction::left_repeat_s(car.log.left_at.is_some());
+        if let Some((j, at)) = departing.filter(|&(_, at)| t < at + repeat) {
             let at = ctx.clock.at_secs(at);
             node.send(&Message::departure(id, at, j), ctx.map, at)
                 .map_err(|e| fail(e.to_string()))?;

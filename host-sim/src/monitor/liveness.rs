@@ -41,6 +41,14 @@ pub enum WaitsOn {
         /// Vehicles holding permissions it conflicts with.
         holders: Vec<u16>,
     },
+    /// A grant of a junction's manager that it cannot ask for: its own transmitter is
+    /// silent (a fault), so the manager never hears its request. Waiting is the protocol's
+    /// answer — entering A_S unpermitted is not — so this is a reason, not a deadlock of
+    /// the others: no other vehicle waits on it unless it stands in their way.
+    OwnSilence {
+        /// The junction's id.
+        junction: u16,
+    },
     /// The end of its road: a dead end, or a junction's edge of A_C it may not pass yet.
     RoadEnd,
     /// Nothing within reach stops it: its own planner holds it (a certified fallback, or a
@@ -59,7 +67,7 @@ impl WaitsOn {
             WaitsOn::Vehicle { id } => vec![*id],
             WaitsOn::LaneChange { ids } => ids.clone(),
             WaitsOn::Grant { holders, .. } => holders.clone(),
-            WaitsOn::RoadEnd => Vec::new(),
+            WaitsOn::RoadEnd | WaitsOn::OwnSilence { .. } => Vec::new(),
             WaitsOn::Planner { nearest } => nearest.iter().copied().collect(),
         }
     }
@@ -80,6 +88,10 @@ impl std::fmt::Display for WaitsOn {
                     "a grant of junction {junction} (permissions held by {holders:?})"
                 )
             }
+            WaitsOn::OwnSilence { junction } => write!(
+                f,
+                "a grant of junction {junction} it cannot ask for: its own transmitter is silent"
+            ),
             WaitsOn::RoadEnd => write!(f, "the end of its road"),
             WaitsOn::Planner { nearest: Some(id) } => write!(
                 f,
@@ -325,6 +337,7 @@ mod tests {
                 holders: vec![5],
             },
             WaitsOn::RoadEnd,
+            WaitsOn::OwnSilence { junction: 4 },
         ]
         .iter()
         .map(ToString::to_string)
@@ -337,9 +350,17 @@ mod tests {
                 "room to change lanes (vehicles [1, 2])",
                 "a grant of junction 3",
                 "a grant of junction 3 (permissions held by [5])",
-                "the end of its road"
+                "the end of its road",
+                "a grant of junction 4 it cannot ask for: its own transmitter is silent"
             ]
         );
+        // A vehicle waiting on its own silence points at no one: a chain ends there.
+        let silent = [
+            stopped(1, vec![WaitsOn::Vehicle { id: 2 }]),
+            stopped(2, vec![WaitsOn::OwnSilence { junction: 0 }]),
+        ];
+        assert_eq!(d.report(12.0, &silent).cycle, None);
+        assert!(WaitsOn::OwnSilence { junction: 0 }.vehicles().is_empty());
     }
 
     #[test]

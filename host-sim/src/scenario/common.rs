@@ -163,7 +163,7 @@ impl RawHeader {
             }
         };
         let invariant = match &self.invariant {
-            None => Invariant::Paper,
+            None => crate::world::DEFAULT_INVARIANT,
             Some(i) => parse_invariant(i.get_ref()).map_err(|m| e.at(Some(i.span()), m))?,
         };
         Ok(Header {

@@ -611,8 +611,9 @@ impl JunctionScenario {
             duration_s: self.header.duration_s,
             seed: self.seed,
             algorithm: AlgorithmToml::of(self.algorithm),
-            invariant: (self.header.invariant != planner_core::Invariant::Paper)
-                .then(|| crate::world::invariant_name(self.header.invariant)),
+            // Always named: the file replays under the invariant it ran under, whatever
+            // the loader's default.
+            invariant: Some(crate::world::invariant_name(self.header.invariant)),
             intersection: self.layout_toml,
             faults: self.header.faults,
             sensing: Some(SensingToml::of(self.header.sensing)),

@@ -149,6 +149,9 @@ struct RoadFile<'a> {
     seed: u64,
     horizon: usize,
     deadline_s: f64,
+    /// Always named, so that the file replays under the invariant it ran under whatever
+    /// the loader's default.
+    invariant: &'static str,
     road: &'a Road,
     #[serde(skip_serializing_if = "Faults::is_none")]
     faults: Faults,
@@ -272,6 +275,7 @@ impl RoadScenario {
             seed: self.seed,
             horizon: self.header.horizon,
             deadline_s: self.header.deadline_s,
+            invariant: crate::world::invariant_name(self.header.invariant),
             road: &self.road,
             faults: self.header.faults,
             sensing,

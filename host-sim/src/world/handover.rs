@@ -114,7 +114,8 @@ pub(super) fn step_place<const N: usize>(v: &mut Vehicle<N>, net: &Network, now:
 impl<const N: usize, B: Bus> World<N, B> {
     /// Phase 5: departures, from what each vehicle's move did (`moves`, in vehicle order,
     /// from its period). A vehicle that leaves a junction says so at once (and repeats it
-    /// for [`LEFT_REPEAT_S`]); one that leaves the world is kept for the summary and, in a
+    /// for [`super::junction::LEFT_REPEAT_S`], or [`super::junction::EXIT_REPEAT_S`] if it
+    /// left the world); one that leaves the world is kept for the summary and, in a
     /// closed system, comes back later.
     pub(super) fn hand_over(&mut self, moves: &[Moved]) -> Result<(), BusError> {
         let now = self.time.t;
@@ -127,7 +128,8 @@ impl<const N: usize, B: Bus> World<N, B> {
                     let at = self.time.clock.at_step(self.time.steps_done);
                     self.bus
                         .send(id, &Message::departure(id, at, Some(j)), now)?;
-                    self.insertion.departing.push((id, Some(j), now));
+                    let until = now + super::junction::left_repeat_s(false);
+                    self.insertion.departing.push((id, Some(j), now, until));
                 }
                 Moved::LeftJunction(j) => leaving.push((i, Some(j))),
                 Moved::LeftWorld => leaving.push((i, None)),
@@ -136,13 +138,14 @@ impl<const N: usize, B: Bus> World<N, B> {
         // Last first, so that the indices stay valid.
         for &(i, junction) in leaving.iter().rev() {
             let v = self.vehicles.remove(i);
-            // It says it left (a junction, or the network at an exit) and repeats it for
-            // LEFT_REPEAT_S; then it leaves the bus.
+            // It says it left (the network at an exit, from a junction or a segment) and
+            // repeats it for EXIT_REPEAT_S; then it leaves the bus.
             let id = v.id;
             let at = self.time.clock.at_step(self.time.steps_done);
             self.bus
                 .send(id, &Message::departure(id, at, junction), now)?;
-            self.insertion.departing.push((id, junction, now));
+            let until = now + super::junction::left_repeat_s(true);
+            self.insertion.departing.push((id, junction, now, until));
             if let Some(j) = junction {
                 if self.spec.arrivals == Arrivals::Closed {
                     let routes = self

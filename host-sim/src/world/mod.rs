@@ -180,6 +180,17 @@ impl<const N: usize> MpcSolver<f64, N> for AnySolver<N> {
     }
 }
 
+/// The invariant a scenario file that names none, and every command without
+/// `--invariant`, keeps toward the vehicle ahead: the leader-aware one (docs/spec.md §11),
+/// made the default once every sweep was clean with it (docs/capacity.md). The paper's
+/// stays selectable (`invariant = "paper"`, `--invariant paper`), and reproduces every
+/// figure of the paper. planner-core's own default stays the paper's: a planner linked
+/// alone keeps the invariant that needs nothing of its leader.
+pub const DEFAULT_INVARIANT: planner_core::Invariant = planner_core::Invariant::LeaderAware;
+
+/// [`DEFAULT_INVARIANT`]'s name, as the command line's flags default to it.
+pub const DEFAULT_INVARIANT_NAME: &str = "leader-aware";
+
 /// The name of an invariant in scenario files, reports, traces and on the command line.
 pub fn invariant_name(i: planner_core::Invariant) -> &'static str {
     match i {
@@ -491,8 +502,9 @@ struct Time {
 /// Vehicles coming and going: arrivals, a closed system's returns, departures still
 /// announcing, and the ids new vehicles take.
 struct Insertion {
-    /// Vehicles that left a junction and repeat `Left`: (id, junction, when).
-    departing: Vec<(u16, Option<usize>, f64)>,
+    /// Vehicles that left a junction or the world and repeat `Left`: (id, junction,
+    /// when, until when).
+    departing: Vec<(u16, Option<usize>, f64, f64)>,
     /// Closed system: (id, route) waiting to come back.
     pending: Vec<(u16, u8)>,
     /// Open system: one arrival stream per entry.

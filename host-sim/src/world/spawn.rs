@@ -241,7 +241,7 @@ impl<const N: usize, B: Bus> World<N, B> {
             let car = Body::CAR;
             match self.room(&entry, car) {
                 r if entry_speed(&self.lim, r, (v_max, car.brake)).is_some_and(|s| s >= v_max) => {
-                    self.insertion.departing.retain(|&(d, _, _)| d != id);
+                    self.insertion.departing.retain(|&(d, ..)| d != id);
                     let trip = (Some(route), Vec::new());
                     self.enter((id, car), &entry, trip, (v_max, now))?;
                 }

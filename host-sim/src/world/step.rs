@@ -4,11 +4,12 @@
 //! liveness watch. Each phase is a function here or in the file named; this one only
 //! runs them.
 
-use super::junction::{ManagerNode, LEFT_REPEAT_S};
+use super::junction::ManagerNode;
 use super::sensor::{roadside, sense_each, Seen, Sensed};
 use super::vehicle::{StepCtx, Vehicle, VehicleTruth};
 use super::{TraceRow, World};
 use crate::bus::{Bus, BusError, Message, Received};
+use crate::monitor::liveness::{Deadlock, WaitsOn};
 
 impl<const N: usize, B: Bus> World<N, B> {
     /// Simulates one period h; `trace` sees a row per vehicle.
@@ -62,15 +63,15 @@ impl<const N: usize, B: Bus> World<N, B> {
     fn broadcast(&mut self, t: f64) -> Result<(), BusError> {
         let bus = &mut self.bus;
         let live = &self.vehicles;
-        self.insertion.departing.retain(|&(id, _, at)| {
-            let keep = t < at + LEFT_REPEAT_S;
+        self.insertion.departing.retain(|&(id, _, _, until)| {
+            let keep = t < until;
             // Its last word said, a vehicle gone from the world leaves the bus too.
             if !keep && !live.iter().any(|v| v.id == id) {
                 bus.detach(id);
             }
             keep
         });
-        for &(id, from, at) in &self.insertion.departing {
+        for &(id, from, at, _) in &self.insertion.departing {
             let at = self.time.clock.at_secs(at);
             self.bus.send(id, &Message::departure(id, at, from), t)?;
         }
@@ -178,7 +179,25 @@ impl<const N: usize, B: Bus> World<N, B> {
             &holders,
             &self.lim,
         ) {
-            self.watch.deadlock = Some(d);
+            self.watch.deadlock = Some(self.own_silence(d));
         }
+    }
+
+    /// `d` with the grant a silent vehicle waits on named for what it is: one it cannot
+    /// ask for (its transmitter is silent, a fault the world knows of and the wait-for
+    /// relation, built from ground truth and the managers' records, does not).
+    fn own_silence(&self, mut d: Deadlock) -> Deadlock {
+        let t = self.time.t;
+        let Some(s) = self.spec.faults.silent.filter(|s| t >= s.from_s) else {
+            return d;
+        };
+        for w in d.waits.iter_mut().filter(|w| w.id == s.id) {
+            for on in &mut w.waits_on {
+                if let WaitsOn::Grant { junction, .. } = *on {
+                    *on = WaitsOn::OwnSilence { junction };
+                }
+            }
+        }
+        d
     }
 }

@@ -238,7 +238,10 @@ fn at_junction(
     if let Some((id, _)) = ahead {
         out.push(WaitsOn::Vehicle { id });
     }
-    let at_line = mine.path.entry() - (s + 0.5 * v.body.length) <= NEAR_M;
+    // At its stop line: its front within NEAR_M of the entry to A_S, not past it (a
+    // vehicle past the line has its grant or has released it, and what holds it is ahead).
+    let to_line = mine.path.entry() - (s + 0.5 * v.body.length);
+    let at_line = (-NEAR_M..=NEAR_M).contains(&to_line);
     if !permitted && at_line && ahead.is_none() {
         let holders = held
             .iter()
@@ -299,6 +302,58 @@ mod tests {
         assert_eq!(
             waits_on(&near[0], &near, &net, &none, &lim),
             [WaitsOn::Vehicle { id: 2 }]
+        );
+    }
+
+    /// Only a vehicle at its stop line waits on a grant: one stopped past it, on its
+    /// outlet track, has had its grant (the fault grid at 99 % loss had one reported as
+    /// waiting on a grant there, stopped behind a vehicle that had left the world).
+    #[test]
+    fn only_a_vehicle_at_its_stop_line_waits_on_a_grant() {
+        use crate::world::network::Junction;
+        use planner_core::intersection::{Layout, LayoutSpec};
+        let p = planner_core::Params::<f64>::table_i();
+        let layout = Layout::new(&p, LayoutSpec::spec8(&p)).expect("SPEC §8 is valid");
+        let entry = layout.route(0).map(|r| r.path.entry()).expect("route 0");
+        let net = Network {
+            segments: Vec::new(),
+            junctions: vec![Junction {
+                id: 0,
+                centre: (0.0, 0.0),
+                layout,
+                algorithm: planner_core::crossing::Algorithm::Pipelined,
+                inlets: [None; 4],
+                outlets: [None; 4],
+            }],
+        };
+        let lim = Limits::table_i();
+        let none = |_: usize| Vec::new();
+        let half = 0.5 * crate::world::Body::CAR.length;
+        let at = |s: f64| VehicleTruth {
+            at: At::Crossing {
+                junction: 0,
+                route: 0,
+                s,
+            },
+            ..stopped(1, 0.0, 0)
+        };
+        let line = [at(entry - half - 0.5)];
+        assert_eq!(
+            waits_on(&line[0], &line, &net, &none, &lim),
+            [WaitsOn::Grant {
+                junction: 0,
+                holders: Vec::new()
+            }]
+        );
+        let back = [at(entry - half - 20.0)];
+        assert_eq!(
+            waits_on(&back[0], &back, &net, &none, &lim),
+            [WaitsOn::Planner { nearest: None }]
+        );
+        let past = [at(entry + 30.0)];
+        assert_eq!(
+            waits_on(&past[0], &past, &net, &none, &lim),
+            [WaitsOn::Planner { nearest: None }]
         );
     }
 }

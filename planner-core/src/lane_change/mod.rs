@@ -78,10 +78,19 @@ pub const HEADING_MARGIN_RAD: f64 = 0.01;
 /// Shortest lane-change reference (m): a quintic S-curve over 3.6 m is steeper than
 /// θmax = π/6 below ~13 m; 16 m keeps its heading ≤ 0.4 rad.
 pub const MIN_CHANGE_LENGTH_M: f64 = 16.0;
-/// Age (s) beyond which a vehicle's data counts as stale (SPEC §9): a lane change does
-/// not start while any vehicle behind in the target lane is known only from data this
-/// old. 0.25 s is 25 periods: far beyond the in-process bus (age 0) and a CAN bus with
-/// tens of ms of delay, yet short next to the seconds a lane change takes.
+/// Age (s), beyond the latency the bus adds to the paper's synchronous exchange (the
+/// notification latency bound less h: [`LanePlanner::set_notify_latency`]), at which a
+/// vehicle's data counts as stale (SPEC §9): a lane change does not start while any
+/// vehicle behind in the target lane is known only from data this old. 0.25 s is 25
+/// periods: far beyond the in-process bus (age 0) and a CAN bus with tens of ms of
+/// delay, yet short next to the seconds a lane change takes.
+///
+/// Why beyond the bus's latency: on a bus whose messages take 1 s, every message is 1 s
+/// old when it arrives, so a fixed 0.25 s made every vehicle behind stale for good and no
+/// lane change could start (the fault grid's multi-lane road at 1 s of delay and 50 %
+/// loss ended with a vehicle 259 m of free lane beside it, never changing). (17) is
+/// inflated by the data's age and the latency bound either way; staleness only says that
+/// data is older than the bus explains.
 pub const STALE_AFTER_S: f64 = 0.25;
 
 /// Steps to which the bus rounds broadcast values (0: exact).

@@ -56,8 +56,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         }
         // (17) for every c ∈ C⁻_t; stale data behind blocks the start (SPEC §9).
         let unaware = self.notify - p.h();
+        let stale_after = unaware + F::from_f64(STALE_AFTER_S);
         self.for_each_behind(obs, m, |c, cx, cv, cooperative| {
-            if !(c.age <= F::from_f64(STALE_AFTER_S)) {
+            if !(c.age <= stale_after) {
                 return Err(StartBlock::Stale(c.id));
             }
             let tau = c.age + if cooperative { unaware } else { p.h() };

@@ -496,3 +496,46 @@ fn the_straight_tail_shortcut_answers_what_the_full_simulation_does() {
     .expect("valid");
     assert!(shortcut_agrees(&short32) > 1000);
 }
+
+/// Two lanes, the ego at x = 0 on lane 0's centre at 15 m/s wanting lane 1, and one
+/// vehicle 1 km behind in lane 1 at 15 m/s (clear of (17) at any age here) whose data is
+/// `age` s old: why the change may
+/// not start, if it may not, with the bus's latency bound `notify`.
+fn start_with_one_behind(notify: f64, age: f64) -> Result<(), StartBlock> {
+    let p = Params::<f64>::table_i();
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
+    pl.set_notify_latency(notify).expect("valid");
+    // Long after its first steps: nothing ahead is unheard of, whatever the latency.
+    pl.steps = 1000;
+    let others = [Other::v2v(2, -1000.0, 15.0, p.length(), 1, age)];
+    let obs = LaneObservation {
+        road: Road {
+            lanes: 2,
+            lane_width: 3.6,
+            end_x: None,
+        },
+        target_lane: 1,
+        ..one_lane(15.0, &others)
+    };
+    pl.start_check(&obs, 1)
+}
+
+#[test]
+fn data_is_stale_only_beyond_what_the_bus_explains() {
+    let p = Params::<f64>::table_i();
+    // The synchronous bus (notify = h): stale beyond STALE_AFTER_S.
+    assert_eq!(start_with_one_behind(p.h(), 0.2), Ok(()));
+    assert_eq!(
+        start_with_one_behind(p.h(), STALE_AFTER_S + 0.01),
+        Err(StartBlock::Stale(2))
+    );
+    // A bus whose messages take up to 1.13 s (1 s of delay, 12 periods of losses): data
+    // 1.1 s old is what it delivers, not stale; the change may start ((17) inflated by
+    // the age and the bound), and data older than the bound by STALE_AFTER_S is stale.
+    let notify = 1.13;
+    assert_eq!(start_with_one_behind(notify, 1.1), Ok(()));
+    assert_eq!(
+        start_with_one_behind(notify, notify - p.h() + STALE_AFTER_S + 0.01),
+        Err(StartBlock::Stale(2))
+    );
+}
