@@ -173,25 +173,30 @@ fn intersection_with_loss_and_delay_is_safe_and_everyone_crosses() {
 }
 
 /// The fault grid's worst row, loss 99 % at 0.1 and 1 s of delay, is live under both
-/// invariants: every vehicle of every live workload meets its goal (it found a follower
-/// stopped for good behind a vehicle that had left the world, whose `Left` it never
-/// heard, and a lane change that never started because a 1 s bus makes every message
-/// 1 s old); in the silent cell every vehicle left waiting is held up by the silent one.
+/// invariants, and with 30 % trucks under the default: every vehicle of every live
+/// workload meets its goal (it found a follower stopped for good behind a vehicle that
+/// had left the world, whose `Left` it never heard, and a lane change that never started
+/// because a 1 s bus makes every message 1 s old); in the silent cell every vehicle left
+/// waiting is held up by the silent one.
 #[test]
 fn the_fault_grid_is_live_at_99_percent_loss() {
     use host_sim::experiments::fault_grid::{grid_report, grid_runs, run_count, Cell, GridPlan};
-    let cells = Cell::grid(&[0.99], &[0.1, 1.0]);
-    for invariant in [
-        planner_core::Invariant::Paper,
-        planner_core::Invariant::LeaderAware,
-    ] {
+    use planner_core::Invariant::{LeaderAware, Paper};
+    let rows = [
+        (Cell::grid(&[0.99], &[0.1, 1.0]), Paper, 0),
+        (Cell::grid(&[0.99], &[0.1, 1.0]), LeaderAware, 0),
+        (Cell::grid(&[0.99], &[1.0]), LeaderAware, 30),
+    ];
+    for (cells, invariant, trucks) in &rows {
+        let (invariant, trucks) = (*invariant, *trucks);
         let plan = GridPlan {
-            cells: &cells,
+            cells,
             runs: 1,
             seed: 1,
             invariant,
+            trucks,
         };
-        let runs = grid_runs(&plan, (0, run_count(&cells, 1)), 2);
+        let runs = grid_runs(&plan, (0, run_count(cells, 1)), 2);
         let report = grid_report(&plan, &runs, 0.0);
         assert_eq!(report.unsafe_cells, 0, "{report}");
         for r in report
@@ -200,7 +205,10 @@ fn the_fault_grid_is_live_at_99_percent_loss() {
             .filter(|r| r.workload != "intersection CON")
         {
             let t = &r.totals;
-            let why = format!("{invariant:?} {:?} {}: {t:?}", r.cell, r.workload);
+            let why = format!(
+                "{invariant:?} {trucks} % {:?} {}: {t:?}",
+                r.cell, r.workload
+            );
             if r.cell.variant == "silent" {
                 assert_eq!(t.unfinished, t.own_silence, "{why}");
             } else {

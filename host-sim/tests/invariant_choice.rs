@@ -85,6 +85,7 @@ fn every_world_of_the_fault_grid_keeps_the_invariant_asked_for() {
             runs: 1,
             seed: 1,
             invariant,
+            trucks: 0,
         };
         let n = run_count(&cells, 1);
         for job in 0..n {

@@ -13,9 +13,9 @@
 //! violations, 0 unpermitted entries. Liveness may degrade, and is reported: the share of
 //! vehicles that met their goals and the mean time by which a run had met them.
 
-use super::crossings::queue_placements;
+use super::crossings::{queues_of, truck_layout};
 use super::experiment::{Experiment, RunError, SettingsError};
-use super::multilane::{paper_scenario, safe_spacing};
+use super::multilane::{paper_scenario, spacing};
 use super::shard::{MergeError, Runs};
 use super::sweep::{self, case_seed, Case, Totals};
 use crate::bus::{Faults, Silent};
@@ -26,7 +26,7 @@ use crate::scenario::junction::{JunctionScenario, LayoutToml};
 use crate::scenario::road::{Road, RoadScenario, RoadVehicle};
 use crate::scenario::{DriverKind, Phase};
 use crate::verdict::{Judged, Safety, Verdict};
-use crate::world::{Finish, WorldSpec};
+use crate::world::{Body, Finish, WorldSpec};
 use planner_core::crossing::Algorithm;
 use planner_core::sensing::Sensing;
 use rand::Rng;
@@ -77,18 +77,70 @@ impl Workload {
         }
     }
 
-    /// Run `k`'s world, without faults yet.
-    fn world(self, seed: u64, k: u64) -> WorldSpec {
+    /// Run `k`'s world, without faults yet, `trucks` percent of its planner-driven
+    /// vehicles trucks ([`Body::TRUCK`]; drawn from a stream of their own, so that with 0
+    /// every world is as it always was).
+    fn world(self, seed: u64, k: u64, trucks: u8) -> WorldSpec {
         let s = case_seed(seed, k);
+        let mut draw = Bodies::new(s, trucks);
         match self {
             Self::Multilane => {
-                let mut w = paper_scenario(s).world();
+                let mut sc = paper_scenario(s);
+                respace_pairs(&mut sc.vehicles, &mut draw);
+                let mut w = sc.world();
                 w.duration_s = 60.0;
                 w
             }
-            Self::Platoon => platoon(s).world(),
-            Self::NonCooperative => non_cooperative(s).world(),
-            Self::Intersection(a) => intersection(a, s).world(),
+            Self::Platoon => platoon(s, &mut draw).world(),
+            Self::NonCooperative => non_cooperative(s, &mut draw).world(),
+            Self::Intersection(a) => intersection(a, s, trucks).world(),
+        }
+    }
+}
+
+/// Which vehicles are trucks: each drawn at `percent` from a stream of its own.
+struct Bodies {
+    rng: rand_chacha::ChaCha8Rng,
+    percent: u8,
+}
+
+impl Bodies {
+    fn new(seed: u64, percent: u8) -> Self {
+        Self {
+            rng: rng(seed ^ 0x7472_7563_6b73),
+            percent,
+        }
+    }
+
+    /// The next vehicle's body (nothing is drawn at 0 %).
+    fn next(&mut self) -> Body {
+        if self.percent > 0 && self.rng.random_range(0..100u8) < self.percent {
+            Body::TRUCK
+        } else {
+            Body::CAR
+        }
+    }
+}
+
+/// `v` given `body`'s length and braking limit (a car's stay unset, as they always were).
+fn with_body(v: &mut RoadVehicle, body: Body) {
+    if body != Body::CAR {
+        v.length = Some(body.length);
+        v.brake = Some(body.brake);
+    }
+}
+
+/// The paper's road (two vehicles per lane, the front one at x = its spacing, the rear
+/// at 0) with drawn bodies, each front vehicle moved to the smallest safe spacing for its
+/// follower's body.
+fn respace_pairs(vehicles: &mut [RoadVehicle], draw: &mut Bodies) {
+    for pair in vehicles.chunks_mut(2) {
+        let bodies: Vec<Body> = pair.iter().map(|_| draw.next()).collect();
+        for (v, &b) in pair.iter_mut().zip(&bodies) {
+            with_body(v, b);
+        }
+        if let ([front, rear], [lead, body]) = (pair, bodies.as_slice()) {
+            front.x = rear.x + spacing(front.v, *lead, *body);
         }
     }
 }
@@ -195,6 +247,8 @@ pub struct GridReport {
     pub seed: u64,
     /// The invariant every planner kept (`paper`, `leader-aware`).
     pub invariant: &'static str,
+    /// Percent of the planner-driven vehicles drawn as trucks (`--trucks`).
+    pub trucks: u8,
     /// Wall-clock time (s).
     pub wall_seconds: f64,
 }
@@ -221,6 +275,11 @@ pub struct GridCells {
     /// Runs per workload and cell, with --grid.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..), requires = "grid")]
     pub runs: u64,
+    /// With --grid: percent of the planner-driven vehicles that are trucks (16.5 m,
+    /// braking at 4.5 m/s²), drawn per vehicle; 0 gives the grid as it always was.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100), requires = "grid")]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 /// `experiment faults --grid`'s settings (a shard's header carries them for `host-sim
@@ -259,6 +318,7 @@ impl GridSettings {
             runs: self.cells.runs,
             seed: self.seed,
             invariant: self.invariant,
+            trucks: self.cells.trucks,
         }
     }
 }
@@ -317,6 +377,8 @@ pub struct GridPlan<'a> {
     pub seed: u64,
     /// The invariant.
     pub invariant: planner_core::Invariant,
+    /// Percent of the planner-driven vehicles that are trucks.
+    pub trucks: u8,
 }
 
 /// The grid's runs in report order: (cell, workload, run). A run's seed depends on its
@@ -370,7 +432,7 @@ pub fn grid_runs(plan: &GridPlan, (first, end): (u64, u64), threads: usize) -> V
 
 /// Run `k` of `workload` in `cell` of the grid: its world, faults and all.
 fn job_world(plan: &GridPlan, (cell, workload): (Cell, Workload), k: u64) -> WorldSpec {
-    let mut world = workload.world(plan.seed, k);
+    let mut world = workload.world(plan.seed, k, plan.trucks);
     world.faults = cell.faults(1);
     world.sensing = Some(Sensing::radar());
     world.finish = Finish::GoalsMetAndStill;
@@ -443,6 +505,7 @@ pub fn grid_report(plan: &GridPlan, outs: &[GridRun], wall_seconds: f64) -> Grid
         runs,
         seed,
         invariant: crate::world::invariant_name(plan.invariant),
+        trucks: plan.trucks,
         wall_seconds,
     }
 }
@@ -457,16 +520,24 @@ pub fn cell_name(c: &Cell) -> String {
 
 /// Six vehicles in one lane at the smallest safe gap at a random speed; the scripted
 /// leader cruises 2 s, then brakes at amin to a stop and stays.
-fn platoon(seed: u64) -> RoadScenario {
+fn platoon(seed: u64, draw: &mut Bodies) -> RoadScenario {
     let lim = Limits::table_i();
     let mut r = rng(seed ^ 0x706c_6174);
     let v = r.random_range(5.0..lim.v_max);
-    let gap = safe_spacing(v);
-    let stop_at = 2.0 + v / lim.brake;
-    let vehicles = (0..6u16)
+    let bodies: Vec<Body> = (0..6).map(|_| draw.next()).collect();
+    // Each at the smallest safe spacing behind the one ahead, for its own body.
+    let mut xs = vec![300.0];
+    for w in bodies.windows(2) {
+        let ahead = xs.last().copied().unwrap_or(300.0);
+        xs.push(ahead - spacing(v, w[0], w[1]));
+    }
+    // The leader brakes at its own limit.
+    let lead_brake = bodies.first().map_or(lim.brake, |b| b.brake);
+    let stop_at = 2.0 + v / lead_brake;
+    let mut vehicles: Vec<RoadVehicle> = (0..6u16)
         .map(|i| RoadVehicle {
             id: i + 1,
-            x: 300.0 - f64::from(i) * gap,
+            x: xs[usize::from(i)],
             lane: 0,
             v,
             target_lane: None,
@@ -483,7 +554,7 @@ fn platoon(seed: u64) -> RoadScenario {
                     },
                     Phase {
                         until_s: stop_at,
-                        accel: -lim.brake,
+                        accel: -lead_brake,
                     },
                 ]
             } else {
@@ -496,6 +567,9 @@ fn platoon(seed: u64) -> RoadScenario {
             cooperative: None,
         })
         .collect();
+    for (v, &b) in vehicles.iter_mut().zip(&bodies) {
+        with_body(v, b);
+    }
     RoadScenario::new(
         format!("grid-platoon-{seed}"),
         15.0,
@@ -510,23 +584,26 @@ fn platoon(seed: u64) -> RoadScenario {
 
 /// Three lanes: four planners with random target lanes and two drivers with random
 /// admissible accelerations that do not cooperate, at random safe spacings.
-fn non_cooperative(seed: u64) -> RoadScenario {
-    let lim = Limits::table_i();
+fn non_cooperative(seed: u64, draw: &mut Bodies) -> RoadScenario {
     let mut r = rng(seed ^ 0x6e6f_6e63);
-    let mut back: [Option<f64>; 3] = [None; 3];
+    let mut back: [Option<(f64, Body)>; 3] = [None; 3];
     let mut vehicles = Vec::new();
     for i in 0..6u16 {
         let lane = r.random_range(0..3u8);
         let v = r.random_range(5.0..20.0);
         let slot = &mut back[usize::from(lane)];
+        let planner = i % 3 != 2;
+        // Planners are trucks at the drawn share; the random drivers stay cars.
+        let body = if planner { draw.next() } else { Body::CAR };
         // A random driver may accelerate: leave it room for a second at amax.
         let x = match *slot {
             None => r.random_range(100.0..160.0),
-            Some(ahead) => ahead - safe_spacing(lim.v_max) - r.random_range(0.0..20.0),
+            Some((ahead, lead)) => {
+                ahead - spacing(Limits::table_i().v_max, lead, body) - r.random_range(0.0..20.0)
+            }
         };
-        *slot = Some(x);
-        let planner = i % 3 != 2;
-        vehicles.push(RoadVehicle {
+        *slot = Some((x, body));
+        let mut vehicle = RoadVehicle {
             id: i + 1,
             x,
             lane,
@@ -543,7 +620,9 @@ fn non_cooperative(seed: u64) -> RoadScenario {
             length: None,
             brake: None,
             cooperative: None,
-        });
+        };
+        with_body(&mut vehicle, body);
+        vehicles.push(vehicle);
     }
     RoadScenario::new(
         format!("grid-non-cooperative-{seed}"),
@@ -558,11 +637,15 @@ fn non_cooperative(seed: u64) -> RoadScenario {
 }
 
 /// Up to three vehicles on each inlet lane of the SPEC §8 intersection.
-fn intersection(algorithm: Algorithm, seed: u64) -> JunctionScenario {
-    let lt = LayoutToml::default();
+fn intersection(algorithm: Algorithm, seed: u64, trucks: u8) -> JunctionScenario {
+    let mut lt = LayoutToml::default();
+    if trucks > 0 {
+        // A_S around the same turns made to take a truck's swing (as `crossings`).
+        lt = truck_layout(lt);
+    }
     let layout = crate::scenario::junction::build_layout(&lt)
         .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
-    let placements = queue_placements(&mut rng(seed), &layout, 3);
+    let placements = queues_of(&mut rng(seed), &layout, (3, trucks));
     JunctionScenario::new(
         format!("grid-intersection-{}-{seed}", algorithm.name()),
         600.0,
@@ -571,15 +654,16 @@ fn intersection(algorithm: Algorithm, seed: u64) -> JunctionScenario {
         lt,
         placements,
     )
-    .unwrap_or_else(|_| unreachable!("queue placements are valid"))
+    .unwrap_or_else(|_| unreachable!("queue placements are valid for cars and trucks"))
 }
 
 impl core::fmt::Display for GridReport {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         writeln!(
             f,
-            "fault grid: {} runs per workload and cell; every vehicle with the onboard radar",
-            self.runs
+            "fault grid: {} runs per workload and cell; every vehicle with the onboard radar; \
+             {} % of the planners' vehicles trucks; {} invariant",
+            self.runs, self.trucks, self.invariant
         )?;
         writeln!(
             f,
@@ -625,13 +709,13 @@ mod tests {
     fn workloads_are_valid_and_the_platoon_is_at_the_smallest_safe_gap() {
         for k in 0..5 {
             for w in Workload::all() {
-                let world = w.world(1, k);
+                let world = w.world(1, k, 0);
                 assert!(!world.vehicles.is_empty(), "{}", w.label());
             }
-            let p = platoon(k);
+            let p = platoon(k, &mut Bodies::new(k, 0));
             let lim = Limits::table_i();
             let gap = p.vehicles[0].x - p.vehicles[1].x;
-            assert!((gap - safe_spacing(p.vehicles[0].v)).abs() < 1e-9);
+            assert!((gap - super::super::multilane::safe_spacing(p.vehicles[0].v)).abs() < 1e-9);
             assert!(
                 gap - crate::world::LENGTH_M - lim.d0 < lim.safe_distance(p.vehicles[0].v) + 1.0
             );
@@ -642,5 +726,41 @@ mod tests {
         for c in Cell::all() {
             c.faults(1).validate().unwrap_or_else(|e| panic!("{e}"));
         }
+    }
+
+    /// With trucks: every workload has some (and cars still), every follower at least
+    /// its own smallest safe spacing behind the one ahead, the platoon's leader braking at
+    /// its own limit; with none, the bodies are the cars the grid always had.
+    #[test]
+    fn workloads_with_trucks_draw_them_and_space_them() {
+        let mut trucks = 0;
+        let mut all = 0;
+        for k in 0..4 {
+            for w in Workload::all() {
+                for v in &w.world(1, k, 0).vehicles {
+                    assert_eq!(v.body, Body::CAR, "{}", w.label());
+                }
+                let world = w.world(1, k, 50);
+                all += world.vehicles.len();
+                trucks += world
+                    .vehicles
+                    .iter()
+                    .filter(|v| v.body == Body::TRUCK)
+                    .count();
+            }
+            let p = platoon(k, &mut Bodies::new(k, 50));
+            for pair in p.vehicles.windows(2) {
+                let (a, b) = (&pair[0], &pair[1]);
+                let want = spacing(a.v, a.body(), b.body());
+                assert!((a.x - b.x - want).abs() < 1e-9, "{k}: {} {}", a.x, b.x);
+            }
+            let lead = &p.vehicles[0];
+            let brake = lead.script.last().map(|ph| -ph.accel);
+            assert_eq!(brake, Some(lead.body().brake), "{k}");
+        }
+        assert!(
+            trucks * 5 > all && trucks * 5 < 4 * all,
+            "{trucks} of {all}"
+        );
     }
 }

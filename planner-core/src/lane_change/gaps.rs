@@ -277,8 +277,12 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
 
     /// Every vehicle that may be in lane `m` behind the ego, fused per vehicle: a sensor
     /// return (fresh, within the error bounds) is used in place of a V2V record of the same
-    /// vehicle, with that record's declared change and cooperation; a vehicle known only
-    /// from the sensor is taken as one that does not cooperate. With sensors, a vehicle
+    /// vehicle, with that record's declared change and cooperation, and, if it
+    /// cooperates, its declared braking limit (trusted, as on V2V alone: without it a car
+    /// seen by the radar was taken to brake like the weakest truck, needed 25 m behind a
+    /// truck changing in front of it where it keeps 15 m itself, and the truck never
+    /// changed lanes); a vehicle known only from the sensor is taken as one that does not
+    /// cooperate, at the weakest braking limit. With sensors, a vehicle
     /// closing in at vmax from just beyond the rear range is added. Each is handed to `f`
     /// with its worst-case position and speed and whether it cooperates.
     pub(super) fn for_each_behind(
@@ -304,7 +308,15 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
                 c.cooperative
             };
             let declared = heard.is_some_and(|h| h.alpha == Some(m));
-            let occupant = Other { cooperative, ..*c };
+            let brake = match heard {
+                Some(h) if cooperative => h.brake,
+                _ => c.brake,
+            };
+            let occupant = Other {
+                cooperative,
+                brake,
+                ..*c
+            };
             // A return up to `e` ahead of the ego may be behind it.
             let behind = if c.sensed { c.x - e <= x } else { c.x <= x };
             if !(behind && (declared || may_occupy(m, &occupant, self.intent_known(obs, c)))) {
@@ -315,7 +327,7 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             } else {
                 (c.x, c.v)
             };
-            f(c, cx, cv, cooperative)?;
+            f(&occupant, cx, cv, cooperative)?;
         }
         if let Some(s) = &self.sensing {
             let p = self.params();

@@ -539,3 +539,53 @@ fn data_is_stale_only_beyond_what_the_bus_explains() {
         Err(StartBlock::Stale(2))
     );
 }
+
+/// `start_with_one_behind`'s road with the radar on and trucks about (the weakest braking
+/// limit 4.5 m/s²), a car 25.3 m behind (centres) at 15 m/s in lane 1 seen by the radar,
+/// and, if `heard`, its V2V record too, declaring a braking limit of 7.9 m/s² and, if
+/// `cooperative`, that it cooperates.
+fn start_beside_a_seen_car(heard: bool, cooperative: bool) -> Result<(), StartBlock> {
+    let p = Params::<f64>::table_i();
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 0).expect("valid");
+    pl.set_sensing(Some(Sensing::radar())).expect("valid");
+    pl.set_weakest_brake(4.5).expect("valid");
+    pl.steps = 1000;
+    let mut v2v = Other::v2v(2, -25.3, 15.0, p.length(), 1, 0.0);
+    v2v.brake = safety::BrakeLimit::from_mps2(p.brake());
+    v2v.cooperative = cooperative;
+    let seen = Other {
+        sensed: true,
+        cooperative: false,
+        brake: None,
+        ..v2v
+    };
+    let both = [v2v, seen];
+    let others = if heard { &both[..] } else { &both[1..] };
+    let obs = LaneObservation {
+        road: Road {
+            lanes: 2,
+            lane_width: 3.6,
+            end_x: None,
+        },
+        target_lane: 1,
+        ..one_lane(15.0, others)
+    };
+    pl.start_check(&obs, 1)
+}
+
+#[test]
+fn a_seen_car_that_declares_its_braking_limit_is_taken_at_it() {
+    // About 20 m of room behind the ego: a car braking at 7.9 m/s² from 15 m/s needs
+    // 14.6 m, the weakest vehicle (4.5 m/s²) 25.5 m.
+    assert_eq!(start_beside_a_seen_car(true, true), Ok(()));
+    // Seen only: nothing is known of it, so it may brake like the weakest.
+    assert_eq!(
+        start_beside_a_seen_car(false, true),
+        Err(StartBlock::Behind(2))
+    );
+    // Heard, but it does not cooperate: its word is not taken.
+    assert_eq!(
+        start_beside_a_seen_car(true, false),
+        Err(StartBlock::Behind(2))
+    );
+}
