@@ -68,7 +68,7 @@ fn a_grid_keeps_the_invariant_asked_for_and_names_it_in_its_file() {
         paper.world().expect("a valid grid").invariant,
         Invariant::Paper
     );
-    let r = grids((1, 0), 1, 30.0, Invariant::LeaderAware, 0);
+    let r = grids((1, 0), (1, 0), 30.0, Invariant::LeaderAware, 0);
     assert_eq!(r.invariant, "leader-aware");
     assert_eq!(
         r.collisions + r.invariant_violations + r.limit_violations + r.unpermitted_entries,

@@ -14,11 +14,12 @@
 //! lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have not crossed
 //! [`GRACE_S`] after they arrived.
 
+use super::crossings::truck_layout;
 use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::shard::{MergeError, Runs};
 use super::sweep::case_seed;
 use crate::monitor::Limits;
-use crate::scenario::junction::{build_layout, LayoutToml};
+use crate::scenario::junction::{build_layout_for, LayoutToml};
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::network::{Junction, Network};
 use crate::world::{Finish, SolverChoice, World, WorldSpec, LENGTH_M};
@@ -128,6 +129,11 @@ pub struct DemandSettings {
     #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     #[serde(default, with = "crate::world::invariant_serde")]
     pub invariant: Invariant,
+    /// Percent of the arrivals that are trucks (16.5 m, braking at 4.5 m/s²), at SPEC
+    /// §8's junction built for a truck's swing; 0 gives the runs as they always were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 impl DemandSettings {
@@ -135,6 +141,7 @@ impl DemandSettings {
     pub fn plan(&self) -> Plan {
         let mut plan = Plan::new(&self.algorithms, &self.rates, self.duration, self.seeds);
         plan.invariant = self.invariant;
+        plan.trucks = self.trucks;
         plan
     }
 }
@@ -212,6 +219,8 @@ pub struct Plan {
     pub seeds: u64,
     /// The invariant every vehicle keeps toward the vehicle ahead.
     pub invariant: Invariant,
+    /// Percent of the arrivals that are trucks.
+    pub trucks: u8,
 }
 
 impl Plan {
@@ -224,6 +233,7 @@ impl Plan {
             duration,
             seeds,
             invariant: Invariant::Paper,
+            trucks: 0,
         }
     }
 
@@ -249,11 +259,30 @@ impl Plan {
 /// The world of one run: the SPEC §8 junction under `algorithm`, arrivals at `rate` per
 /// inlet lane.
 pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> WorldSpec {
-    let lt = LayoutToml::default();
-    let layout = build_layout(&lt).unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
+    world_with(algorithm, (rate, 0), duration, seed)
+}
+
+/// [`world`] with `trucks` percent of the arrivals trucks: then the junction is built for
+/// a truck's swing ([`truck_layout`]) and its conflicts swept by a truck's rectangle.
+pub fn world_with(
+    algorithm: Algorithm,
+    (rate, trucks): (f64, u8),
+    duration: f64,
+    seed: u64,
+) -> WorldSpec {
+    let mut lt = LayoutToml::default();
+    if trucks > 0 {
+        lt = truck_layout(lt);
+    }
+    let fleet = crate::world::Fleet::with_arrivals([], trucks);
+    let layout = build_layout_for(&lt, fleet)
+        .unwrap_or_else(|e| unreachable!("the SPEC §8 layout is valid for cars and trucks: {e}"));
     let arrivals = crate::scenario::junction::stub_arrivals(
         &layout,
-        crate::scenario::common::ArrivalsToml::cars(rate),
+        crate::scenario::common::ArrivalsToml {
+            rate_vph: rate,
+            trucks,
+        },
     );
     WorldSpec {
         name: format!("demand-{}-{rate}-{seed}", algorithm.name()),
@@ -310,14 +339,14 @@ struct Arrival {
     crossed: bool,
 }
 
-/// Free-flow time from the start of the inlet (centre at L/2) to leaving A_C on route
-/// `route` at vImax (s).
-fn free_flow(jn: Option<&Junction>, route: Option<u8>) -> f64 {
+/// Free-flow time from the start of the inlet (centre at L/2, `length` the vehicle's L)
+/// to leaving A_C on route `route` at vImax (s).
+fn free_flow(jn: Option<&Junction>, route: Option<u8>, length: f64) -> f64 {
     route
         .zip(jn)
         .and_then(|(r, j)| j.layout.route(usize::from(r)).map(|r| (r, j)))
         .map_or(0.0, |(r, j)| {
-            (r.path.exit() + j.layout.spec.comm_margin - 0.5 * LENGTH_M) / j.layout.spec.v_limit
+            (r.path.exit() + j.layout.spec.comm_margin - 0.5 * length) / j.layout.spec.v_limit
         })
 }
 
@@ -331,7 +360,7 @@ fn arrivals(w: &World<20>, jn: Option<&Junction>) -> Vec<Arrival> {
                 crate::world::at::At::Crossing { route, .. } => Some(route),
                 _ => None,
             };
-            let free = free_flow(jn, route);
+            let free = free_flow(jn, route, v.body.length);
             let out = v.log.left_at.unwrap_or(end);
             Arrival {
                 at: v.log.entered_at,
@@ -373,7 +402,7 @@ fn growing(arrivals: &[Arrival], end: f64) -> bool {
 }
 
 fn one(algorithm: Algorithm, rate: f64, plan: &Plan, seed: u64) -> RunOutcome {
-    let mut spec = world(algorithm, rate, plan.duration, seed);
+    let mut spec = world_with(algorithm, (rate, plan.trucks), plan.duration, seed);
     spec.invariant = plan.invariant;
     let net = spec.network.clone();
     let mut w = World::<20>::new(spec, SolverChoice::Ours, None);

@@ -198,6 +198,7 @@ mod tests {
             duration: 60.0,
             seeds: 1,
             invariant: Invariant::Paper,
+            trucks: 0,
         };
         let e = twice.validate().expect_err("FIFO twice");
         assert_eq!(

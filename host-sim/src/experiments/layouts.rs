@@ -36,6 +36,13 @@ pub struct Layouts {
     #[command(flatten)]
     #[serde(flatten)]
     pub sweep: CasesUnder,
+    /// Percent of the arrivals that are trucks (16.5 m, braking at 4.5 m/s²); every
+    /// intersection then gets a turn inset, mostly one that holds a truck's swing and now
+    /// and then one too small (which the loader must refuse at its line). 0 gives the
+    /// cases as they always were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 impl Experiment for Layouts {
@@ -52,7 +59,7 @@ impl Experiment for Layouts {
         Ok(sweep_with(
             end - first,
             first,
-            s.sweep.seed,
+            (s.sweep.seed, self.trucks),
             threads,
             s.invariant,
         ))
@@ -136,26 +143,58 @@ impl LayoutsReport {
 
 /// Case `index` of the sweep seeded `seed`: a network file.
 pub fn case(seed: u64, index: u64) -> String {
+    case_with((seed, 0), index)
+}
+
+/// The turn insets of a case with trucks, from a stream of their own (so that trucks
+/// move no other draw): none without trucks.
+struct Insets(Option<rand_chacha::ChaCha8Rng>);
+
+impl Insets {
+    /// A `turn_inset` line for the next intersection or grid: mostly the 8 m a 16.5 m
+    /// truck's swing needs at SPEC §8's turns, one in ten from 0 to 8 m (too small for
+    /// some layouts: the loader refuses those at their line).
+    fn line(&mut self) -> String {
+        self.0.as_mut().map_or_else(String::new, |r| {
+            let inset = if r.random_bool(0.9) {
+                super::crossings::TRUCK_TURN_INSET_M
+            } else {
+                r.random_range(0.0..super::crossings::TRUCK_TURN_INSET_M)
+            };
+            format!("turn_inset = {inset:.1}\n")
+        })
+    }
+}
+
+/// Case `index` of the sweep seeded `seed` with `trucks_percent` of the arrivals trucks:
+/// with 0, [`case()`]'s file; else the same layout with a turn inset at every
+/// intersection and `trucks` in its arrivals.
+pub fn case_with((seed, trucks_percent): (u64, u8), index: u64) -> String {
     let mut r = rng(case_seed(seed, index));
+    let mut insets =
+        Insets((trucks_percent > 0).then(|| rng(case_seed(seed ^ 0x007a_0cc5, index))));
     let mut f = format!(
         "name = \"layout-{seed}-{index}\"\nduration_s = 40.0\nseed = {}\nalgorithm = \"{}\"\n",
         case_seed(seed, index),
         ["pipelined", "concurrent_fair", "fifo", "stop"][r.random_range(0..4)]
     );
     if r.random_bool(0.5) {
-        grid(&mut r, &mut f);
+        grid(&mut r, &mut f, &mut insets);
     } else {
-        explicit(&mut r, &mut f);
+        explicit(&mut r, &mut f, &mut insets);
     }
     let _ = write!(
         f,
         "\n[arrivals]\nrate_vph = {:.0}\n",
         r.random_range(100.0..1500.0)
     );
+    if trucks_percent > 0 {
+        let _ = writeln!(f, "trucks = {trucks_percent}");
+    }
     f
 }
 
-fn grid(r: &mut impl Rng, f: &mut String) {
+fn grid(r: &mut impl Rng, f: &mut String, insets: &mut Insets) {
     let rows: u8 = r.random_range(1..=4);
     let cols: u8 = r.random_range(1..=4);
     let lanes: u8 = r.random_range(1..=4);
@@ -166,7 +205,8 @@ fn grid(r: &mut impl Rng, f: &mut String) {
     };
     let _ = write!(
         f,
-        "\n[grid]\nrows = {rows}\ncols = {cols}\nblock_m = {block:.1}\nlanes = {lanes}\n"
+        "\n[grid]\nrows = {rows}\ncols = {cols}\nblock_m = {block:.1}\nlanes = {lanes}\n{}",
+        insets.line()
     );
     if r.random_bool(0.6) {
         let boundary = if r.random_bool(0.4) {
@@ -187,7 +227,7 @@ fn road_length(r: &mut impl Rng) -> f64 {
     }
 }
 
-fn explicit(r: &mut impl Rng, f: &mut String) {
+fn explicit(r: &mut impl Rng, f: &mut String, insets: &mut Insets) {
     const HEADINGS: [&str; 4] = ["east", "north", "west", "south"];
     let n: usize = r.random_range(1..=4);
     let lanes0: u8 = r.random_range(1..=3);
@@ -219,10 +259,11 @@ fn explicit(r: &mut impl Rng, f: &mut String) {
         let _ = write!(
             f,
             "\n[[intersection]]\nid = {}\nx = {:.1}\ny = {:.1}\nlanes = {lanes}\n\
-             v_limit = {v_limit:.2}\ncomm_margin = {margin:.2}\n",
+             v_limit = {v_limit:.2}\ncomm_margin = {margin:.2}\n{}",
             i + 1,
             spacing * p.0 as f64,
-            spacing * p.1 as f64
+            spacing * p.1 as f64,
+            insets.line()
         );
     }
     let mut sid = 100;
@@ -334,15 +375,22 @@ fn run_case(text: &str) -> Outcome {
 /// Runs `cases` cases from index `first` of the sweep seeded `seed` on `threads` threads,
 /// every file under the default invariant.
 pub fn sweep(cases: u64, first: u64, seed: u64, threads: usize) -> LayoutsReport {
-    sweep_with(cases, first, seed, threads, crate::world::DEFAULT_INVARIANT)
+    sweep_with(
+        cases,
+        first,
+        (seed, 0),
+        threads,
+        crate::world::DEFAULT_INVARIANT,
+    )
 }
 
-/// [`sweep()`] with every file naming `invariant` (after what its seed draws, so the
-/// layouts are the same under either).
+/// [`sweep()`] with `trucks` percent of the arrivals trucks ([`case_with`]) and every
+/// file naming `invariant` (after what its seed draws, so the layouts are the same under
+/// either).
 pub fn sweep_with(
     cases: u64,
     first: u64,
-    seed: u64,
+    (seed, trucks): (u64, u8),
     threads: usize,
     invariant: planner_core::Invariant,
 ) -> LayoutsReport {
@@ -354,7 +402,7 @@ pub fn sweep_with(
     let outcomes = super::par::map_indexed(cases as usize, threads, |i| {
         let index = first + i as u64;
         // The key goes first: top-level keys before any table.
-        let text = format!("{named}{}", case(seed, index));
+        let text = format!("{named}{}", case_with((seed, trucks), index));
         (index, run_case(&text), text)
     });
     let mut r = LayoutsReport {
@@ -445,5 +493,28 @@ mod tests {
         assert!(texts.iter().any(|t| t.contains("[grid]")));
         assert!(texts.iter().any(|t| t.contains("[[intersection]]")));
         assert_eq!(case(9, 3), case(9, 3));
+    }
+
+    /// With trucks, the same layouts (the insets draw from their own stream), every
+    /// intersection with a turn inset and trucks among the arrivals.
+    #[test]
+    fn cases_with_trucks_are_the_same_layouts_built_for_them() {
+        for i in 0..40 {
+            let (cars, trucks) = (case(9, i), case_with((9, 30), i));
+            let without: String = trucks
+                .lines()
+                .filter(|l| !l.starts_with("turn_inset = ") && !l.starts_with("trucks = "))
+                .map(|l| format!("{l}\n"))
+                .collect();
+            assert_eq!(without, cars);
+            let junctions =
+                cars.matches("[[intersection]]").count() + cars.matches("[grid]").count();
+            assert_eq!(
+                trucks.matches("turn_inset = ").count(),
+                junctions,
+                "{trucks}"
+            );
+            assert!(trucks.ends_with("trucks = 30\n"), "{trucks}");
+        }
     }
 }

@@ -11,6 +11,7 @@
 //! deadlock, and at least 95 % of the trips that arrived at least free flow + [`GRACE_S`]
 //! before the end completed.
 
+use super::crossings::TRUCK_TURN_INSET_M;
 use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::shard::{combine_all, MergeError};
 use crate::scenario::junction::AlgorithmToml;
@@ -82,6 +83,11 @@ pub struct NetworkSettings {
     #[arg(long, default_value = "PIPE", value_parser = super::flags::algorithm)]
     #[serde(default = "pipelined", with = "super::flags::algorithm_name")]
     pub algorithm: Algorithm,
+    /// Percent of the arrivals that are trucks (16.5 m, braking at 4.5 m/s²); every
+    /// intersection is then built for a truck's swing (`turn_inset`).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 /// The grid's algorithm before it could be chosen (a shard header without one).
@@ -100,6 +106,7 @@ impl Default for NetworkSettings {
             seed: 1,
             invariant: planner_core::Invariant::Paper,
             algorithm: Algorithm::Pipelined,
+            trucks: 0,
         }
     }
 }
@@ -145,10 +152,18 @@ impl NetworkSettings {
             "invariant = \"{}\"\n",
             crate::world::invariant_name(self.invariant)
         );
+        // Trucks: junctions that hold a truck's swing, and the share among the arrivals.
+        let (inset, trucks) = match self.trucks {
+            0 => (String::new(), String::new()),
+            p => (
+                format!("turn_inset = {TRUCK_TURN_INSET_M:.1}\n"),
+                format!("trucks = {p}\n"),
+            ),
+        };
         format!(
             "name = \"grid-{r}x{c}\"\nduration_s = {d}\nseed = {seed}\nalgorithm = \"{a}\"\n{invariant}\n\
-             [grid]\nrows = {r}\ncols = {c}\nblock_m = {b}\nlanes = {l}\n\n\
-             [arrivals]\nrate_vph = {rate}\n",
+             [grid]\nrows = {r}\ncols = {c}\nblock_m = {b}\nlanes = {l}\n{inset}\n\
+             [arrivals]\nrate_vph = {rate}\n{trucks}",
             r = self.grid.rows,
             c = self.grid.cols,
             a = AlgorithmToml::of(self.algorithm).key(),
@@ -499,6 +514,11 @@ pub struct Grids {
         with = "crate::world::invariant_serde"
     )]
     pub invariant: planner_core::Invariant,
+    /// Percent of the arrivals that are trucks (16.5 m, braking at 4.5 m/s²), at
+    /// junctions built for a truck's swing; 0 gives the grids as they always were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 impl Experiment for Grids {
@@ -518,7 +538,7 @@ impl Experiment for Grids {
         let cases = (end - first, first);
         Ok(grids(
             cases,
-            self.seed,
+            (self.seed, self.trucks),
             self.duration,
             self.invariant,
             threads,
@@ -562,12 +582,23 @@ impl core::fmt::Display for GridsReport {
 }
 
 /// Case `index` of the grids sweep seeded `seed`, `duration_s` long (the paper's
-/// invariant).
+/// invariant, cars only).
 pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
+    grid_case_with((seed, 0), index, duration_s)
+}
+
+/// [`grid_case`] with `trucks` percent of the arrivals trucks: the same draws, each
+/// junction built for a truck's swing and each block at least as long as that takes.
+pub fn grid_case_with((seed, trucks): (u64, u8), index: u64, duration_s: f64) -> NetworkSettings {
     use rand::Rng;
     let mut r = crate::reference::instances::rng(super::sweep::case_seed(seed, index));
     let lanes: u8 = r.random_range(1..=4);
-    let min = crate::scenario::network::min_block_m(lanes);
+    let min = if trucks == 0 {
+        crate::scenario::network::min_block_m(lanes)
+    } else {
+        let truck = crate::world::Body::TRUCK.length;
+        crate::scenario::network::min_block_m_for(lanes, TRUCK_TURN_INSET_M, truck)
+    };
     NetworkSettings {
         grid: GridSize {
             rows: r.random_range(2..=4),
@@ -580,14 +611,16 @@ pub fn grid_case(seed: u64, index: u64, duration_s: f64) -> NetworkSettings {
         seed: super::sweep::case_seed(seed, index),
         invariant: planner_core::Invariant::Paper,
         algorithm: Algorithm::Pipelined,
+        trucks,
     }
 }
 
-/// Runs `cases` grids from index `first` of the sweep seeded `seed`, each for
-/// `duration_s` with every planner keeping `invariant`, on `threads` threads.
+/// Runs `cases` grids from index `first` of the sweep seeded `seed`, `trucks` percent of
+/// the arrivals trucks, each for `duration_s` with every planner keeping `invariant`, on
+/// `threads` threads.
 pub fn grids(
     (cases, first): (u64, u64),
-    seed: u64,
+    (seed, trucks): (u64, u8),
     duration_s: f64,
     invariant: planner_core::Invariant,
     threads: usize,
@@ -597,7 +630,7 @@ pub fn grids(
         let index = first + i as u64;
         let s = NetworkSettings {
             invariant,
-            ..grid_case(seed, index, duration_s)
+            ..grid_case_with((seed, trucks), index, duration_s)
         };
         let deadlock = std::cell::RefCell::new(None);
         let r = run_with(&s, &mut |d| *deadlock.borrow_mut() = Some(d.to_string()));

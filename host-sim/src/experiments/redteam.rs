@@ -26,7 +26,7 @@
 //! The paper's Concurrent Crossing as written is run for safety too; it is not live
 //! (SPEC §7), so its unfinished vehicles are left out of the totals, as in `crossings`.
 
-use super::crossings::{queue_placements, ALGORITHMS};
+use super::crossings::{queues_of, truck_layout, ALGORITHMS};
 use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, Cases, CasesUnder, Failing, Totals};
@@ -59,22 +59,34 @@ impl Kind {
     }
 }
 
-/// `host-sim outages`: cases, seed and invariant.
+/// `host-sim outages`: cases, seed, invariant and trucks.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
 pub struct Outages {
     /// Cases, seed, invariant.
     #[command(flatten)]
     #[serde(flatten)]
     pub sweep: CasesUnder,
+    /// Percent of the vehicles that are trucks (16.5 m, braking at 4.5 m/s²), drawn per
+    /// vehicle at a junction built for a truck's swing; 0 gives the cases as they always
+    /// were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
-/// `host-sim liars`: cases, seed and invariant.
+/// `host-sim liars`: cases, seed, invariant and trucks.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
 pub struct Liars {
     /// Cases, seed, invariant.
     #[command(flatten)]
     #[serde(flatten)]
     pub sweep: CasesUnder,
+    /// Percent of the vehicles that are trucks (16.5 m, braking at 4.5 m/s²), drawn per
+    /// vehicle at a junction built for a truck's swing; 0 gives the cases as they always
+    /// were.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    #[serde(default, skip_serializing_if = "super::flags::is_zero")]
+    pub trucks: u8,
 }
 
 /// `host-sim ids`: cases and seed (each case is a network file, whose invariant is the
@@ -109,7 +121,7 @@ macro_rules! junction_sweep {
                 Ok(junction_faults(
                     $kind,
                     range,
-                    (s.sweep.seed, s.invariant),
+                    (s.sweep.seed, s.invariant, self.trucks),
                     threads,
                 ))
             }
@@ -293,11 +305,26 @@ pub fn sensed(seed: u64, index: u64) -> bool {
 
 /// Case `index` of `kind` under `algorithm`: random queues and the case's fault.
 pub fn case(kind: Kind, seed: u64, index: u64, algorithm: Algorithm) -> JunctionScenario {
-    let lt = LayoutToml::default();
+    case_with(kind, (seed, 0), index, algorithm)
+}
+
+/// [`case()`] with `trucks_percent` of the vehicles trucks, at SPEC §8's junction built
+/// for a truck's swing ([`truck_layout`]); with 0 the case is [`case()`]'s. The fault is
+/// drawn from its own stream, so trucks change no fault.
+pub fn case_with(
+    kind: Kind,
+    (seed, trucks_percent): (u64, u8),
+    index: u64,
+    algorithm: Algorithm,
+) -> JunctionScenario {
+    let mut lt = LayoutToml::default();
+    if trucks_percent > 0 {
+        lt = truck_layout(lt);
+    }
     let layout = build_layout(&lt).unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
     let mut r = rng(case_seed(seed, index));
     let per_lane = [1usize, 2, 3, 5, 8][r.random_range(0..5)];
-    let placements = queue_placements(&mut r, &layout, per_lane);
+    let placements = queues_of(&mut r, &layout, (per_lane, trucks_percent));
     let ids: Vec<u16> = placements.iter().map(|p| p.id).collect();
     let mut sc = JunctionScenario::new(
         format!("{}-{seed}-{index}-{}", kind.name(), algorithm.name()),
@@ -307,7 +334,7 @@ pub fn case(kind: Kind, seed: u64, index: u64, algorithm: Algorithm) -> Junction
         lt,
         placements,
     )
-    .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
+    .unwrap_or_else(|e| unreachable!("the SPEC §8 layout is valid for cars and trucks: {e}"));
     sc.header.faults = faults(kind, seed, index, &ids);
     if kind == Kind::Liars && sensed(seed, index) {
         sc.header.sensing = Some(planner_core::Sensing::radar());
@@ -316,11 +343,12 @@ pub fn case(kind: Kind, seed: u64, index: u64, algorithm: Algorithm) -> Junction
 }
 
 /// Runs `cases` cases of `kind` from index `first` of the sweep seeded `seed`, each under
-/// every algorithm with every vehicle keeping `invariant`, on `threads` threads.
+/// every algorithm with every vehicle keeping `invariant`, `trucks` percent of them
+/// trucks, on `threads` threads.
 pub fn junction_faults(
     kind: Kind,
     (cases, first): (u64, u64),
-    (seed, invariant): (u64, planner_core::Invariant),
+    (seed, invariant, trucks): (u64, planner_core::Invariant, u8),
     threads: usize,
 ) -> JunctionFaultsReport {
     let t0 = std::time::Instant::now();
@@ -329,7 +357,7 @@ pub fn junction_faults(
         .collect();
     let results: Vec<Case> = super::par::map_indexed(jobs.len(), threads, |j| {
         let (index, algorithm) = jobs[j];
-        let mut sc = case(kind, seed, index, algorithm);
+        let mut sc = case_with(kind, (seed, trucks), index, algorithm);
         sc.header.invariant = invariant;
         Case {
             index,
@@ -550,5 +578,40 @@ mod tests {
             one_period > 3 && from_start > 3,
             "{one_period} {from_start}"
         );
+    }
+
+    /// With trucks: every case loads, at the junction built for a truck's swing, with
+    /// trucks and cars among its vehicles over the sweep, and the same outage as without.
+    #[test]
+    fn cases_with_trucks_are_valid_and_keep_their_faults() {
+        use crate::world::Body;
+        let (mut trucks, mut cars) = (0, 0);
+        // A truck's junction takes a while to build (its swept area is checked along
+        // every route): a few cases.
+        for i in 0..5 {
+            for kind in [Kind::Outages, Kind::Liars] {
+                let t = case_with(kind, (5, 40), i, Algorithm::Platoon);
+                JunctionScenario::parse(&t.to_toml(), Path::new("t.toml"))
+                    .unwrap_or_else(|e| panic!("{e}"));
+                trucks += t
+                    .placements
+                    .iter()
+                    .filter(|p| p.body == Body::TRUCK)
+                    .count();
+                cars += t.placements.iter().filter(|p| p.body == Body::CAR).count();
+                assert_eq!(t.layout_toml, truck_layout(LayoutToml::default()));
+            }
+            assert_eq!(
+                case_with(Kind::Outages, (5, 40), i, Algorithm::Fifo)
+                    .header
+                    .faults,
+                case(Kind::Outages, 5, i, Algorithm::Fifo).header.faults
+            );
+            assert_eq!(
+                case_with(Kind::Liars, (5, 0), i, Algorithm::Fifo).to_toml(),
+                case(Kind::Liars, 5, i, Algorithm::Fifo).to_toml()
+            );
+        }
+        assert!(trucks > 10 && cars > 10, "{trucks} trucks, {cars} cars");
     }
 }

@@ -200,6 +200,13 @@ pub struct Totals {
     /// routes that conflict with that one wait too. Counted in `unfinished` all the same.
     #[serde(default)]
     pub own_silence: u64,
+    /// Of the unfinished, those of runs that no deadlock ended, held up at the end by a
+    /// vehicle whose transmitter is silent: ahead of them, or in the lane they must
+    /// change into, known only by sensors and so taken at the wall and at the fleet's
+    /// weakest braking limit (`Summary::held_by_silent`). Counted in `unfinished` all the
+    /// same.
+    #[serde(default)]
+    pub held_by_silent: u64,
     /// Latest time by which a case had every goal met (s).
     pub max_finish_time_s: f64,
     /// Mean of those times (s).
@@ -242,6 +249,7 @@ impl Totals {
             t.unfinished += c.unfinished();
             t.deadlocks += u64::from(s.deadlock.is_some());
             t.own_silence += own_silence(s);
+            t.held_by_silent += s.held_by_silent as u64;
             t.fallback_steps += s.fallback_steps;
             let f = c.finish_time_s();
             t.max_finish_time_s = t.max_finish_time_s.max(f);
@@ -269,6 +277,7 @@ impl Totals {
             t.unfinished += p.unfinished;
             t.deadlocks += p.deadlocks;
             t.own_silence += p.own_silence;
+            t.held_by_silent += p.held_by_silent;
             t.fallback_steps += p.fallback_steps;
             t.max_finish_time_s = t.max_finish_time_s.max(p.max_finish_time_s);
             sum += p.mean_finish_time_s * p.cases as f64;

@@ -145,6 +145,9 @@ impl<const N: usize> Harness<N> {
                 unfinished,
                 // The fleet runs closed worlds: every vehicle is due from the start.
                 under_way: 0,
+                // Not classified on a fleet (a silent node's neighbours left waiting count
+                // as unfinished, with no reason given): the in-process world gives it.
+                held_by_silent: 0,
                 findings: &findings,
                 counters: &counters,
                 deadlock: deadlock.as_ref(),

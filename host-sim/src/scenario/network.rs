@@ -459,10 +459,16 @@ fn fleet_of(
 /// The shortest `block_m` a `[grid]` of `lanes` lanes at the default communication
 /// margin and speed limit takes (what `check_blocks` requires between junctions).
 pub fn min_block_m(lanes: u8) -> f64 {
-    let a = half_size_for(lanes);
+    min_block_m_for(lanes, 0.0, LENGTH_M)
+}
+
+/// [`min_block_m`] for a grid whose `turn_inset` is `inset` and whose longest vehicle is
+/// `longest` m (an outlet takes it out of A_C).
+pub fn min_block_m_for(lanes: u8, inset: f64, longest: f64) -> f64 {
+    let a = half_size_for(lanes) + inset;
     let margin = comm();
     2.0 * a
-        + (margin + LENGTH_M)
+        + (margin + longest.max(LENGTH_M))
         + margin
         + f64::from(lanes.saturating_sub(1)) * change_distance(limit())
 }

@@ -183,6 +183,37 @@ impl<const N: usize, B: Bus> World<N, B> {
         }
     }
 
+    /// Of the vehicles unfinished now (and due), those held up by a silent vehicle when
+    /// no deadlock ended the run: what each waits on (as the deadlock report would say it,
+    /// from ground truth) names the vehicle whose transmitter is silent — the vehicle
+    /// ahead, or one in the lane it must change into, which it knows only by its sensors
+    /// and so takes at the wall and, its body unknown, at the fleet's weakest braking
+    /// limit (a gap enough for the car it is may not be for the truck it could be).
+    pub(super) fn held_by_silent(&self) -> usize {
+        let t = self.time.t;
+        let silent = self.spec.faults.silent.filter(|s| t >= s.from_s);
+        let (Some(s), None) = (silent, &self.watch.deadlock) else {
+            return 0;
+        };
+        let truths: Vec<VehicleTruth> = self.vehicles.iter().map(|v| v.truth(&self.net)).collect();
+        let holders = |j: usize| super::wait::holders(&self.managers, j);
+        let names = |w: &WaitsOn| match w {
+            WaitsOn::Vehicle { id } => *id == s.id,
+            WaitsOn::LaneChange { ids } => ids.contains(&s.id),
+            _ => false,
+        };
+        self.vehicles
+            .iter()
+            .zip(&truths)
+            .filter(|(v, _)| v.id != s.id && v.unmet(&self.net) && self.due(v))
+            .filter(|(_, truth)| {
+                super::wait::waits_on(truth, &truths, &self.net, &holders, &self.lim)
+                    .iter()
+                    .any(names)
+            })
+            .count()
+    }
+
     /// `d` with the grant a silent vehicle waits on named for what it is: one it cannot
     /// ask for (its transmitter is silent, a fault the world knows of and the wait-for
     /// relation, built from ground truth and the managers' records, does not).

@@ -137,6 +137,10 @@ pub struct Summary {
     /// Planner-driven vehicles with a goal still unmet at the end that were due to have
     /// met it (every such vehicle in a closed world).
     pub unfinished: usize,
+    /// Of the unfinished vehicles, those held up by a silent vehicle (a run with
+    /// `[faults.silent]` that no deadlock ended): each waits, at the end, on the vehicle
+    /// whose transmitter is silent — ahead of it, or in the lane it must change into.
+    pub held_by_silent: usize,
     /// The deadlock that ended the run, if one did.
     pub deadlock: Option<Deadlock>,
     /// How each vehicle computer in the loop ended (`run --firmware`; else empty, and
@@ -216,6 +220,8 @@ pub struct Outcome<'a> {
     pub unfinished: usize,
     /// Of those, planner-driven vehicles with a goal still unmet, not yet due.
     pub under_way: usize,
+    /// Of the unfinished, those held up by a silent vehicle.
+    pub held_by_silent: usize,
     /// The monitor's findings.
     pub findings: &'a Findings,
     /// The planners' counters.
@@ -319,6 +325,7 @@ pub fn summarize<'v, const N: usize>(
         wall_seconds: o.wall_seconds,
         crossing,
         unfinished: o.unfinished,
+        held_by_silent: o.held_by_silent,
         deadlock: o.deadlock.cloned(),
         firmware: Vec::new(),
     }
@@ -354,7 +361,7 @@ impl<const N: usize, B: Bus> World<N, B> {
     /// vehicles are all there from the start; in an open world only if it arrived at
     /// least its trip's free-flow time plus [`OPEN_GRACE_S`] ago (one that just arrived
     /// has not failed).
-    fn due<const M: usize>(&self, v: &crate::world::vehicle::Vehicle<M>) -> bool {
+    pub(super) fn due<const M: usize>(&self, v: &crate::world::vehicle::Vehicle<M>) -> bool {
         !matches!(self.spec.arrivals, crate::world::Arrivals::Poisson(_))
             || v.log.entered_at + v.log.free_flow_s.unwrap_or(0.0) + OPEN_GRACE_S <= self.time.t
     }
@@ -376,6 +383,7 @@ impl<const N: usize, B: Bus> World<N, B> {
                     .iter()
                     .filter(|v| v.unmet(&self.net) && !self.due(v))
                     .count(),
+                held_by_silent: self.held_by_silent(),
                 findings: &self.watch.monitor.findings,
                 counters: &self.tally.counters,
                 deadlock: self.watch.deadlock.as_ref(),
