@@ -100,6 +100,37 @@ def table(outdir, board, core, target):
     return "\n".join(lines)
 
 
+# The computer driven by python-can (sil_check.py) hears its frames when the host's
+# serial line delivers them, so the SysTick phase at which a period's work starts varies
+# from run to run, and the worst period's count by a few ticks (on the M33, whose 20 MHz
+# SysTick counts 6.25 instructions a tick, 273,687 then 273,700). That row is held to
+# within this many instructions (ten ticks of the coarsest board); every other figure,
+# and the loop run in lock-step by host-sim, exactly.
+SIL_WORST = "in the loop (python-can over SLCAN, two cars): instructions per period, worst"
+SIL_TOLERANCE = 64
+
+
+def numbers(cell):
+    return [int(x.replace(",", "")) for x in cell.replace("*", "").split("|") if x.strip()]
+
+
+def same(old, new):
+    """The tables agree: every row exactly, the python-can row within SIL_TOLERANCE."""
+    a, b = old.strip().splitlines(), new.strip().splitlines()
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b):
+        if x == y:
+            continue
+        label = f"| {SIL_WORST} |"
+        if not (x.startswith(label) and y.startswith(label)):
+            return False
+        xs, ys = numbers(x[len(label):]), numbers(y[len(label):])
+        if len(xs) != len(ys) or any(abs(p - q) > SIL_TOLERANCE for p, q in zip(xs, ys)):
+            return False
+    return True
+
+
 def main(outdir, doc, write=None):
     block = "\n\n".join(table(outdir, *b) for b in BOARDS)
     text = open(doc).read()
@@ -110,7 +141,7 @@ def main(outdir, doc, write=None):
     if write == "--write":
         open(doc, "w").write(head + BEGIN + "\n" + block + "\n" + END + tail)
         return 0
-    if old.strip() == block:
+    if same(old, block):
         print(f"{doc}: the per-core tables match the firmware's figures")
         return 0
     print(f"{doc}: the per-core tables do not match the firmware; they should read:")

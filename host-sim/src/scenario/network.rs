@@ -497,6 +497,10 @@ fn build(
         return Err(e.at(span, format!("at most {MAX_JUNCTIONS} intersections")));
     }
     let mut net = Network::default();
+    // A layout is a function of its table and the fleet alone, and building one (its
+    // conflict map, a truck's swept area) dominates loading a network: a grid's
+    // identical junctions share the first one's.
+    let mut built: Vec<(LayoutToml, usize)> = Vec::new();
     for (j, span) in juncs {
         if net.junctions.iter().any(|o| o.id == j.id) {
             return Err(e.at(at(span), format!("intersection {}: duplicate id", j.id)));
@@ -519,8 +523,15 @@ fn build(
             lanes: j.lanes,
             turn_inset: j.turn_inset,
         };
-        let layout = build_layout_for(&lt, fleet)
-            .map_err(|m| e.field(at(span), &format!("intersection {}", j.id), &m))?;
+        let same = built.iter().find(|(b, _)| *b == lt).map(|&(_, k)| k);
+        let layout = match same.and_then(|k| net.junctions.get(k)) {
+            Some(twin) => twin.layout.clone(),
+            None => {
+                built.push((lt, net.junctions.len()));
+                build_layout_for(&lt, fleet)
+                    .map_err(|m| e.field(at(span), &format!("intersection {}", j.id), &m))?
+            }
+        };
         net.junctions.push(Junction {
             id: j.id,
             centre: (j.x, j.y),
