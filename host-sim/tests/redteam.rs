@@ -176,6 +176,38 @@ fn worlds_of_any_size_have_no_blind_step() {
     assert!(err.contains("holds"), "{err}");
 }
 
+/// The same with 30 % trucks: junctions that hold a truck's swing, every vehicle a
+/// truck's length apart (so a world needs a larger grid), trucks and cars among them,
+/// and a world of 100 runs with no blind step, no fallback, no collision.
+#[test]
+fn worlds_with_trucks_have_no_blind_step() {
+    use host_sim::experiments::worlds::worlds_with;
+    use host_sim::experiments::worlds::{grid_fleet_with, smallest_grid, smallest_grid_with};
+    let text = grid_fleet_with((2, 2), (60, 30), 300.0, 1.0).expect("a grid of 60");
+    assert!(text.contains("turn_inset = 8.0"), "{text}");
+    let trucks = text.matches("length = 16.5").count();
+    assert!((5..=40).contains(&trucks), "{trucks} trucks of 60");
+    assert!(smallest_grid_with(400, 30) > smallest_grid(400));
+    let r = worlds_with(
+        (&[100], 30),
+        2.0,
+        None,
+        planner_core::Invariant::LeaderAware,
+    )
+    .expect("the world runs");
+    let w = &r.worlds[0];
+    assert_eq!(
+        (
+            w.blind_steps,
+            w.fallback_steps,
+            w.collisions,
+            w.invariant_violations
+        ),
+        (0, 0, 0, 0),
+        "{w:?}"
+    );
+}
+
 /// The 1,000-case layouts sweep's two failures, replayed: a junction (17.38 m/s) feeding
 /// a slower segment (16.42 m/s) let vehicles leave at its own limit, over the segment's
 /// (91 and 199 limit violations); crossing planners now take the slower of the two. And

@@ -42,25 +42,60 @@ pub fn grid_fleet(
     block_m: f64,
     duration_s: f64,
 ) -> Result<String, String> {
-    let grid = format!("[grid]\nrows = {rows}\ncols = {cols}\nblock_m = {block_m:.1}\nlanes = 2\n");
+    grid_fleet_with((rows, cols), (n, 0), block_m, duration_s)
+}
+
+/// What a grid of `trucks` percent trucks asks for: its junctions' turn inset (room for a
+/// truck's swing), the spacing at a standstill (the longest vehicle, d0 and 1 m to
+/// spare) and the longest vehicle.
+fn fleet_room(trucks: u8) -> (f64, f64, f64) {
+    if trucks == 0 {
+        (0.0, SPACING_M, crate::world::LENGTH_M)
+    } else {
+        let truck = crate::world::Body::TRUCK.length;
+        (super::crossings::TRUCK_TURN_INSET_M, truck + 1.5, truck)
+    }
+}
+
+/// [`grid_fleet`] with `trucks` percent of the `n` vehicles trucks ([`Body::TRUCK`],
+/// drawn at random from a stream of its own): then every junction holds a truck's swing
+/// and every vehicle stands a truck's length apart.
+///
+/// [`Body::TRUCK`]: crate::world::Body::TRUCK
+pub fn grid_fleet_with(
+    (rows, cols): (u8, u8),
+    (n, trucks): (usize, u8),
+    block_m: f64,
+    duration_s: f64,
+) -> Result<String, String> {
+    let grid = grid_table((rows, cols), block_m, trucks);
     let head = format!(
         "name = \"grid-{rows}x{cols}-{n}\"\nduration_s = {duration_s:.1}\nseed = 1\n\
          algorithm = \"pipelined\"\n\n{grid}"
     );
-    let slots = slots(&network(&grid)?);
+    let slots = slots(&network(&grid, trucks)?, trucks);
     if slots.len() < n {
         return Err(format!(
-            "a {rows}x{cols} grid holds {} vehicles {SPACING_M} m apart, not {n}",
-            slots.len()
+            "a {rows}x{cols} grid holds {} vehicles {} m apart, not {n}",
+            slots.len(),
+            fleet_room(trucks).1
         ));
     }
+    let mut bodies = crate::reference::instances::rng(0x7472_7563_6b73);
     let mut out = head;
     for (i, (seg, x, lane, hops)) in slots.into_iter().take(n).enumerate() {
         let route = vec!["\"straight\""; hops].join(", ");
+        let truck = trucks > 0 && rand::Rng::random_range(&mut bodies, 0..100u8) < trucks;
+        let body = if truck {
+            let t = crate::world::Body::TRUCK;
+            format!("length = {:.1}\nbrake = {:.1}\n", t.length, t.brake)
+        } else {
+            String::new()
+        };
         let _ = write!(
             out,
             "\n[[vehicle]]\nid = {}\nsegment = {seg}\nx = {x:.1}\nlane = {lane}\nv = 0.0\n\
-             route = [{route}]\n",
+             route = [{route}]\n{body}",
             i + 1
         );
     }
@@ -68,18 +103,35 @@ pub fn grid_fleet(
     Ok(out)
 }
 
+/// The `[grid]` table: 2 lanes, and a truck's turn inset with trucks.
+fn grid_table((rows, cols): (u8, u8), block_m: f64, trucks: u8) -> String {
+    let inset = if trucks == 0 {
+        String::new()
+    } else {
+        format!("turn_inset = {:.1}\n", fleet_room(trucks).0)
+    };
+    format!("[grid]\nrows = {rows}\ncols = {cols}\nblock_m = {block_m:.1}\nlanes = 2\n{inset}")
+}
+
 /// The smallest square grid of [`BLOCK_M`] blocks that holds `n` vehicles, if one does.
 pub fn smallest_grid(n: usize) -> Option<u8> {
+    smallest_grid_with(n, 0)
+}
+
+/// [`smallest_grid`] for a fleet of `trucks` percent trucks (spaced as trucks).
+pub fn smallest_grid_with(n: usize, trucks: u8) -> Option<u8> {
     (2..=MAX_SIDE).find(|&k| {
-        let head = format!("[grid]\nrows = {k}\ncols = {k}\nblock_m = {BLOCK_M}\nlanes = 2\n");
-        network(&head).is_ok_and(|net| slots(&net).len() >= n)
+        let table = grid_table((k, k), BLOCK_M, trucks);
+        network(&table, trucks).is_ok_and(|net| slots(&net, trucks).len() >= n)
     })
 }
 
-/// The network of a `[grid]` table (arrivals make it loadable alone).
-fn network(grid: &str) -> Result<Network, String> {
-    let probe =
-        format!("name = \"probe\"\nduration_s = 1.0\n{grid}\n[arrivals]\nrate_vph = 100.0\n");
+/// The network of a `[grid]` table (arrivals make it loadable alone; with trucks among
+/// them, its outlets take a truck out of A_C).
+fn network(grid: &str, trucks: u8) -> Result<Network, String> {
+    let probe = format!(
+        "name = \"probe\"\nduration_s = 1.0\n{grid}\n[arrivals]\nrate_vph = 100.0\ntrucks = {trucks}\n"
+    );
     scenario::parse(&probe, Path::new("grid.toml"))
         .map(|s| s.network)
         .map_err(|e| e.to_string())
@@ -87,7 +139,8 @@ fn network(grid: &str) -> Result<Network, String> {
 
 /// Every place a vehicle can stand, round robin over the lanes of the segments that lead
 /// straight on to an exit: (segment id, x, lane, intersections to its exit).
-fn slots(net: &Network) -> Vec<(u16, f64, u8, usize)> {
+fn slots(net: &Network, trucks: u8) -> Vec<(u16, f64, u8, usize)> {
+    let (_, spacing, longest) = fleet_room(trucks);
     let mut lanes: Vec<Vec<(u16, f64, u8, usize)>> = Vec::new();
     for (k, sg) in net.segments.iter().enumerate() {
         let (Some(hops), End::Junction(j, end)) = (hops_to_exit(net, k), sg.end) else {
@@ -103,11 +156,11 @@ fn slots(net: &Network) -> Vec<(u16, f64, u8, usize)> {
             .map_or(0.0, |a| a.layout.spec.outlet_length);
         // The front d0 and a metre before the edge of A_C; the rear a metre past the
         // outlet track.
-        let last = end - margin - 0.5 * crate::world::LENGTH_M - 1.5;
+        let last = end - margin - 0.5 * longest - 1.5;
         for lane in 0..sg.lanes {
             let placed = (0..)
-                .map(|i| last - f64::from(i) * SPACING_M)
-                .take_while(|x| x - 0.5 * crate::world::LENGTH_M >= start + 1.0)
+                .map(|i| last - f64::from(i) * spacing)
+                .take_while(|x| x - 0.5 * longest >= start + 1.0)
                 .map(|x| (sg.id, x, lane, hops))
                 .collect();
             lanes.push(placed);
@@ -177,6 +230,11 @@ pub struct Worlds {
     /// The invariant every planner keeps toward the vehicle ahead.
     #[arg(long, default_value = crate::world::DEFAULT_INVARIANT_NAME, value_parser = super::flags::invariant())]
     pub invariant: planner_core::Invariant,
+    /// Percent of the vehicles that are trucks (16.5 m, braking at 4.5 m/s²), drawn per
+    /// vehicle: every junction then holds a truck's swing and every vehicle stands a
+    /// truck's length apart.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=100))]
+    pub trucks: u8,
 }
 
 impl Experiment for Worlds {
@@ -201,7 +259,8 @@ impl Experiment for Worlds {
                 "every size must be at least 1",
             ));
         }
-        match self.vehicles.iter().find(|&&n| smallest_grid(n).is_none()) {
+        let fits = |n: usize| smallest_grid_with(n, self.trucks).is_some();
+        match self.vehicles.iter().find(|&&n| !fits(n)) {
             Some(n) => Err(SettingsError::new(
                 "--vehicles",
                 format!("no grid up to 8x8 holds {n} vehicles"),
@@ -216,8 +275,8 @@ impl Experiment for Worlds {
     }
 
     fn run(&self, _range: (u64, u64), _threads: usize) -> Result<WorldsReport, RunError> {
-        worlds(&self.vehicles, self.duration, self.delay, self.invariant)
-            .map_err(RunError::Internal)
+        let sizes = (self.vehicles.as_slice(), self.trucks);
+        worlds_with(sizes, self.duration, self.delay, self.invariant).map_err(RunError::Internal)
     }
 
     fn report(&self, parts: Vec<WorldsReport>) -> Result<WorldsReport, MergeError> {
@@ -276,11 +335,22 @@ pub fn worlds(
     delay_s: Option<f64>,
     invariant: planner_core::Invariant,
 ) -> Result<WorldsReport, String> {
+    worlds_with((sizes, 0), duration_s, delay_s, invariant)
+}
+
+/// [`worlds`] with `trucks` percent of each world's vehicles trucks
+/// ([`grid_fleet_with`]).
+pub fn worlds_with(
+    (sizes, trucks): (&[usize], u8),
+    duration_s: f64,
+    delay_s: Option<f64>,
+    invariant: planner_core::Invariant,
+) -> Result<WorldsReport, String> {
     let mut rows = Vec::new();
     for &n in sizes {
-        let side =
-            smallest_grid(n).ok_or_else(|| format!("no grid up to 8x8 holds {n} vehicles"))?;
-        let text = grid_fleet((side, side), n, BLOCK_M, duration_s)?;
+        let side = smallest_grid_with(n, trucks)
+            .ok_or_else(|| format!("no grid up to 8x8 holds {n} vehicles"))?;
+        let text = grid_fleet_with((side, side), (n, trucks), BLOCK_M, duration_s)?;
         let clean = run(&text, (n, side), invariant, 0.0, None)?;
         let per_second = clean.wall_seconds / clean.sim_seconds.max(1e-9);
         rows.push(clean);
