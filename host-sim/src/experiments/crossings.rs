@@ -222,10 +222,7 @@ pub fn case_with(
     algorithm: Algorithm,
     invariant: Invariant,
 ) -> JunctionScenario {
-    let mut lt = LayoutToml::default();
-    if trucks_percent > 0 {
-        lt = truck_layout(lt);
-    }
+    let lt = spec_layout(trucks_percent);
     let layout = crate::scenario::junction::build_layout(&lt)
         .unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
     let p = placements((seed, trucks_percent), index, &layout);
@@ -240,6 +237,18 @@ pub fn case_with(
     .unwrap_or_else(|e| unreachable!("the SPEC §8 layout is valid for cars and trucks: {e}"));
     sc.header.invariant = invariant;
     sc
+}
+
+/// SPEC §8's layout as written, made to take trucks ([`truck_layout`]) when
+/// `trucks_percent` of the vehicles may be trucks: the junction of every sweep that
+/// draws them at SPEC §8's intersection.
+pub fn spec_layout(trucks_percent: u8) -> LayoutToml {
+    let lt = LayoutToml::default();
+    if trucks_percent > 0 {
+        truck_layout(lt)
+    } else {
+        lt
+    }
 }
 
 /// `lt` made to take trucks: A_S [`TRUCK_TURN_INSET_M`] larger all round around the same

@@ -14,12 +14,12 @@
 //! lane at the end, and at most [`UNFINISHED_SHARE`] of the arrivals have not crossed
 //! [`GRACE_S`] after they arrived.
 
-use super::crossings::truck_layout;
+use super::crossings::spec_layout;
 use super::experiment::{duration_within, Experiment, RunError, SettingsError};
 use super::shard::{MergeError, Runs};
 use super::sweep::case_seed;
 use crate::monitor::Limits;
-use crate::scenario::junction::{build_layout_for, LayoutToml};
+use crate::scenario::junction::build_layout_for;
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::network::{Junction, Network};
 use crate::world::{Finish, SolverChoice, World, WorldSpec, LENGTH_M};
@@ -263,17 +263,14 @@ pub fn world(algorithm: Algorithm, rate: f64, duration: f64, seed: u64) -> World
 }
 
 /// [`world`] with `trucks` percent of the arrivals trucks: then the junction is built for
-/// a truck's swing ([`truck_layout`]) and its conflicts swept by a truck's rectangle.
+/// a truck's swing ([`spec_layout`]) and its conflicts swept by a truck's rectangle.
 pub fn world_with(
     algorithm: Algorithm,
     (rate, trucks): (f64, u8),
     duration: f64,
     seed: u64,
 ) -> WorldSpec {
-    let mut lt = LayoutToml::default();
-    if trucks > 0 {
-        lt = truck_layout(lt);
-    }
+    let lt = spec_layout(trucks);
     let fleet = crate::world::Fleet::with_arrivals([], trucks);
     let layout = build_layout_for(&lt, fleet)
         .unwrap_or_else(|e| unreachable!("the SPEC §8 layout is valid for cars and trucks: {e}"));

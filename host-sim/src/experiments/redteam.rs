@@ -26,13 +26,13 @@
 //! The paper's Concurrent Crossing as written is run for safety too; it is not live
 //! (SPEC §7), so its unfinished vehicles are left out of the totals, as in `crossings`.
 
-use super::crossings::{queues_of, truck_layout, ALGORITHMS};
+use super::crossings::{queues_of, spec_layout, ALGORITHMS};
 use super::experiment::{Experiment, RunError};
 use super::shard::{combine_all, MergeError};
 use super::sweep::{self, case_seed, Case, Cases, CasesUnder, Failing, Totals};
 use crate::bus::{is_vehicle_id, Faults, Liar, ManagerDown};
 use crate::reference::instances::rng;
-use crate::scenario::junction::{build_layout, JunctionScenario, LayoutToml};
+use crate::scenario::junction::{build_layout, JunctionScenario};
 use crate::scenario::network::NetworkScenario;
 use crate::verdict::{Judged, Safety, Verdict};
 use crate::world::{SolverChoice, World};
@@ -309,7 +309,7 @@ pub fn case(kind: Kind, seed: u64, index: u64, algorithm: Algorithm) -> Junction
 }
 
 /// [`case()`] with `trucks_percent` of the vehicles trucks, at SPEC §8's junction built
-/// for a truck's swing ([`truck_layout`]); with 0 the case is [`case()`]'s. The fault is
+/// for a truck's swing ([`spec_layout`]); with 0 the case is [`case()`]'s. The fault is
 /// drawn from its own stream, so trucks change no fault.
 pub fn case_with(
     kind: Kind,
@@ -317,10 +317,7 @@ pub fn case_with(
     index: u64,
     algorithm: Algorithm,
 ) -> JunctionScenario {
-    let mut lt = LayoutToml::default();
-    if trucks_percent > 0 {
-        lt = truck_layout(lt);
-    }
+    let lt = spec_layout(trucks_percent);
     let layout = build_layout(&lt).unwrap_or_else(|_| unreachable!("the SPEC §8 layout is valid"));
     let mut r = rng(case_seed(seed, index));
     let per_lane = [1usize, 2, 3, 5, 8][r.random_range(0..5)];
@@ -584,6 +581,8 @@ mod tests {
     /// trucks and cars among its vehicles over the sweep, and the same outage as without.
     #[test]
     fn cases_with_trucks_are_valid_and_keep_their_faults() {
+        use super::super::crossings::truck_layout;
+        use crate::scenario::junction::LayoutToml;
         use crate::world::Body;
         let (mut trucks, mut cars) = (0, 0);
         // A truck's junction takes a while to build (its swept area is checked along
