@@ -15,6 +15,7 @@
 # the forged grant at the intersection, authenticated, on CAN FD, no clean run beside it);
 # its JSON must show no forgery accepted, no unsafe event and every vehicle done.
 # VCAN_ATTACKS="" skips it.
+# VCAN_HOST_SIM=PATH: run that release build of host-sim instead of building one.
 # Results go to $VCAN_OUT (default: vcan-qemu in cargo's target directory).
 # Needs: qemu-system-x86_64, apt-get (Debian's archive), cargo, ldd, python3 with
 # cantools (.ci/run installs all of them).
@@ -73,8 +74,15 @@ echo "== host-sim (release, the host's build) and the shared libraries it and ca
 # it (this Debian and the VM's packages are one release): no second build of host-sim for
 # another target (a static musl build cost CI three minutes of compiling beside the
 # tests; in the VM both run the multi-lane road alike).
-(cd "$root" && cargo build --release -q -p host-sim)
-hostsim="$target/release/host-sim"
+# VCAN_HOST_SIM names a build already made (CI's): then no cargo runs here, so the VM
+# never waits for the build directory's lock while a test build beside it holds it.
+if [ -n "${VCAN_HOST_SIM:-}" ]; then
+  hostsim="$VCAN_HOST_SIM"
+  [ -x "$hostsim" ] || { echo "run-in-qemu: VCAN_HOST_SIM=$hostsim is not an executable" >&2; exit 2; }
+else
+  (cd "$root" && cargo build --release -q -p host-sim)
+  hostsim="$target/release/host-sim"
+fi
 echo "== initramfs: busybox, candump and host-sim (+ their glibc), the 4 modules, the scenarios"
 r="$out/rootfs"
 mkdir -p "$r"/{bin,proc,sys,dev,work/scenarios,lib/modules,lib64,lib/x86_64-linux-gnu}
