@@ -66,6 +66,14 @@ pub trait CanPort: Send {
     /// The next received frame and its receive time stamp, waiting up to `timeout`
     /// (zero: only a frame already there); `None` when none came in time.
     fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>>;
+    /// From now on, takes only frames from source address `sa` where the medium can
+    /// filter cheaply (a SocketCAN socket: the kernel's acceptance filter, as a CAN
+    /// controller's). The default takes everything still: the hub's deliveries cost a
+    /// queue push each, and its tests count every node hearing every frame.
+    fn hear_only(&mut self, sa: u8) -> io::Result<()> {
+        let _ = sa;
+        Ok(())
+    }
 }
 
 impl<P: CanPort + ?Sized> CanPort for Box<P> {
@@ -74,6 +82,9 @@ impl<P: CanPort + ?Sized> CanPort for Box<P> {
     }
     fn receive(&mut self, timeout: Duration) -> io::Result<Option<(FdFrame, SystemTime)>> {
         (**self).receive(timeout)
+    }
+    fn hear_only(&mut self, sa: u8) -> io::Result<()> {
+        (**self).hear_only(sa)
     }
 }
 
@@ -254,7 +265,19 @@ impl CanPort for SocketCanPort {
             Err(e) => Err(e),
         }
     }
+
+    fn hear_only(&mut self, sa: u8) -> io::Result<()> {
+        // Extended frames whose low byte, the J1939 source address, is `sa`.
+        let filter = (CAN_EFF_FLAG | u32::from(sa), CAN_EFF_FLAG | 0xFF);
+        match &self.sock {
+            Sock::Classic(s) => s.set_filters(&[filter]),
+            Sock::Fd(s) => s.set_filters(&[filter]),
+        }
+    }
 }
+
+/// The flag of an extended (29-bit) identifier in a SocketCAN `can_id` (linux/can.h).
+const CAN_EFF_FLAG: u32 = 0x8000_0000;
 
 /// Why frames on `iface` may arrive out of order, if they may: a virtual CAN interface
 /// hands each frame to the sending CPU's receive backlog, so on a multi-core host without
@@ -578,6 +601,14 @@ impl<P: CanPort> CanNode<P> {
     /// The node of vehicle `id` (its CAN source address is its id).
     pub fn vehicle(id: u16, port: P) -> Result<Self, CanError> {
         Ok(Self::new(vehicle_address(id)?, port))
+    }
+
+    /// From now on the node hears only the fleet's clock (its SYNC ticks), where the
+    /// medium filters ([`CanPort::hear_only`]): for a vehicle that has left the world,
+    /// which plans nothing, so that a kernel under TCG stops waking its task for every
+    /// frame of the fleet (a quarter of the corridor's deliveries on vcan0).
+    pub fn hear_only_clock(&mut self) -> Result<(), CanError> {
+        self.port.hear_only(CLOCK_ADDRESS).map_err(CanError::Io)
     }
 
     /// What the node's traffic amounted to.
