@@ -606,7 +606,7 @@ impl<P: CanPort> CanNode<P> {
     /// From now on the node hears only the fleet's clock (its SYNC ticks), where the
     /// medium filters ([`CanPort::hear_only`]): for a vehicle that has left the world,
     /// which plans nothing, so that a kernel under TCG stops waking its task for every
-    /// frame of the fleet (a quarter of the corridor's deliveries on vcan0).
+    /// frame of the fleet (a fifth of the corridor's deliveries on vcan0: 6.39 M → 5.11 M).
     pub fn hear_only_clock(&mut self) -> Result<(), CanError> {
         self.port.hear_only(CLOCK_ADDRESS).map_err(CanError::Io)
     }
