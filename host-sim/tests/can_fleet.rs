@@ -2,10 +2,10 @@
 //! own task on the in-process frame hub, with the same code that runs on SocketCAN
 //! (the real vcan test is `host-sim/vcan/run-in-qemu.sh`, run by CI).
 
-mod common;
+use crate::common;
 
+use crate::common::{builtin, load as scenario, Failing};
 use can_gateway::FdFrame;
-use common::{builtin, load as scenario, Failing};
 use embedded_can::{Frame, Id, StandardId};
 use host_sim::bus::{Bus, Clock};
 use host_sim::fleet::can::RESOLUTION;

@@ -2,11 +2,11 @@
 //! and one for the intersection manager, on the in-process frame hub with the code that
 //! runs on SocketCAN (the real vcan run is `host-sim/vcan/run-in-qemu.sh`, run by CI).
 
-mod common;
+use crate::common;
 
+use crate::common::{assert_all_crossed_safely, builtin, Failing};
 use can_gateway::wire;
 use can_gateway::{encode, FdFrame, Frames, PlainFrame, Reassembler};
-use common::{assert_all_crossed_safely, builtin, Failing};
 use host_sim::bus::Message;
 use host_sim::fleet::can::{CanPort, Hub, HubPort, WireMap};
 use host_sim::fleet::{self, FleetError, FleetSummary, Medium, Node, TIMEOUT};

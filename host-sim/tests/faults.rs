@@ -5,8 +5,8 @@ use host_sim::bus::{Bus, Faults, InProcessBus, Message, Received, Silent};
 use host_sim::world::{SolverChoice, World};
 use std::path::Path;
 
-mod common;
-use common::{assert_safe, builtin};
+use crate::common;
+use crate::common::{assert_safe, builtin};
 
 fn state(id: u16, stamp: f64) -> Message {
     let state = common::lane_state(id, stamp, 10.0, stamp);

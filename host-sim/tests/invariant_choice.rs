@@ -9,7 +9,7 @@ use host_sim::experiments::platoon::{sweep, Following};
 use planner_core::Invariant;
 use std::process::Command;
 
-mod common;
+use crate::common;
 
 #[test]
 fn leader_aware_followers_close_up_on_followers_and_stay_safe() {

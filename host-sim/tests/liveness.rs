@@ -1,9 +1,9 @@
 //! Liveness (Theorems 3–5) where the paper's experiments did not go: the deadlock
 //! detector's positive and negative cases, and the failures the liveness sweeps found as regressions.
 
-mod common;
+use crate::common;
 
-use common::run_world;
+use crate::common::run_world;
 use host_sim::bus::{Faults, Silent};
 use host_sim::monitor::liveness::{WaitsOn, DEADLOCK_WINDOW_S};
 use host_sim::world::{SolverChoice, TraceRow, World, WorldSpec};

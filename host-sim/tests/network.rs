@@ -1,9 +1,9 @@
 //! Road networks: the shipped corridor and grid, in-process and as a fleet of
 //! CAN nodes, the loader's refusals, and the grid experiment's figures.
 
-mod common;
+use crate::common;
 
-use common::{assert_safe, builtin, load, run_world};
+use crate::common::{assert_safe, builtin, load, run_world};
 use host_sim::fleet::{self, Medium};
 use host_sim::world::network::Place;
 use host_sim::world::{SolverChoice, TraceRow, World};

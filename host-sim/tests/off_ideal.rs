@@ -2,9 +2,7 @@
 //! CLI as a user runs them, and their harder variants in-process. Safety may not rest on
 //! the bus, on other vehicles' goodwill, or on inputs the loader let through.
 
-mod common;
-
-use common::{assert_safe, parse, run_world};
+use crate::common::{assert_safe, parse, run_world};
 use std::path::PathBuf;
 use std::process::Command;
 

@@ -19,7 +19,7 @@ fn net() -> Network {
     Network::road(2, None, 27.8)
 }
 
-use common::lane_state as state;
+use crate::common::lane_state as state;
 
 fn hear(view: &mut View, net: &Network, s: VehicleState<f64>) -> Result<(), Reject> {
     view.take(
@@ -102,7 +102,7 @@ fn each_kind_of_lie_has_its_reason() {
     }
 }
 
-mod common;
+use crate::common;
 
 /// The multi-lane experiment's file with vehicle `liar` claiming to be `offset` m further on
 /// from 2 s, sensors on or off.

@@ -2,7 +2,7 @@
 //! sweeps built to find their kind: small runs of each that must come out clean, and that
 //! a sharded run of each merges into the unsharded one.
 
-mod common;
+use crate::common;
 
 use serde_json::Value;
 use std::process::Command;

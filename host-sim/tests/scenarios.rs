@@ -8,8 +8,8 @@ use host_sim::world::{SolverChoice, TraceRow, World, WorldSpec};
 use planner_core::Invariant;
 use std::path::Path;
 
-mod common;
-use common::builtin;
+use crate::common;
+use crate::common::builtin;
 
 /// Runs `sc` on the in-process bus (horizon 20) with `seed`; `row` sees the trace.
 fn go(sc: WorldSpec, seed: Option<u64>, row: &mut dyn FnMut(&TraceRow)) -> Summary {

@@ -6,9 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-#[path = "../../can-gateway/tests/support/mod.rs"]
-#[allow(dead_code)] // skip_or_fail: this test needs no skip, python3 is a prerequisite
-mod support;
+use crate::support;
 
 fn out_dir() -> PathBuf {
     let d = std::env::temp_dir().join(format!("host-sim-trace-check-{}", std::process::id()));

@@ -15,9 +15,7 @@ fn scenario(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// The test script's Python and its skips, shared with can-gateway's DBC test.
-#[path = "../../can-gateway/tests/support/mod.rs"]
-mod support;
+use crate::support;
 use support::{python, skip_or_fail};
 
 fn browser_available() -> Result<(), String> {

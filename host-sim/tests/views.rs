@@ -3,9 +3,7 @@
 //! that a jam — hundreds standing within the fixed radius of two vehicles at vmax — is no
 //! overflow, and a view that truly cannot hold every vehicle that may matter says so.
 
-mod common;
-
-use common::lane_state;
+use crate::common::lane_state;
 use host_sim::bus::Message;
 use host_sim::world::heard::{reach, slack, Here, Record, View, VIEW_CAP};
 use host_sim::world::network::Network;

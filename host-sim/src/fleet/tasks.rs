@@ -207,7 +207,6 @@ pub(super) fn vehicle_task<const N: usize, P: CanPort>(
     let mut heard = Vec::new();
     let mut sync_rx = None;
     let mut departing: Option<(Option<usize>, f64)> = None;
-    let mut deaf = false;
     for k in 0..=ctx.total {
         let t = k as f64 * h;
         let now = ctx.clock.at_step(k);
@@ -222,11 +221,6 @@ pub(super) fn vehicle_task<const N: usize, P: CanPort>(
             exit = true;
         }
         let in_world = car.log.left_at.is_none();
-        if !in_world && !deaf {
-            // Gone from the world, it plans nothing: only SYNC paces it from here on.
-            node.hear_only_clock().map_err(|e| fail(e.to_string()))?;
-            deaf = true;
-        }
         let kind = if in_world {
             publish(&car, &mut node, ctx, k, &mut msgs).map_err(|e| fail(e.to_string()))?
         } else {
@@ -277,6 +271,11 @@ pub(super) fn vehicle_task<const N: usize, P: CanPort>(
             Moved::LeftJunction(j) => departing = Some((Some(j), now)),
             Moved::LeftWorld => departing = Some((None, now)),
             Moved::Stays => {}
+        }
+        if moved != Moved::Stays && car.log.left_at.is_some() {
+            // Gone from the world (past an exit, or off a junction with no outlet road),
+            // it plans nothing more: only SYNC paces it from here on.
+            node.hear_only_clock().map_err(|e| fail(e.to_string()))?;
         }
         row = Some(r);
     }
