@@ -111,25 +111,27 @@ impl Link {
             .map_err(|e| FirmwareError::Log(format!("{}: {e}", log.display())))?;
         let serial = Serial::beside(log)?;
         let (machine, cpu) = board.qemu();
-        let child = Command::new("qemu-system-arm")
-            .args([
-                "-machine",
-                machine,
-                "-cpu",
-                cpu,
-                "-nographic",
-                "-monitor",
-                "none",
-            ])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            .args(["-icount", "shift=3,sleep=off"])
-            .arg("-serial")
-            .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
-            .arg("-kernel")
-            .arg(elf)
-            .stdin(Stdio::null())
-            .stdout(out)
-            .stderr(Stdio::null())
+        let mut qemu = Command::new("qemu-system-arm");
+        qemu.args([
+            "-machine",
+            machine,
+            "-cpu",
+            cpu,
+            "-nographic",
+            "-monitor",
+            "none",
+        ])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(["-icount", "shift=3,sleep=off"])
+        .arg("-serial")
+        .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
+        .arg("-kernel")
+        .arg(elf)
+        .stdin(Stdio::null())
+        .stdout(out)
+        .stderr(Stdio::null());
+        super::affinity::confine(&mut qemu);
+        let child = qemu
             .spawn()
             .map_err(|e| FirmwareError::Start(format!("qemu-system-arm: {e}")))?;
         let stream = connect(port)?;

@@ -4,6 +4,7 @@
 //!
 //! - [`link`]: one QEMU process and its UART as serial-line CAN (SLCAN) on a local TCP
 //!   socket — frames out, frames in, the process's end;
+//! - [`affinity`]: each QEMU on one host core, the QEMUs of a run spread over the cores;
 //! - [`computer`]: what the world says to the computer and hears back, per period: its
 //!   measured state ([`can_gateway::wire::Message::Ego`]) answered with its V2V state, then
 //!   what it hears and the tick ([`can_gateway::wire::Message::Sync`]) answered with its
@@ -14,6 +15,7 @@
 //! virtual 125 MHz core, never in host time; its commands depend only on the frames it
 //! received. The firmware drives roads (the multi-lane planner); junctions are not its.
 
+pub mod affinity;
 pub mod computer;
 pub mod link;
 
