@@ -190,8 +190,8 @@ fn four_fault_grid_and_demand_shards_merge_into_the_unsharded_experiments() {
 
 #[test]
 fn four_liveness_shards_merge_into_the_unsharded_sweeps() {
-    check("deadends", &["--cases", "6", "--seed", "2"]);
-    check("crossings", &["--cases", "4", "--seed", "2"]);
+    check("deadends", &["--cases", "3", "--seed", "2"]);
+    check("crossings", &["--cases", "2", "--seed", "2"]);
 }
 
 #[test]
