@@ -5,7 +5,7 @@
 //! Sans-IO and bounded: the manager is fed vehicle reports and the time, and answers
 //! which vehicles hold a permission; it tracks at most `CAP` vehicles.
 
-use crate::intersection::{Layout, CONFLICT_SAMPLE_M, MAX_ROUTES};
+use crate::intersection::{Layout, Route, CONFLICT_SAMPLE_M, MAX_ROUTES};
 use crate::params::Params;
 use crate::planner::{valid_resolution, ConfigError};
 use crate::real::Real;
@@ -62,21 +62,36 @@ pub enum Algorithm {
     /// followers on one route, which Theorem 1 covers; every other guarantee (the stop
     /// line, Spaciousness, the outlet invariant) is the paper's.
     Pipelined,
-    /// Beyond the paper: [`Algorithm::Pipelined`] with platoons — the green wave of a
-    /// signal, without its fixed phases. A vehicle that follows, within
-    /// [`PLATOON_SPACING_M`], a vehicle on its own inlet lane that holds a permission may
-    /// be granted ahead of an earlier vehicle waiting on a conflicting route — as long as
-    /// every such waiting vehicle has waited less than [`PLATOON_MAX_WAIT`]. Every
-    /// grant still passes the pipelined admissibility test (no route held by another
-    /// vehicle conflicts, but for followers on one route), so the safety argument is
-    /// [`Algorithm::Pipelined`]'s word for word; only the order changes.
+    /// Beyond the paper: [`Algorithm::Pipelined`] with platoons — a signal's phases,
+    /// made of whatever fits together, without its fixed timing. Two changes to PIPE:
     ///
-    /// Why: under the fair scan a queue discharges one vehicle per turn, alternating with
-    /// every conflicting lane, and each turn starts from a standstill at the stop line —
-    /// a signal whose phases last one vehicle. A platoon keeps its lane moving at speed
-    /// while its followers are close; the bound on waiting keeps it starvation-free
-    /// (docs/spec.md, Theorem 5: once a vehicle has waited [`PLATOON_MAX_WAIT`] as its
-    /// lane's head, nothing conflicting with it is granted out of order).
+    /// 1. *Trailing on a shared inlet.* A vehicle may be permitted behind a holder on its
+    ///    own inlet lane whose route differs from its own but trails it
+    ///    ([`Layout::trails`]: at the invariant's spacing along their common arc length
+    ///    their footprints cannot meet while the leader is in its conflict zone with the
+    ///    follower's route), both of the length the layout checked. Its crossing planner
+    ///    keeps the leader as a wall until the leader has left that zone
+    ///    ([`CrossingPlanner::step`]), so Theorem 1 keeps them apart along the arc and
+    ///    the layout's check turns that into footprints that do not meet.
+    /// 2. *Joining the flow.* A vehicle admissible beside every holder may be granted
+    ///    ahead of earlier vehicles waiting on conflicting routes when each of those was
+    ///    refused because a route already held or granted conflicts with its own — it
+    ///    could not go now whatever this one does — and has waited less than
+    ///    [`PLATOON_MAX_WAIT`].
+    ///
+    /// Every grant still passes the pipelined admissibility test (with 1 added to its
+    /// following rule), so the safety argument is [`Algorithm::Pipelined`]'s with one
+    /// more kind of follower (docs/spec.md, Theorem 4 under PLATOON); only the order
+    /// changes otherwise.
+    ///
+    /// Why: under the fair scan a saturated junction serves one lane head at a time,
+    /// each starting from a standstill at its line, and a lane whose vehicles turn left
+    /// and go straight by turns serves one vehicle per clearance of the box. Joining
+    /// lets every lane that fits with the current flow go with it, as a signal's phase
+    /// does, and trailing lets a lane discharge whatever its vehicles' movements; the
+    /// bound on waiting keeps it starvation-free (docs/spec.md, Theorem 5: once a vehicle
+    /// has waited [`PLATOON_MAX_WAIT`] as its lane's head, nothing conflicting with it is
+    /// granted out of order).
     Platoon,
 }
 
@@ -110,14 +125,7 @@ impl Algorithm {
     }
 }
 
-/// Under [`Algorithm::Platoon`], the farthest (m, centre to centre, along the inlet) a
-/// vehicle may be behind the vehicle it follows on its inlet lane to be granted as part of
-/// that vehicle's platoon: 25 m is the wall invariant's spacing at vImax (L + d0 +
-/// dS(13.9) ≈ 17.5 m) with room for the lag of a queue starting up, and under 2 s at
-/// vImax — a signal's gap-out.
-pub const PLATOON_SPACING_M: f64 = 25.0;
-
-/// Under [`Algorithm::Platoon`], how long a lane's head may wait while platoons on
+/// Under [`Algorithm::Platoon`], how long a lane's head may wait while vehicles on
 /// conflicting routes go ahead of it: past this, nothing that conflicts with it is granted
 /// out of order (a signal's maximum green).
 pub const PLATOON_MAX_WAIT: Duration = Duration::from_millis(60_000);
@@ -126,6 +134,11 @@ pub const PLATOON_MAX_WAIT: Duration = Duration::from_millis(60_000);
 /// under [`Algorithm::Pipelined`]: 30 m is dS(vImax) ≈ 12.4 m plus ~1.2 s at vImax, so a
 /// vehicle granted at once never has to brake for its stop line.
 pub const REQUEST_DISTANCE_M: f64 = 30.0;
+
+/// How far (m) a vehicle's length may be from the length a layout's trails were checked
+/// for ([`Layout::trails`]) for [`Algorithm::Platoon`] to let it trail or be trailed: the
+/// same body, up to rounding far below the 0.1 m margin of the check.
+pub const TRAIL_LENGTH_TOLERANCE_M: f64 = 1e-3;
 
 /// How close (m) to its stop line a vehicle at standstill counts as "stopped at the line"
 /// for All-Way STOP: the planner halts its front d0 = 0.5 m before the line; 1.5 m allows
@@ -751,8 +764,10 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         } else {
             self.priority(as_written)
         };
-        // Routes of the vehicles refused so far, and since when each has waited at most.
+        // Routes of the vehicles refused so far (`stuck`: those refused because a route
+        // held conflicts with theirs), and since when each has waited at most.
         let mut waiting: u32 = 0;
+        let mut stuck: u32 = 0;
         let mut since = [now; MAX_ROUTES];
         let mut grant: Vec<usize, CAP> = Vec::new();
         let mut refused: Vec<usize, CAP> = Vec::new();
@@ -775,11 +790,14 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 .get(usize::from(c.route))
                 .map_or(0, |m| m & waiting);
             let fair = self.algorithm == Algorithm::Concurrent || blocking == 0;
-            let ok = self.admissible(c, &grant)
-                && (fair || self.extends_platoon(c, &grant, blocking, &since, now));
+            let admissible = self.admissible(c, &grant);
+            let ok = admissible && (fair || self.joins_flow(c, blocking, stuck, &since, now));
             if ok {
                 let _ = grant.push(i);
             } else {
+                if !admissible {
+                    stuck |= 1 << c.route;
+                }
                 waiting |= 1 << c.route;
                 let r = usize::from(c.route);
                 if let Some(t) = since.get_mut(r) {
@@ -813,45 +831,42 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         order
     }
 
-    /// [`Algorithm::Platoon`]'s exception to fairness: `c` follows, within
-    /// [`PLATOON_SPACING_M`], the nearest vehicle ahead of it on its inlet lane, that one
-    /// holds a permission (or is granted in this scan), and every waiting route `c`
-    /// conflicts with (`blocking`) has waited less than [`PLATOON_MAX_WAIT`] (`since`:
-    /// the earliest a vehicle refused on each route began to wait).
-    fn extends_platoon(
+    /// `true` if every waiting route in `blocking` has waited less than
+    /// [`PLATOON_MAX_WAIT`] (`since`: the earliest a vehicle refused on each route began
+    /// to wait): [`Algorithm::Platoon`]'s exception to fairness may still pass it.
+    fn patient(blocking: u32, since: &[Instant; MAX_ROUTES], now: Instant) -> bool {
+        !since
+            .iter()
+            .enumerate()
+            .any(|(r, t)| blocking & (1 << r) != 0 && now.since(*t) >= PLATOON_MAX_WAIT)
+    }
+
+    /// [`Algorithm::Platoon`]'s exception to fairness, joining the flow: every
+    /// earlier vehicle waiting on a route `c` conflicts with (`blocking`) was refused
+    /// because a route already held or granted conflicts with its own (`stuck`) — it
+    /// could not go now whatever `c` does, as a vehicle at a red light cannot — and has
+    /// waited less than [`PLATOON_MAX_WAIT`]. Then `c`, admissible beside every holder,
+    /// goes with them: a signal's phase, made of whatever fits together. Not behind a
+    /// suspect on its own inlet lane: its crossing planner would follow what the suspect
+    /// says of itself, which the manager no longer believes.
+    fn joins_flow(
         &self,
         c: &Entry<F>,
-        granted_now: &[usize],
         blocking: u32,
+        stuck: u32,
         since: &[Instant; MAX_ROUTES],
         now: Instant,
     ) -> bool {
-        if self.algorithm != Algorithm::Platoon {
-            return false;
-        }
-        let impatient = since
-            .iter()
-            .enumerate()
-            .any(|(r, t)| blocking & (1 << r) != 0 && now.since(*t) >= PLATOON_MAX_WAIT);
-        if impatient {
-            return false;
-        }
-        let inlet = self.inlet_of(c);
-        let leader = self
-            .entries
-            .iter()
-            .enumerate()
-            .filter(|(_, l)| l.id != c.id && self.inlet_of(l) == inlet && l.progress > c.progress)
-            .min_by(|(_, a), (_, b)| {
-                a.progress
-                    .partial_cmp(&b.progress)
-                    .unwrap_or(Ordering::Equal)
-            });
-        leader.is_some_and(|(i, l)| {
-            (l.holds() || granted_now.contains(&i))
-                && !l.suspect
-                && l.progress - c.progress <= F::from_f64(PLATOON_SPACING_M)
-        })
+        let behind_suspect = self.entries.iter().any(|l| {
+            l.suspect
+                && l.id != c.id
+                && self.inlet_of(l) == self.inlet_of(c)
+                && l.progress > c.progress
+        });
+        self.algorithm == Algorithm::Platoon
+            && blocking & !stuck == 0
+            && Self::patient(blocking, since, now)
+            && !behind_suspect
     }
 
     /// The inlet lane of entry `e`, as an index in Ψ's order ([`Layout::inlet_index`]).
@@ -977,6 +992,29 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         }
     }
 
+    /// `true` if, under [`Algorithm::Platoon`], `c` may follow holder `h` into A_S from
+    /// their common inlet lane on another route ([`Layout::trails`]): `h` is no suspect
+    /// (`c`'s planner would follow what `h` says of itself), and both are of the
+    /// length the trails were checked for (within [`TRAIL_LENGTH_TOLERANCE_M`]; a
+    /// vehicle's length is twice the distance from its centre to its front,
+    /// `−(to_line + progress)`). `c`'s crossing planner keeps `h` as a wall until `h`'s
+    /// centre has passed its conflict zone with `c`'s route
+    /// ([`CrossingPlanner::step`]), so the two stay L + d0 apart along their common arc
+    /// length, where the layout has checked that their footprints cannot meet.
+    fn trails(&self, h: &Entry<F>, c: &Entry<F>) -> bool {
+        let l = self.layout.trail_length;
+        let tol = F::from_f64(TRAIL_LENGTH_TOLERANCE_M);
+        let fits = |e: &Entry<F>| (-F::TWO * (e.to_line + e.progress) - l).abs() <= tol;
+        self.algorithm == Algorithm::Platoon
+            && !h.suspect
+            && self.inlet_of(h) == self.inlet_of(c)
+            && self
+                .layout
+                .may_trail(usize::from(h.route), usize::from(c.route))
+            && fits(h)
+            && fits(c)
+    }
+
     /// Step 4's test: c's route conflicts with no route held by a permitted vehicle or
     /// one granted earlier in this scan (with the pipelined relaxations when chosen).
     fn admissible(&self, c: &Entry<F>, granted_now: &[usize]) -> bool {
@@ -991,8 +1029,9 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
                 continue;
             }
             if self.algorithm.pipelined() {
-                if hr == cr && h.progress > c.progress {
-                    // 1: following on the same route, behind the holder.
+                if (hr == cr || self.trails(h, c)) && h.progress > c.progress {
+                    // 1: following on the same route (or, under PLATOON, on a route
+                    // that trails the holder's), behind the holder.
                     continue;
                 }
                 let end = self
@@ -1323,6 +1362,54 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         s + F::HALF * self.length > entry || self.lease_until.is_some_and(|u| u >= now)
     }
 
+    /// Where along my path (my arc position) the vehicle of report `rep`, heard `age`
+    /// seconds ago, stands as an obstacle, if it is on my path at all: on my route; on my
+    /// inlet lane while its rear is on it, or on another route while its centre is in
+    /// its conflict zone with mine; on my outlet once its front is (or may be) there.
+    fn on_my_path(
+        &self,
+        layout: &Layout<F>,
+        route: &Route<F>,
+        rep: &CrossingReport<F>,
+        age: F,
+    ) -> Option<F> {
+        let (r, x) = (rep.route, rep.s);
+        let other = layout.route(usize::from(r))?;
+        let (oe, ox) = (other.path.entry(), other.path.exit());
+        let (exit, half) = (route.path.exit(), F::HALF * self.length);
+        // How far it may have gone since its report: reports older than the bound may
+        // not show it on my outlet yet.
+        let reach = if age > self.notify {
+            self.planner.params().v_max() * age
+        } else {
+            F::ZERO
+        };
+        // Its conflict zone with my route, along its route from its A_S entry.
+        let zone = layout
+            .zone_end
+            .get(usize::from(r))
+            .and_then(|row| row.get(usize::from(self.route)))
+            .copied()
+            .unwrap_or(F::ZERO);
+        let shared = other.inlet == route.inlet;
+        let in_zone =
+            x - F::HALF * self.position_step - oe <= zone + F::from_f64(CONFLICT_SAMPLE_M);
+        if r == self.route || (shared && (x - half < oe || in_zone)) {
+            // Same route, or still partly on our common inlet — or past it but still in
+            // its conflict zone with my route, where PLATOON may have let me follow it
+            // (`Layout::trails`): as a wall at its arc length, which my own counts from
+            // the same start, until it has surely left that zone (its report rounded
+            // down), as the manager counts it.
+            Some(x)
+        } else if other.outlet == route.outlet && x + reach + half > ox {
+            // Its front is (or may be) on my outlet: where it is along my path, at
+            // least (positions only grow).
+            Some(exit + (x - ox))
+        } else {
+            None
+        }
+    }
+
     /// One planning step at `now`, at path position `s` with v_{t−h} = `v_prev`.
     pub fn step(
         &mut self,
@@ -1341,29 +1428,8 @@ impl<F: Real, const N: usize, const CAP: usize> CrossingPlanner<F, N, CAP> {
         self.obstacles.clear();
         for heard in self.others.iter() {
             let (rep, stamp) = (&heard.report, heard.stamp);
-            let (r, x) = (rep.route, rep.s);
-            let Some(other) = layout.route(usize::from(r)) else {
-                continue;
-            };
-            let (oe, ox) = (other.path.entry(), other.path.exit());
-            // How far it may have gone since its report: reports older than the bound may
-            // not show it on my outlet yet.
             let age: F = now.since(stamp).as_secs();
-            let reach = if age > self.notify {
-                p.v_max() * age
-            } else {
-                F::ZERO
-            };
-            let on_my_path = if r == self.route || (other.inlet == route.inlet && x - half < oe) {
-                // Same route, or still partly on our common inlet.
-                Some(x)
-            } else if other.outlet == route.outlet && x + reach + half > ox {
-                // Its front is (or may be) on my outlet: where it is along my path, at
-                // least (positions only grow).
-                Some(exit + (x - ox))
-            } else {
-                None
-            };
+            let on_my_path = self.on_my_path(layout, route, rep, age);
             if let Some(x) = on_my_path {
                 // Ahead of this vehicle: credited under the leader-aware invariant.
                 let credit = self.credit(rep, x - s, age);
@@ -1812,7 +1878,8 @@ mod tests {
     }
 
     /// Which heard vehicles are on this vehicle's path: its own route anywhere; its inlet
-    /// lane until the other's rear has left it; nothing else before the outlet.
+    /// lane until the other's rear has left it and its centre its conflict zone with
+    /// this route; nothing else before the outlet.
     #[test]
     fn vehicles_on_the_same_route_or_still_on_the_same_inlet_are_obstacles() {
         let l = spec8();
@@ -1833,7 +1900,19 @@ mod tests {
         let sibling = route_like_0(&l, true, false);
         let oe = l.route(sibling).expect("sibling").path.entry();
         assert!(on(sibling, oe + 2.0), "rear still on the common inlet");
-        assert!(!on(sibling, oe + 2.5), "rear off it");
+        // Off it, but still where its footprint meets my route's sweep (PLATOON may
+        // have let me trail it): kept until its centre is past that zone.
+        let zone = l.zone_end[sibling][0];
+        assert!(zone > 2.5, "{zone}");
+        assert!(on(sibling, oe + 2.5), "rear off the inlet, in the zone");
+        assert!(
+            on(sibling, oe + zone + CONFLICT_SAMPLE_M),
+            "at the zone's last sample"
+        );
+        assert!(
+            !on(sibling, oe + zone + CONFLICT_SAMPLE_M + 0.01),
+            "past it"
+        );
         let stranger = route_like_0(&l, false, false);
         let se = l.route(stranger).expect("stranger").path.entry();
         assert!(!on(stranger, se - 5.0), "another inlet lane");
@@ -1983,8 +2062,10 @@ mod tests {
         }
     }
 
-    /// Ties at the track boundaries: a rear exactly on its stop line has left the inlet,
-    /// a front exactly at the outlet's start is not on it yet.
+    /// Ties at the boundaries: a front exactly at the outlet's start is not on it yet; a
+    /// vehicle of the same inlet whose centre is exactly at the end of its conflict zone
+    /// (plus the sample) is still in it — as the manager, which frees the zone only
+    /// past that point, counts it.
     #[test]
     fn a_vehicle_exactly_at_a_boundary_is_on_the_far_side_of_it() {
         let l = spec8();
@@ -1999,9 +2080,13 @@ mod tests {
         };
         let sibling = route_like_0(&l, true, false);
         let oe = l.route(sibling).expect("sibling").path.entry();
-        let rear_on_line = exactly(oe, 2.25);
-        let seen = obstacles_with(&l, sibling as u8, rear_on_line, true);
-        assert!(!seen.iter().any(|o| (o.0 - rear_on_line).abs() < 1e-9));
+        let zone = l.zone_end[sibling][0] + CONFLICT_SAMPLE_M;
+        let at_zone_end = exactly(oe, zone);
+        let seen = obstacles_with(&l, sibling as u8, at_zone_end, true);
+        assert!(seen.iter().any(|o| (o.0 - at_zone_end).abs() < 1e-9));
+        let past = at_zone_end.next_up();
+        let seen = obstacles_with(&l, sibling as u8, past, true);
+        assert!(!seen.iter().any(|o| (o.0 - past).abs() < 1e-9));
         let q = route_like_0(&l, false, true);
         let ox = l.route(q).expect("route onto the same outlet").path.exit();
         let front_at_outlet = exactly(ox, -2.25);

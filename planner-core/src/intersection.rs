@@ -301,6 +301,18 @@ pub struct Layout<F> {
     /// `zone_end[i][j]`: along route i (distance from its A_S entry), where the part of its
     /// path whose footprint meets route j's swept area ends; NEG if none.
     pub zone_end: [[F; MAX_ROUTES]; MAX_ROUTES],
+    /// `trails[i]` bit j: a vehicle on route j may follow one on route i (i ≠ j, the same
+    /// inlet lane) into A_S while the leader is still in its conflict zone with j, when
+    /// both are of the layout's length L: at L + d0 or more apart along their common arc
+    /// length (what the invariant keeps between a follower and the wall it keeps on its
+    /// leader, [`crate::crossing::CrossingPlanner::step`]), their L × W footprints plus
+    /// margin do not meet at any sampled pair of positions while the leader's centre is
+    /// within `zone_end[i][j]` (plus one sample) of its A_S entry
+    /// (checked in `Layout::new`). A route trails itself (Theorem 1).
+    pub trails: [u32; MAX_ROUTES],
+    /// The vehicle length L (m) the trails were checked for: a pair of other lengths
+    /// stands closer or sweeps otherwise, and is not covered.
+    pub trail_length: F,
 }
 
 /// The manoeuvres inlet lane `lane` of `n` serves, in route order (SPEC §10): the inner
@@ -426,6 +438,22 @@ const SWEEP_PATH_SAMPLES: usize = 256;
 /// Points along each edge of a rectangle in [`sweep_outside`], less one (0.26 m apart on
 /// a truck's 16.5 m side).
 const SWEEP_EDGE_SAMPLES: usize = 64;
+
+/// The most samples [`Layout::compute_trails`] takes along one stretch.
+const TRAIL_SAMPLES: usize = 512;
+
+/// How many samples `step` apart cover `[0, length]`, both ends included; `None` past
+/// [`TRAIL_SAMPLES`] (or for a length that is not finite).
+fn samples_in<F: Real>(length: F, step: F) -> Option<usize> {
+    let mut n = 1;
+    while F::from_usize(n - 1) * step < length {
+        if n >= TRAIL_SAMPLES {
+            return None;
+        }
+        n += 1;
+    }
+    length.is_finite().then_some(n)
+}
 
 /// Separating-axis test of two oriented rectangles (touching counts as overlap).
 pub fn rectangles_meet<F: Real>(a: Pose<F>, b: Pose<F>, hl: F, hw: F) -> bool {
@@ -560,8 +588,11 @@ impl<F: Real> Layout<F> {
             routes,
             conflicts: [0; MAX_ROUTES],
             zone_end: [[F::from_f64(-1.0); MAX_ROUTES]; MAX_ROUTES],
+            trails: [0; MAX_ROUTES],
+            trail_length: p.length(),
         };
         layout.compute_conflicts(p);
+        layout.compute_trails(p);
         Ok(layout)
     }
 
@@ -721,6 +752,63 @@ impl<F: Real> Layout<F> {
         }
     }
 
+    /// Which routes may follow which into A_S ([`Layout::trails`]): two routes from one
+    /// inlet lane share their path up to the stop line and part from there, so a
+    /// follower one invariant spacing (L + d0, centre to centre along the common arc
+    /// length) behind its leader may still meet it where the paths part — the chord of
+    /// a turn is shorter than its arc and a turning rectangle's corners swing out. The
+    /// pair trails if, for every leader position from the A_S entry to one sample past
+    /// its conflict zone with the follower's route (where the leader stops blocking that
+    /// route, [`Layout::zone_end`]), and every follower position from L + d0 behind it
+    /// back 2 (L + W) further (beyond that their centres are too far apart for two
+    /// rectangles to meet), the footprints (L × W plus [`CONFLICT_MARGIN_M`] each way)
+    /// do not meet, sampled every [`CONFLICT_SAMPLE_M`] as the conflicts are.
+    fn compute_trails(&mut self, p: &Params<F>) {
+        let m = F::from_f64(CONFLICT_MARGIN_M);
+        let (hl, hw) = (F::HALF * p.length() + m, F::HALF * p.width() + m);
+        let step = F::from_f64(CONFLICT_SAMPLE_M);
+        let gap = p.length() + p.d0();
+        let back = F::TWO * (p.length() + p.width());
+        let n = self.routes.len();
+        for i in 0..n {
+            if let Some(t) = self.trails.get_mut(i) {
+                *t |= 1 << i;
+            }
+            for j in 0..n {
+                let (Some(ri), Some(rj)) = (self.routes.get(i), self.routes.get(j)) else {
+                    continue;
+                };
+                let zone = self.zone_end.get(i).and_then(|r| r.get(j)).copied();
+                let Some(zone) = zone.filter(|_| i != j && ri.inlet == rj.inlet) else {
+                    continue;
+                };
+                // Counted loops, at most TRAIL_SAMPLES each: a pair whose zone or spacing
+                // needs more is not checked, so it does not trail.
+                let (leaders, followers) = (samples_in(zone + step, step), samples_in(back, step));
+                let mut ok = leaders.is_some() && followers.is_some();
+                for a in 0..leaders.unwrap_or(0) {
+                    let sl = ri.path.entry() + F::from_usize(a) * step;
+                    let leader = ri.path.pose_at(sl);
+                    for b in 0..followers.unwrap_or(0) {
+                        let sf = sl - gap - F::from_usize(b) * step;
+                        ok = ok && !rectangles_meet(leader, rj.path.pose_at(sf), hl, hw);
+                    }
+                }
+                if ok {
+                    if let Some(t) = self.trails.get_mut(i) {
+                        *t |= 1 << j;
+                    }
+                }
+            }
+        }
+    }
+
+    /// `true` if a vehicle on route `j` may follow one on route `i` into A_S
+    /// ([`Layout::trails`]).
+    pub fn may_trail(&self, i: usize, j: usize) -> bool {
+        j < MAX_ROUTES && self.trails.get(i).is_some_and(|t| t >> j & 1 == 1)
+    }
+
     /// `true` if routes i and j conflict.
     pub fn conflict(&self, i: usize, j: usize) -> bool {
         j < MAX_ROUTES && self.conflicts.get(i).is_some_and(|c| c >> j & 1 == 1)
@@ -782,6 +870,60 @@ mod tests {
         // The north inlet (heading south) drives on the west half (x = −1.8 inner).
         let n = l.route(ns).unwrap().path.pose_at(50.0);
         assert!((n.x + 1.8).abs() < 1e-9 && n.y > 12.0);
+    }
+
+    /// The trails of the SPEC §8 layout: on every approach the inner lane's straight and
+    /// left turn trail each other, the outer lane's right turn trails its straight, not
+    /// the other way round, and nothing trails across lanes. Re-checked every 5 cm with
+    /// the bare rectangles (no margin): no trailing pair meets at the invariant's spacing
+    /// or more while the leader is in its zone. And the check bites: with d0 = 0 (a
+    /// follower L behind touches with the margin) no two routes trail.
+    #[test]
+    fn trails_of_the_spec8_layout_and_a_finer_recheck() {
+        let p = Params::<f64>::table_i();
+        let l = Layout::new(&p, LayoutSpec::spec8(&p)).unwrap();
+        let mut pairs = 0;
+        for h in 0..4u8 {
+            let idx = |lane, m| l.route_index(h, lane, m).unwrap();
+            let (s, left) = (idx(0, Movement::Straight), idx(0, Movement::Left));
+            let (os, or) = (idx(1, Movement::Straight), idx(1, Movement::Right));
+            assert!(l.may_trail(s, left) && l.may_trail(left, s));
+            assert!(l.may_trail(os, or) && !l.may_trail(or, os));
+            for (i, j) in [(s, os), (os, s), (left, or), (or, left)] {
+                assert!(!l.may_trail(i, j), "across lanes {i} {j}");
+            }
+        }
+        let (hl, hw) = (0.5 * p.length(), 0.5 * p.width());
+        for i in 0..ROUTES {
+            for j in 0..ROUTES {
+                if i == j || !l.may_trail(i, j) {
+                    continue;
+                }
+                pairs += 1;
+                let (ri, rj) = (l.route(i).unwrap(), l.route(j).unwrap());
+                let last = l.zone_end[i][j] + CONFLICT_SAMPLE_M;
+                for a in 0..=((last / 0.05) as usize) {
+                    let sl = ri.path.entry() + a as f64 * 0.05;
+                    for b in 0..=((2.0 * (p.length() + p.width()) / 0.05) as usize) {
+                        let sf = sl - p.length() - p.d0() - b as f64 * 0.05;
+                        assert!(
+                            !rectangles_meet(ri.path.pose_at(sl), rj.path.pose_at(sf), hl, hw),
+                            "{i} -> {j}: leader at {sl}, follower at {sf}"
+                        );
+                    }
+                }
+            }
+        }
+        assert_eq!(pairs, 12, "3 pairs on each of 4 approaches");
+        let mut tight = *p.spec();
+        tight.d0 = 0.0;
+        let pt = Params::new(tight).unwrap();
+        let l = Layout::new(&pt, LayoutSpec::spec8(&pt)).unwrap();
+        for i in 0..ROUTES {
+            for j in 0..ROUTES {
+                assert_eq!(l.may_trail(i, j), i == j, "d0 = 0: {i} -> {j}");
+            }
+        }
     }
 
     /// SPEC §10: three lanes per approach: inner straight + left, middle straight,

@@ -412,8 +412,12 @@ fn a_restarted_manager_grants_nothing_an_old_lease_could_conflict_with() {
     use planner_core::crossing::Lease;
     use planner_core::Duration;
     let l = layout();
-    let (ra, rb, _) = starving_triple(&l);
-    assert!(l.conflict(usize::from(ra), usize::from(rb)));
+    let (ra, _, _) = starving_triple(&l);
+    // A crossing route from another inlet lane: `a` drives up to and across `b`'s line.
+    let inlet = |r: u8| l.route(usize::from(r)).unwrap().inlet;
+    let rb = (0..ROUTES as u8)
+        .find(|&r| l.conflict(usize::from(ra), usize::from(r)) && inlet(r) != inlet(ra))
+        .unwrap();
     let lease = Lease::default();
     let ms = |k: u64| secs(0.0).saturating_add(Duration::from_millis(k));
     let (entry, exit) = {

@@ -7,8 +7,7 @@
 //! `s = entry − 2.25 − to_line` (negative `to_line`: past the line, inside A_S).
 
 use planner_core::crossing::{
-    Algorithm, CrossingReport, Manager, ManagerError, PLATOON_MAX_WAIT, PLATOON_SPACING_M,
-    REQUEST_DISTANCE_M,
+    Algorithm, CrossingReport, Manager, ManagerError, PLATOON_MAX_WAIT, REQUEST_DISTANCE_M,
 };
 use planner_core::intersection::{Layout, LayoutSpec, Movement, CONFLICT_SAMPLE_M, ROUTES};
 use planner_core::{Instant, Params};
@@ -784,36 +783,86 @@ fn platoon_scene(alg: Algorithm, gap: f64, t: f64) -> (Manager<f64, 8>, Layout<f
 
 /// A follower close behind a holder on its lane goes with it under PLATOON — ahead of an
 /// earlier vehicle waiting on a conflicting route — and under no other algorithm.
+/// A vehicle that fits beside every holder goes with them under PLATOON — ahead of an
+/// earlier vehicle waiting on a conflicting route that could not go anyway (a holder
+/// crosses it) — and under no other algorithm; near or far behind its leader alike.
 #[test]
-fn a_close_follower_joins_its_leaders_platoon_only_under_platoon() {
+fn a_vehicle_joins_the_flow_past_one_that_could_not_go_only_under_platoon() {
     for (alg, joins) in [
         (Algorithm::Platoon, true),
         (Algorithm::Pipelined, false),
         (Algorithm::ConcurrentFair, false),
     ] {
-        let (m, _) = platoon_scene(alg, 20.0, 1.0);
-        assert!(m.permitted(1) && !m.permitted(2), "{alg:?}");
-        assert_eq!(m.permitted(3), joins, "{alg:?}");
-        assert_eq!(entry(&m, 2).waiting_since, Some(secs(0.5)), "kept");
+        for gap in [10.0, 26.0] {
+            let (m, _) = platoon_scene(alg, gap, 1.0);
+            assert!(m.permitted(1) && !m.permitted(2), "{alg:?}");
+            assert_eq!(m.permitted(3), joins, "{alg:?} {gap}");
+            assert_eq!(entry(&m, 2).waiting_since, Some(secs(0.5)), "kept");
+        }
     }
 }
 
-// The follower below asks (it is within the request distance), and is refused.
-const _: () = assert!(PLATOON_SPACING_M + 1.0 < REQUEST_DISTANCE_M);
-
-/// Beyond the platoon spacing a follower is a new arrival like any other.
+/// Trailing on a shared inlet: behind a holder still in its conflict zone with the
+/// follower's route, a vehicle of its lane on the other route is granted under PLATOON
+/// where the layout found that the pair trails (straight and left on the inner lane,
+/// either way round; a right turn behind a straight on the outer lane) — not a straight
+/// behind a right turn, whose tight arc swings the leader's rear across the straight,
+/// not a vehicle of another length, and not under PIPE.
 #[test]
-fn a_follower_beyond_the_spacing_waits_its_turn() {
-    let (m, _) = platoon_scene(Algorithm::Platoon, PLATOON_SPACING_M + 1.0, 1.0);
-    assert!(!m.permitted(3));
-    let (m, _) = platoon_scene(Algorithm::Platoon, PLATOON_SPACING_M - 0.5, 1.0);
-    assert!(m.permitted(3));
+fn a_vehicle_trails_its_lane_leader_onto_another_route_only_under_platoon() {
+    let l = layout();
+    let (s, left) = (
+        route(&l, 0, Movement::Straight),
+        route(&l, 0, Movement::Left),
+    );
+    let outer_s = l.route_index(0, 1, Movement::Straight).unwrap();
+    let outer_r = l.route_index(0, 1, Movement::Right).unwrap();
+    assert!(l.conflict(s, left) && l.conflict(outer_s, outer_r));
+    let granted = |alg: Algorithm, lead: usize, follow: usize, length: f64| {
+        let mut m = manager(&l, alg);
+        m.observe(&at(&l, 1, lead, 0.5, 0.0), secs(0.0)).unwrap();
+        m.update(secs(0.0));
+        // The leader's centre 0.75 m past its line: in its zone with the follower's route.
+        m.observe(&at(&l, 1, lead, -3.0, 5.0), secs(0.5)).unwrap();
+        assert!(l.zone_end[lead][follow] > 0.75 + CONFLICT_SAMPLE_M);
+        let entry = l.route(follow).unwrap().path.entry();
+        let follower = CrossingReport {
+            s: entry - length / 2.0 - 5.0,
+            length,
+            ..at(&l, 2, follow, 5.0, 5.0)
+        };
+        m.observe(&follower, secs(0.5)).unwrap();
+        m.update(secs(0.5));
+        assert!(m.permitted(1));
+        m.permitted(2)
+    };
+    for (lead, follow, trails) in [
+        (s, left, true),
+        (left, s, true),
+        (outer_s, outer_r, true),
+        (outer_r, outer_s, false),
+    ] {
+        assert_eq!(l.may_trail(lead, follow), trails, "{lead} -> {follow}");
+        assert_eq!(
+            granted(Algorithm::Platoon, lead, follow, LENGTH),
+            trails,
+            "{lead} -> {follow}"
+        );
+        assert!(
+            !granted(Algorithm::Pipelined, lead, follow, LENGTH),
+            "PIPE {lead} -> {follow}"
+        );
+        assert!(
+            !granted(Algorithm::Platoon, lead, follow, 4.0),
+            "4 m {lead} -> {follow}"
+        );
+    }
 }
 
-/// Once the conflicting vehicle has waited PLATOON_MAX_WAIT, the platoon stops growing:
-/// the follower waits behind it (Theorem 5's bound); a moment before, it still joins.
+/// Once the conflicting vehicle has waited PLATOON_MAX_WAIT, nothing joins past it: the
+/// follower waits behind it (Theorem 5's bound); a moment before, it still joins.
 #[test]
-fn no_platoon_grows_past_a_vehicle_that_waited_the_longest_wait() {
+fn nothing_joins_past_a_vehicle_that_waited_the_longest_wait() {
     let wait = PLATOON_MAX_WAIT.as_secs::<f64>();
     let (m, _) = platoon_scene(Algorithm::Platoon, 20.0, 0.5 + wait);
     assert!(!m.permitted(3), "waited exactly the bound");
@@ -821,11 +870,49 @@ fn no_platoon_grows_past_a_vehicle_that_waited_the_longest_wait() {
     assert!(m.permitted(3), "just under the bound");
 }
 
-/// A platoon may start in one scan: a leader granted now takes its follower along, past a
-/// vehicle that waits on a crossing route, while a follower of a vehicle that is not
-/// granted gets nothing.
+/// Only past vehicles that could not go: `z` (south, inner, straight) waits since 0.5 s
+/// behind holder 1 (west, inner, straight, inside A_S) and by 61 s has waited the bound;
+/// `y` (west, outer, straight) fits beside 1 but not beside `z`, so the bound refuses it;
+/// `c` (south, outer, right) fits beside 1 and `z` but merges into `y`'s outlet. `y` could
+/// go now, so `c` does not join past it — though without `y` it is granted.
 #[test]
-fn a_leader_granted_in_the_same_scan_takes_its_follower_along() {
+fn nothing_joins_past_a_vehicle_that_could_go() {
+    let l = layout();
+    let (a, z, y) = (
+        route(&l, 0, Movement::Straight),
+        route(&l, 1, Movement::Straight),
+        l.route_index(0, 1, Movement::Straight).unwrap(),
+    );
+    let c = l.route_index(1, 1, Movement::Right).unwrap();
+    assert!(l.conflict(a, z) && l.conflict(z, y) && l.conflict(y, c));
+    assert!(!l.conflict(a, y) && !l.conflict(a, c) && !l.conflict(z, c));
+    for with_y in [true, false] {
+        let mut m = manager(&l, Algorithm::Platoon);
+        m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+        m.update(secs(0.0));
+        m.observe(&at(&l, 1, a, -3.0, 0.0), secs(0.5)).unwrap();
+        m.observe(&at(&l, 2, z, 0.5, 0.0), secs(0.5)).unwrap();
+        m.update(secs(0.5));
+        assert!(!m.permitted(2));
+        for id in [1, 2] {
+            let (r, to_line) = if id == 1 { (a, -3.0) } else { (z, 0.5) };
+            m.observe(&at(&l, id, r, to_line, 0.0), secs(61.0)).unwrap();
+        }
+        if with_y {
+            m.observe(&at(&l, 3, y, 0.5, 0.0), secs(61.0)).unwrap();
+        }
+        m.observe(&at(&l, 4, c, 0.5, 0.0), secs(61.0)).unwrap();
+        m.update(secs(61.0));
+        assert!(m.permitted(1) && !m.permitted(2) && !m.permitted(3));
+        assert_eq!(m.permitted(4), !with_y, "with y: {with_y}");
+    }
+}
+
+/// A flow may start in one scan: a vehicle granted now blocks a crossing one, and a
+/// vehicle that fits beside the first joins it, while a follower of a vehicle that is
+/// not granted gets nothing (it cannot pass it).
+#[test]
+fn a_vehicle_granted_in_the_same_scan_starts_the_flow() {
     let l = layout();
     let a = route(&l, 0, Movement::Straight);
     let w = route(&l, 1, Movement::Straight);
@@ -844,9 +931,10 @@ fn a_leader_granted_in_the_same_scan_takes_its_follower_along() {
     assert!(m.permitted(2) && !m.permitted(1) && !m.permitted(3));
 }
 
-/// A suspect leader heads no platoon.
+/// Nobody joins the flow behind a suspect on its own lane (its planner follows what the
+/// suspect says of itself).
 #[test]
-fn a_suspect_heads_no_platoon() {
+fn nobody_joins_the_flow_behind_a_suspect() {
     let l = layout();
     let a = route(&l, 0, Movement::Straight);
     let w = route(&l, 1, Movement::Straight);

@@ -118,6 +118,8 @@ pub fn layout32(l: &Layout<f64>) -> Layout<f32> {
         routes,
         conflicts: l.conflicts,
         zone_end: l.zone_end.map(|row| row.map(r)),
+        trails: l.trails,
+        trail_length: r(l.trail_length),
     }
 }
 
