@@ -857,16 +857,19 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         since: &[Instant; MAX_ROUTES],
         now: Instant,
     ) -> bool {
-        let behind_suspect = self.entries.iter().any(|l| {
-            l.suspect
-                && l.id != c.id
-                && self.inlet_of(l) == self.inlet_of(c)
-                && l.progress > c.progress
-        });
+        // The scan over the entries last: it runs only where the cheap tests pass.
+        let behind_suspect = || {
+            self.entries.iter().any(|l| {
+                l.suspect
+                    && l.id != c.id
+                    && self.inlet_of(l) == self.inlet_of(c)
+                    && l.progress > c.progress
+            })
+        };
         self.algorithm == Algorithm::Platoon
             && blocking & !stuck == 0
             && Self::patient(blocking, since, now)
-            && !behind_suspect
+            && !behind_suspect()
     }
 
     /// The inlet lane of entry `e`, as an index in Ψ's order ([`Layout::inlet_index`]).
@@ -1005,9 +1008,10 @@ impl<F: Real, const CAP: usize> Manager<F, CAP> {
         let l = self.layout.trail_length;
         let tol = F::from_f64(TRAIL_LENGTH_TOLERANCE_M);
         let fits = |e: &Entry<F>| (-F::TWO * (e.to_line + e.progress) - l).abs() <= tol;
+        // `may_trail` holds only for two routes of one inlet lane (or a route and itself,
+        // which the caller has already let follow), so the lane needs no test of its own.
         self.algorithm == Algorithm::Platoon
             && !h.suspect
-            && self.inlet_of(h) == self.inlet_of(c)
             && self
                 .layout
                 .may_trail(usize::from(h.route), usize::from(c.route))
