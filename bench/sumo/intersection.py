@@ -24,7 +24,10 @@ environment's Python, into which matplotlib is installed on first use): docs/dem
 
 Usage: python3 bench/sumo/intersection.py [--rates 100,200,300,400] [--duration 600]
        [--seeds 2] [--algorithms PIPE,PLATOON] [--invariant leader-aware] [--json]
-       [--plot OUT.png]
+       [--plot OUT.png] [--every-rate]
+
+An algorithm is run rate by rate, lowest first, and not above a rate where its queues were
+not bounded (`--every-rate` runs it everywhere): such runs only measure a queue growing.
 """
 
 import argparse
@@ -34,6 +37,7 @@ import subprocess
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -47,9 +51,10 @@ DRIVERS = {
 }
 
 
-def ours(hs, rates, duration, seeds, algorithms, invariant):
+def ours_at(hs, rate, duration, seeds, algorithms, invariant):
+    """{(algorithm, rate): row} of one `experiment demand` run at `rate`."""
     out = subprocess.run(
-        [hs, "experiment", "demand", "--rates", ",".join(map(str, rates)),
+        [hs, "experiment", "demand", "--rates", str(rate),
          "--duration", str(duration), "--seeds", str(seeds),
          "--algorithms", ",".join(algorithms), "--invariant", invariant, "--json"],
         check=True, capture_output=True, text=True,
@@ -62,6 +67,21 @@ def ours(hs, rates, duration, seeds, algorithms, invariant):
             "bounded": r["bounded"],
             "unsafe": r["collisions"] + r["invariant_violations"] + r["unpermitted_entries"],
         }
+    return rows
+
+
+def ours(hs, rates, duration, seeds, algorithms, invariant, every_rate):
+    """Our algorithms at each rate, lowest first. An algorithm whose queues were not bounded
+    at one rate is not run at the higher ones unless `every_rate`: its queues only grow
+    there (they grow by the excess of arrivals over what it serves), each run's cost grows
+    with them, and the issue's table marks those cells "–" as well."""
+    rows, live = {}, list(algorithms)
+    for rate in sorted(rates):
+        if not live:
+            break
+        rows.update(ours_at(hs, rate, duration, seeds, live, invariant))
+        if not every_rate:
+            live = [x for x in live if rows[(x, rate)]["bounded"]]
     return rows
 
 
@@ -100,25 +120,34 @@ def sumo_trips(net, routes, duration, seed):
     return len(done), mean(float(t.get("timeLoss")) + float(t.get("departDelay")) for t in done)
 
 
+def sumo_job(hs, name, scenario_text, control, duration, seed):
+    """[(driver, sumo_trips)] of one world under one control, in a directory of its own."""
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        (work / f"{name}.toml").write_text(scenario_text)
+        subprocess.run([hs, "export", "sumo", str(work / f"{name}.toml"), str(work),
+                        "--control", control], check=True, capture_output=True)
+        subprocess.run([sumo_bin("netconvert"), "-c", f"{name}.netccfg"], cwd=work,
+                       check=True, capture_output=True)
+        return [(d, sumo_trips(work / f"{name}.net.xml", with_driver(work / f"{name}.rou.xml", d),
+                               duration, seed)) for d in DRIVERS]
+
+
 def sumo_runs(hs, name, scenario_of, rates, controls, duration, seeds):
     """{(control, driver, rate): [sumo_trips of each seed]}: the world `scenario_of(rate,
     seed)` (a scenario file named `name`) exported by host-sim under each control, built
-    by netconvert and run with each driver."""
-    rows = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        for rate in rates:
-            for control in controls:
-                for seed in range(1, seeds + 1):
-                    (work / f"{name}.toml").write_text(scenario_of(rate, seed))
-                    subprocess.run([hs, "export", "sumo", str(work / f"{name}.toml"), str(work),
-                                    "--control", control], check=True, capture_output=True)
-                    subprocess.run([sumo_bin("netconvert"), "-c", f"{name}.netccfg"], cwd=work,
-                                   check=True, capture_output=True)
-                    for d in DRIVERS:
-                        routes = with_driver(work / f"{name}.rou.xml", d)
-                        rows.setdefault((control, d, rate), []).append(
-                            sumo_trips(work / f"{name}.net.xml", routes, duration, seed))
+    by netconvert and run with each driver. The runs are independent single-threaded
+    processes, so they run one per core (their results do not depend on the order)."""
+    sumo_bin("sumo")  # installs SUMO once, before the workers look for it
+    jobs = [(rate, control, seed) for rate in rates for control in controls
+            for seed in range(1, seeds + 1)]
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        done = pool.map(lambda j: sumo_job(hs, name, scenario_of(j[0], j[2]), j[1], duration,
+                                           j[2]), jobs)
+        rows = {}
+        for (rate, control, _), drivers in zip(jobs, done):
+            for d, trips in drivers:
+                rows.setdefault((control, d, rate), []).append(trips)
     return rows
 
 
@@ -151,11 +180,13 @@ def main():
     ap.add_argument("--invariant", default="leader-aware")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--plot", metavar="OUT.png")
+    ap.add_argument("--every-rate", action="store_true",
+                    help="run each algorithm at every rate, also above one where it saturated")
     a = ap.parse_args()
     rates = [float(r) for r in a.rates.split(",")]
     algorithms = a.algorithms.split(",")
     hs = host_sim()
-    mine = ours(hs, rates, a.duration, a.seeds, algorithms, a.invariant)
+    mine = ours(hs, rates, a.duration, a.seeds, algorithms, a.invariant, a.every_rate)
     theirs = sumo(hs, rates, a.duration, a.seeds)
     results = {
         "meta": {"duration": a.duration, "seeds": a.seeds, "invariant": a.invariant},
@@ -169,24 +200,34 @@ def main():
         print(json.dumps(results, indent=1))
         return
     cell = lambda r: f"{r['throughput']:.0f} / {r['delay']:.1f}"
+    ratio = lambda x, y: f"{x / y:.2f}" if y > 0 else "–"
     head = ["rate"] + [f"**{x}**" for x in algorithms]
     head += [f"SUMO {c}, human · automated" for c in CONTROLS]
     best = algorithms[-1]
-    head += [f"{best} delay / SUMO actuated human", f"{best} throughput / SUMO actuated human"]
+    head += [f"{best} delay / SUMO actuated human", f"{best} delay / SUMO's best delay",
+             f"{best} throughput / SUMO actuated, human · automated"]
     print("Per inlet lane, throughput (veh/h) / mean delay (s); * = our queues not bounded; "
+          "– = not run (saturated at a lower rate); "
           f"{a.duration:.0f} s x {a.seeds} seeds, {a.invariant} invariant")
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     for rate in rates:
         row = [f"{rate:.0f}"]
         for x in algorithms:
-            r = mine[(x, rate)]
-            row.append(cell(r) + ("" if r["bounded"] else "*"))
+            r = mine.get((x, rate))
+            row.append("–" if r is None else cell(r) + ("" if r["bounded"] else "*"))
         for c in CONTROLS:
             row.append(cell(theirs[(c, "human", rate)]) + " · " + cell(theirs[(c, "automated", rate)]))
-        ref, r = theirs[("actuated", "human", rate)], mine[(best, rate)]
-        row.append(f"{r['delay'] / ref['delay']:.2f}" if ref["delay"] > 0 else "–")
-        row.append(f"{r['throughput'] / ref['throughput']:.2f}")
+        r = mine.get((best, rate))
+        if r is None:
+            row += ["–"] * 3
+        else:
+            human, auto = theirs[("actuated", "human", rate)], theirs[("actuated", "automated", rate)]
+            sumo_best = min(v["delay"] for k, v in theirs.items() if k[2] == rate)
+            row.append(ratio(r["delay"], human["delay"]))
+            row.append(ratio(r["delay"], sumo_best))
+            row.append(ratio(r["throughput"], human["throughput"]) + " · "
+                       + ratio(r["throughput"], auto["throughput"]))
         print("| " + " | ".join(row) + " |")
     unsafe = sum(r["unsafe"] for r in mine.values())
     print(f"ours: {unsafe} collisions, invariant violations and unpermitted entries")

@@ -193,6 +193,10 @@ fn bad_input_exits_2_and_runs_nothing() {
         vec!["--clock-start", "2e9"],
         vec!["--precision", "f32", "--solver", "clarabel"],
         vec!["--precision", "f16"],
+        // A cut that is no cut: longer than the file's duration_s, empty, not a time.
+        vec!["--duration", "1000"],
+        vec!["--duration", "0"],
+        vec!["--duration", "NaN"],
     ] {
         let out = bin()
             .arg("run")
@@ -203,6 +207,38 @@ fn bad_input_exits_2_and_runs_nothing() {
         assert_eq!(out.status.code(), Some(2), "{args:?}");
         assert!(out.stdout.is_empty(), "{args:?}");
     }
+}
+
+/// `--duration` cuts a run short, and a deadline past the cut comes forward to it: the
+/// goal the vehicle has not reached by then is missed (exit 3).
+#[test]
+fn a_run_cut_short_ends_there_and_is_judged_there() {
+    let f = tmp("cut.toml");
+    std::fs::write(
+        &f,
+        "name = \"cut\"\nduration_s = 8.0\n[road]\nlanes = 1\n[[vehicle]]\nid = 1\nx = 0.0\nlane = 0\nv = 10.0\ngoal_x = 60.0\n",
+    )
+    .expect("write");
+    let run = |cut: &str| {
+        let out = bin()
+            .arg("run")
+            .arg(&f)
+            .args(["--json", "--duration", cut])
+            .output()
+            .expect("runs");
+        let v = json_with(&out.stdout, &["completed", "sim_seconds"]);
+        (out.status.code(), v)
+    };
+    let (code, v) = run("8");
+    assert_eq!(
+        (code, &v["completed"]),
+        (Some(0), &serde_json::json!(true)),
+        "{v}"
+    );
+    let (code, v) = run("2.5");
+    assert_eq!(code, Some(3), "{v}");
+    assert_eq!(v["completed"], false);
+    assert_eq!(v["sim_seconds"], 2.5);
 }
 
 #[test]

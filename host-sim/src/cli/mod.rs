@@ -104,6 +104,10 @@ enum Command {
         /// Overrides the scenario's seed.
         #[arg(long)]
         seed: Option<u64>,
+        /// Cut the run to this many seconds (more than 0, at most the scenario's
+        /// duration_s); a deadline_s past it comes forward to it.
+        #[arg(long, value_name = "SECONDS")]
+        duration: Option<f64>,
         /// Print one JSON summary object.
         #[arg(long)]
         json: bool,
@@ -280,6 +284,7 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Run {
             file,
             seed,
+            duration,
             json,
             trace,
             plot,
@@ -298,6 +303,7 @@ fn dispatch(command: Command) -> ExitCode {
         } => run::run(run::RunArgs {
             file,
             seed,
+            duration,
             json,
             trace,
             plot,

@@ -22,6 +22,8 @@ pub struct RunArgs {
     pub file: PathBuf,
     /// Overrides the scenario's seed.
     pub seed: Option<u64>,
+    /// Cuts the run short (s).
+    pub duration: Option<f64>,
     /// One JSON object instead of the human summary.
     pub json: bool,
     /// CSV trace.
@@ -198,6 +200,17 @@ fn prepare(a: &RunArgs) -> Result<(WorldSpec, Sinks), ExitCode> {
         ));
     }
     let mut spec = host_sim::scenario::load(&a.file).map_err(bad_input)?;
+    if let Some(d) = a.duration {
+        // Only shorter: arrivals and faults were drawn for the file's duration.
+        if !(d > 0.0 && d <= spec.duration_s) {
+            return Err(bad_input(format!(
+                "--duration must be in (0, {}] s (the scenario's duration_s), got {d}",
+                spec.duration_s
+            )));
+        }
+        spec.duration_s = d;
+        spec.deadline_s = spec.deadline_s.min(d);
+    }
     spec.clock_start = planner_core::Instant::EPOCH.saturating_add(start);
     spec.precision = a.precision;
     if let Some(i) = a.invariant {
