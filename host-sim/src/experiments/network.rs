@@ -212,6 +212,9 @@ pub struct NetworkReport {
     pub mean_delay_s: f64,
     /// Lane changes completed.
     pub lane_changes: u64,
+    /// Movements given up by vehicles that could not reach a lane serving them before the
+    /// edge of A_C (each took a detour: [`crate::world::reroute`]).
+    pub turns_given_up: u64,
     /// Junction crossings completed.
     pub crossings: u64,
     /// Collisions (pairs × steps).
@@ -289,6 +292,7 @@ pub fn run_with(
         mean_trip_time_s: trips.mean_time,
         mean_delay_s: trips.mean_delay,
         lane_changes: summary.lane_changes.changes as u64,
+        turns_given_up: trips.turns_given_up,
         crossings: summary.crossed(),
         collisions: summary.collisions,
         invariant_violations: summary.invariant_violations,
@@ -311,6 +315,7 @@ struct Trips {
     due_completed: u64,
     mean_time: f64,
     mean_delay: f64,
+    turns_given_up: u64,
 }
 
 impl Trips {
@@ -322,10 +327,12 @@ impl Trips {
             due_completed: 0,
             mean_time: 0.0,
             mean_delay: 0.0,
+            turns_given_up: 0,
         };
         let (mut time, mut delay) = (0.0, 0.0);
         for v in w.all_vehicles() {
             t.spawned += 1;
+            t.turns_given_up += u64::from(v.log.turns_given_up);
             let free = v.log.free_flow_s.unwrap_or(0.0);
             let is_due = v.log.entered_at + free + GRACE_S <= end;
             t.due += u64::from(is_due);
@@ -376,8 +383,8 @@ impl core::fmt::Display for NetworkReport {
         )?;
         writeln!(
             f,
-            "  {} lane changes, {} crossings",
-            self.lane_changes, self.crossings
+            "  {} lane changes, {} crossings, {} turns given up (detours)",
+            self.lane_changes, self.crossings, self.turns_given_up
         )?;
         write!(
             f,

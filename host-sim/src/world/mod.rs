@@ -29,6 +29,7 @@ pub mod network;
 pub mod period;
 pub mod plausible;
 pub mod precision;
+pub mod reroute;
 pub mod sensor;
 pub mod spawn;
 pub mod step;

@@ -76,6 +76,9 @@ pub struct Log {
     /// Its trip's free-flow time from where it entered (s), if it drives out of a
     /// network ([`Network::free_flow_s`]).
     pub free_flow_s: Option<f64>,
+    /// Movements it gave up, unable to reach a lane serving them in time
+    /// ([`super::reroute`]).
+    pub turns_given_up: u32,
 }
 
 /// One vehicle.
@@ -741,6 +744,7 @@ impl<const N: usize> Vehicle<N> {
         counters: &mut Counters,
     ) -> (f64, f64) {
         let Pose { x, y, theta } = pose;
+        self.give_up_turn_if_late(ctx);
         let road = self.road(ctx.net, seg);
         let v_max = ctx.net.segments.get(seg).map_or(ctx.lim.v_max, |s| s.v_max);
         let Some(b) = self.role.brain_mut() else {
@@ -1097,6 +1101,32 @@ impl<const N: usize> Vehicle<N> {
         }
         self.retarget(net);
         self.forget_planners();
+    }
+
+    /// Takes a detour if it can no longer reach a lane serving its next movement before
+    /// the edge of A_C ([`super::reroute`]).
+    fn give_up_turn_if_late(&mut self, ctx: &StepCtx<'_>) {
+        use super::reroute::{destination, detour, must_give_up};
+        let next = self.trip.movements.first().copied();
+        if !must_give_up(
+            ctx.net,
+            &ctx.lim,
+            self.at(),
+            (self.v, self.body.brake),
+            next,
+        ) {
+            return;
+        }
+        let At::Lane { seg, lane, .. } = self.at() else {
+            return;
+        };
+        let new = destination(ctx.net, seg, &self.trip.movements)
+            .and_then(|dest| detour(ctx.net, seg, lane, dest));
+        if let Some(movements) = new {
+            self.trip.movements = movements;
+            self.retarget(ctx.net);
+            self.log.turns_given_up += 1;
+        }
     }
 
     /// Sets the target lane on the current segment: the nearest lane serving the next
