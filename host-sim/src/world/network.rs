@@ -136,6 +136,20 @@ impl Segment {
         }
     }
 
+    /// Where A_C of the junction at its end begins (x), if it ends at one: a lane
+    /// change must be over there (SPEC §10).
+    pub fn comm_edge(&self, net: &Network) -> Option<f64> {
+        let End::Junction(j, stop) = self.end else {
+            return None;
+        };
+        Some(
+            stop - net
+                .junctions
+                .get(j)
+                .map_or(0.0, |jn| jn.layout.spec.comm_margin),
+        )
+    }
+
     /// The junction at its end, if any.
     pub fn into_junction(&self) -> Option<usize> {
         match self.end {

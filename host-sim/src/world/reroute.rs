@@ -15,7 +15,7 @@
 //! lane, never what its planners may do, so nothing it does is less safe.
 
 use super::at::At;
-use super::network::{End, Network};
+use super::network::Network;
 use crate::monitor::Limits;
 use planner_core::intersection::{lane_movements, Movement};
 
@@ -92,14 +92,9 @@ pub fn must_give_up(
     let Some(sg) = net.segments.get(seg) else {
         return false;
     };
-    let End::Junction(j, stop) = sg.end else {
-        return false;
-    };
-    let margin = net
-        .junctions
-        .get(j)
-        .map_or(0.0, |jn| jn.layout.spec.comm_margin);
-    !sg.serves(net, lane, next) && stop - margin - x < give_up_distance(lim, v, brake)
+    sg.comm_edge(net).is_some_and(|edge| {
+        !sg.serves(net, lane, next) && edge - x < give_up_distance(lim, v, brake)
+    })
 }
 
 #[cfg(test)]
@@ -160,11 +155,8 @@ mod tests {
         let (net, lim) = (grid(), Limits::table_i());
         let (seg, stop) = into_centre(&net);
         let sg = &net.segments[seg];
-        let edge = stop
-            - net.junctions[sg.into_junction().expect("junction")]
-                .layout
-                .spec
-                .comm_margin;
+        let edge = sg.comm_edge(&net).expect("a junction at its end");
+        assert!(edge < stop);
         // Lane 1 (inner) serves a left turn; lane 0 (outer) does not.
         let (inner, outer) = (1, 0);
         assert!(sg.serves(&net, inner, Some(Movement::Left)));
@@ -173,43 +165,15 @@ mod tests {
         let v = (13.9, 7.9);
         let d = give_up_distance(&lim, v.0, v.1);
         let late = edge - d + 0.5;
-        assert!(must_give_up(
-            &net,
-            &lim,
-            on(seg, late, outer, None),
-            v,
-            left
-        ));
-        assert!(!must_give_up(
-            &net,
-            &lim,
-            on(seg, edge - d - 0.5, outer, None),
-            v,
-            left
-        ));
-        assert!(!must_give_up(
-            &net,
-            &lim,
-            on(seg, late, inner, None),
-            v,
-            left
-        ));
-        assert!(!must_give_up(
-            &net,
-            &lim,
-            on(seg, late, outer, Some(inner)),
-            v,
-            left
-        ));
+        let gives_up = |x: f64, lane: u8, alpha: Option<u8>, next: Option<Movement>| {
+            must_give_up(&net, &lim, on(seg, x, lane, alpha), v, next)
+        };
+        assert!(gives_up(late, outer, None, left));
+        assert!(!gives_up(edge - d - 0.5, outer, None, left));
+        assert!(!gives_up(late, inner, None, left));
+        assert!(!gives_up(late, outer, Some(inner), left));
         // Straight is served by both lanes.
-        let straight = Some(Movement::Straight);
-        assert!(!must_give_up(
-            &net,
-            &lim,
-            on(seg, late, outer, None),
-            v,
-            straight
-        ));
+        assert!(!gives_up(late, outer, None, Some(Movement::Straight)));
     }
 
     /// The detour starts with a movement the lane serves and ends where the trip did.

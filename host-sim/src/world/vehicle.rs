@@ -649,17 +649,8 @@ impl<const N: usize> Vehicle<N> {
         let end_x = match sg.end {
             End::Open | End::Exit(_) => None,
             End::DeadEnd(x) => Some(x),
-            End::Junction(j, x) => {
-                let margin = net
-                    .junctions
-                    .get(j)
-                    .map_or(0.0, |jn| jn.layout.spec.comm_margin);
-                Some(if self.in_serving_lane(net) {
-                    x
-                } else {
-                    x - margin
-                })
-            }
+            End::Junction(_, x) if self.in_serving_lane(net) => Some(x),
+            End::Junction(..) => sg.comm_edge(net),
         };
         Road {
             lanes: sg.lanes,
