@@ -211,3 +211,16 @@ fn a_change_bent_off_its_curve_still_centres_before_the_road_end() {
     assert_eq!(s.lane_changes.in_target_lane, 25, "{:?}", s.lane_changes);
     assert_eq!(s.road_end_overruns, 0);
 }
+
+#[test]
+fn a_change_stopped_behind_a_vehicle_at_the_road_end_ends_in_its_lane() {
+    // Found by the liveness sweep at dd411d9, case 24 (leader-aware): vehicle 1 stood 0.67 m
+    // off lane 0's centre, inside lane 0, its change never completed (a deadlock).
+    let spec = load("deadend-24-leader-aware.toml");
+    assert_eq!(spec.invariant, Invariant::LeaderAware, "the file names it");
+    let s = run_world(spec);
+    assert_eq!(s.unsafe_events(), 0);
+    assert!(s.deadlock.is_none(), "{:?}", s.deadlock);
+    assert_eq!(s.lane_changes.in_target_lane, 26, "{:?}", s.lane_changes);
+    assert_eq!(s.road_end_overruns, 0);
+}

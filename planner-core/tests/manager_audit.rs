@@ -1103,3 +1103,42 @@ fn a_measured_suspect_exactly_its_error_past_its_line_is_not_committed() {
     assert_eq!(entry(&m, 1).to_line, -err);
     assert!(!entry(&m, 1).committed);
 }
+
+/// Only the routes that block a vehicle count against its joining: `z` has waited the
+/// bound (61 s) behind holder 1 but does not cross `c`; `y`, which crosses both holder 1
+/// and `c`, could not go (stuck behind 1) and arrived just now. `c` joins the flow past
+/// `y` — `z`'s long wait is not in its way.
+#[test]
+fn only_a_blocking_route_that_waited_the_bound_stops_a_joiner() {
+    let l = layout();
+    let n = l.routes.len();
+    let distinct =
+        |rs: [usize; 4]| (0..4).all(|i| (i + 1..4).all(|j| inlet(&l, rs[i]) != inlet(&l, rs[j])));
+    let scene = (0..n)
+        .flat_map(|a| (0..n).map(move |z| (a, z)))
+        .flat_map(|(a, z)| (0..n).map(move |y| (a, z, y)))
+        .flat_map(|(a, z, y)| (0..n).map(move |c| [a, z, y, c]))
+        .find(|&[a, z, y, c]| {
+            distinct([a, z, y, c])
+                && l.conflict(a, z)
+                && l.conflict(a, y)
+                && l.conflict(y, c)
+                && !l.conflict(a, c)
+                && !l.conflict(z, c)
+        });
+    let [a, z, y, c] = scene.expect("the SPEC §8 layout has such routes");
+    let mut m = manager(&l, Algorithm::Platoon);
+    m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+    m.update(secs(0.0));
+    m.observe(&at(&l, 1, a, -3.0, 0.0), secs(0.5)).unwrap();
+    m.observe(&at(&l, 2, z, 0.5, 0.0), secs(0.5)).unwrap();
+    m.update(secs(0.5));
+    assert!(m.permitted(1) && !m.permitted(2));
+    m.observe(&at(&l, 1, a, -3.0, 0.0), secs(61.0)).unwrap();
+    m.observe(&at(&l, 2, z, 0.5, 0.0), secs(61.0)).unwrap();
+    m.observe(&at(&l, 3, y, 0.5, 0.0), secs(61.0)).unwrap();
+    m.observe(&at(&l, 4, c, 0.5, 0.0), secs(61.0)).unwrap();
+    m.update(secs(61.0));
+    assert!(!m.permitted(2) && !m.permitted(3), "both cross holder 1");
+    assert!(m.permitted(4), "routes {a} {z} {y} {c}");
+}

@@ -2,7 +2,7 @@
 //! and the change under way β — when a change is declared, when it may start (17), when
 //! it completes, and re-centring afterwards.
 
-use super::certify::braking_tail_ok;
+use super::certify::{braking_tail_ok, pose_ok};
 use super::reference::{recentre_length, Reference};
 use super::{
     LaneEvent, LaneObservation, LanePlanner, StartBlock, CENTRED_M, MIN_CHANGE_LENGTH_M,
@@ -126,9 +126,9 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
             let centred = (obs.pose.y - obs.road.lane_centre(m)).abs() <= F::from_f64(CENTRED_M);
             // The tail's certificate starts with the pose itself: the rectangle inside
             // lane m, with its heading in bounds.
-            if centred
-                && obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD)
-                && braking_tail_ok(&p, obs.pose, obs.v_prev, lane_m)
+            let straight = obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD);
+            if (centred && straight && braking_tail_ok(&p, obs.pose, obs.v_prev, lane_m))
+                || stopped_inside(&p, obs, lane_m, obs.road.lane_centre(m))
             {
                 self.lane = m;
                 self.alpha = None;
@@ -199,4 +199,28 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         }
         None
     }
+}
+
+/// A change that stopped short of the centre line ends where it stands, if the rectangle
+/// is already inside lane `m` (`lane_m`, edges not shrunk) with its heading in bounds and
+/// pointing toward `centre`. A unicycle cannot turn at standstill ((31) bounds the yaw
+/// rate by v over the radius), so a vehicle whose leader in lane `m` stopped at a road
+/// end stands there half-way through its S-curve for good: not centred, not straight,
+/// still counted in both lanes, and the queue behind it in the lane it left stops
+/// behind a vehicle that is no longer there (the dead-end sweep's case 24 of seed
+/// 3,712,032,153 under the leader-aware invariant). Safe, as standstill is: the braking
+/// tail from v = 0 is the pose itself, which is inside lane `m`. Live: heading toward
+/// the centre, the first metres it drives take it away from the edge it is nearest and
+/// straightening swings its rear corner inward too, so the re-centring S-curve
+/// ([`RECENTRE_M`]) can always start — unlike a straight vehicle stopped by an edge,
+/// which the [`CENTRED_M`] rule keeps in its change.
+fn stopped_inside<F: Real>(
+    p: &crate::params::Params<F>,
+    obs: &LaneObservation<'_, F>,
+    lane_m: crate::lanes::Band<F>,
+    centre: F,
+) -> bool {
+    !(obs.v_prev > F::ZERO)
+        && (centre - obs.pose.y) * obs.pose.theta > F::ZERO
+        && pose_ok(p, obs.pose, lane_m)
 }

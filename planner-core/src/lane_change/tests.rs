@@ -589,3 +589,42 @@ fn a_seen_car_that_declares_its_braking_limit_is_taken_at_it() {
         Err(StartBlock::Behind(2))
     );
 }
+
+/// A planner changing from lane 1 into lane 0 of two, after its first steps, and the
+/// lane event of its next step's bookkeeping at `pose` with v_{t−h} = `v_prev`.
+fn completes_at(y: f64, theta: f64, v_prev: f64) -> Option<LaneEvent> {
+    let p = Params::<f64>::table_i();
+    let mut pl = LanePlanner::<f64, 20>::new(p, CostWeights::default(), 1).expect("valid");
+    pl.steps = 100;
+    pl.alpha = Some(0);
+    let obs = LaneObservation {
+        pose: Pose { x: 0.0, y, theta },
+        v_prev,
+        road: Road {
+            lanes: 2,
+            lane_width: 3.6,
+            end_x: None,
+        },
+        target_lane: 0,
+        ..one_lane(v_prev, &[])
+    };
+    pl.update_lanes(&obs)
+}
+
+#[test]
+fn a_change_stopped_inside_its_lane_heading_for_the_centre_ends_there() {
+    // Where the dead-end sweep's case stopped: 0.67 m above lane 0's centre line (1.8 m),
+    // heading −0.055 rad, its rectangle inside lane 0 (top corner at 3.44 of 3.6 m).
+    let done = Some(LaneEvent::Completed(0));
+    assert_eq!(completes_at(2.47, -0.055, 0.0), done);
+    // Not while it moves: it can still drive its S-curve to the centre.
+    assert_eq!(completes_at(2.47, -0.055, 0.5), None);
+    // Not heading away from the centre, nor straight, off the line: it could not steer
+    // back without its rear corner leaving the lane first.
+    assert_eq!(completes_at(2.47, 0.055, 0.0), None);
+    assert_eq!(completes_at(2.47, 0.0, 0.0), None);
+    // Not with a corner still in lane 1 (top corner at 3.62 m).
+    assert_eq!(completes_at(2.65, -0.055, 0.0), None);
+    // Centred and straight it completes, moving or not, as it always did.
+    assert_eq!(completes_at(1.8, 0.0, 10.0), done);
+}
