@@ -60,8 +60,8 @@
 //! <!-- resources: begin (firmware-example/resources.py) -->
 //! | N | `size_of` `Planner` | `size_of` `LanePlanner` | stack per call: approach | stack per call: lane change, both planners | peak stack, whole firmware | instructions per single-lane step, median / worst | per lane-change step, median / worst |
 //! |---|---|---|---|---|---|---|---|
-//! | 20 | 5,276 B | 8,788 B | 3,184 B | 3,760 B | 4,024 B | 50,970 / 331,040 | 198,565 / 204,390 |
-//! | 50 | 12,996 B | 16,628 B | 6,480 B | 7,632 B | 7,888 B | 125,630 / 1,049,720 | 254,445 / 700,330 |
+//! | 20 | 5,276 B | 8,788 B | 3,184 B | 3,768 B | 4,032 B | 50,970 / 331,040 | 198,585 / 204,400 |
+//! | 50 | 12,996 B | 16,628 B | 6,480 B | 7,648 B | 7,904 B | 125,630 / 1,049,720 | 254,460 / 700,350 |
 //! <!-- resources: end -->
 
 use crate::mpc::CostWeights;
