@@ -623,6 +623,10 @@ fn a_change_stopped_inside_its_lane_heading_for_the_centre_ends_there() {
     // back without its rear corner leaving the lane first.
     assert_eq!(completes_at(2.47, 0.055, 0.0), None);
     assert_eq!(completes_at(2.47, 0.0, 0.0), None);
+    // The same below the centre line (an overshoot): toward the centre is +θ there.
+    assert_eq!(completes_at(1.2, 0.055, 0.0), done);
+    assert_eq!(completes_at(1.2, 0.0, 0.0), None);
+    assert_eq!(completes_at(1.2, -0.055, 0.0), None);
     // Not with a corner still in lane 1 (top corner at 3.62 m).
     assert_eq!(completes_at(2.65, -0.055, 0.0), None);
     // Centred and straight it completes, moving or not, as it always did.
