@@ -870,6 +870,18 @@ fn nothing_joins_past_a_vehicle_that_waited_the_longest_wait() {
     assert!(m.permitted(3), "just under the bound");
 }
 
+/// A PLATOON manager whose vehicle 1 on `a` was granted at its line at t = 0 and stands
+/// 3 m inside A_S at t = 0.5, when vehicle 2 on `z` arrived at its line; scanned at 0.5.
+fn holder_and_waiter(l: &Layout<f64>, a: usize, z: usize) -> Manager<f64, 8> {
+    let mut m = manager(l, Algorithm::Platoon);
+    m.observe(&at(l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
+    m.update(secs(0.0));
+    m.observe(&at(l, 1, a, -3.0, 0.0), secs(0.5)).unwrap();
+    m.observe(&at(l, 2, z, 0.5, 0.0), secs(0.5)).unwrap();
+    m.update(secs(0.5));
+    m
+}
+
 /// Only past vehicles that could not go: `z` (south, inner, straight) waits since 0.5 s
 /// behind holder 1 (west, inner, straight, inside A_S) and by 61 s has waited the bound;
 /// `y` (west, outer, straight) fits beside 1 but not beside `z`, so the bound refuses it;
@@ -887,12 +899,7 @@ fn nothing_joins_past_a_vehicle_that_could_go() {
     assert!(l.conflict(a, z) && l.conflict(z, y) && l.conflict(y, c));
     assert!(!l.conflict(a, y) && !l.conflict(a, c) && !l.conflict(z, c));
     for with_y in [true, false] {
-        let mut m = manager(&l, Algorithm::Platoon);
-        m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
-        m.update(secs(0.0));
-        m.observe(&at(&l, 1, a, -3.0, 0.0), secs(0.5)).unwrap();
-        m.observe(&at(&l, 2, z, 0.5, 0.0), secs(0.5)).unwrap();
-        m.update(secs(0.5));
+        let mut m = holder_and_waiter(&l, a, z);
         assert!(!m.permitted(2));
         for id in [1, 2] {
             let (r, to_line) = if id == 1 { (a, -3.0) } else { (z, 0.5) };
@@ -1127,12 +1134,7 @@ fn only_a_blocking_route_that_waited_the_bound_stops_a_joiner() {
                 && !l.conflict(z, c)
         });
     let [a, z, y, c] = scene.expect("the SPEC §8 layout has such routes");
-    let mut m = manager(&l, Algorithm::Platoon);
-    m.observe(&at(&l, 1, a, 0.5, 0.0), secs(0.0)).unwrap();
-    m.update(secs(0.0));
-    m.observe(&at(&l, 1, a, -3.0, 0.0), secs(0.5)).unwrap();
-    m.observe(&at(&l, 2, z, 0.5, 0.0), secs(0.5)).unwrap();
-    m.update(secs(0.5));
+    let mut m = holder_and_waiter(&l, a, z);
     assert!(m.permitted(1) && !m.permitted(2));
     m.observe(&at(&l, 1, a, -3.0, 0.0), secs(61.0)).unwrap();
     m.observe(&at(&l, 2, z, 0.5, 0.0), secs(61.0)).unwrap();

@@ -123,12 +123,13 @@ impl<F: Real, const N: usize, S: MpcSolver<F, N>> LanePlanner<F, N, S> {
         let p = *self.params();
         if let Some(m) = self.alpha {
             let lane_m = obs.road.band(m, None);
-            let centred = (obs.pose.y - obs.road.lane_centre(m)).abs() <= F::from_f64(CENTRED_M);
+            let centre = obs.road.lane_centre(m);
+            let centred = (obs.pose.y - centre).abs() <= F::from_f64(CENTRED_M);
             // The tail's certificate starts with the pose itself: the rectangle inside
             // lane m, with its heading in bounds.
             let straight = obs.pose.theta.abs() <= F::from_f64(STRAIGHT_HEADING_RAD);
             if (centred && straight && braking_tail_ok(&p, obs.pose, obs.v_prev, lane_m))
-                || stopped_inside(&p, obs, lane_m, obs.road.lane_centre(m))
+                || stopped_inside(&p, obs, lane_m, centre)
             {
                 self.lane = m;
                 self.alpha = None;
